@@ -1,0 +1,24 @@
+"""ials_zoo: benchmark suite for deep multi-agent RL in large networked systems.
+
+Global simulators (PettingZoo ``ParallelEnv``)::
+
+    from ials_zoo import warehouse_v0, traffic_grid_v0
+    env = warehouse_v0.parallel_env(learners=["robot_20"])
+
+Influence-augmented local simulators (Gymnasium ``Env``)::
+
+    import ials_zoo
+    env = ials_zoo.make_ials("warehouse_v0", "robot_20")
+"""
+
+__version__ = "0.1.0"
+
+
+def make_ials(*args, **kwargs):
+    """Build the influence-augmented local simulator of one agent (see ``ials_zoo.influence``)."""
+    from ials_zoo.influence.ials import make_ials as _make_ials
+
+    return _make_ials(*args, **kwargs)
+
+
+__all__ = ["__version__", "make_ials"]

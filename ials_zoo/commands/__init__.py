@@ -1,0 +1,1 @@
+"""Subcommands of ``ials-zoo``; each module defines ``configure(parser)`` and ``run(args)``."""
