@@ -1,0 +1,300 @@
+"""Pieces shared by the PPO baselines: dataclass <-> command line, training simulators, the
+periodic GS evaluation with its learning curve, and saving a model with its metadata sidecar.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import time
+import typing
+from pathlib import Path
+
+import numpy as np
+
+from ials_zoo.utils import atomic_path, atomic_write_text
+
+# --------------------------------------------------------------------------------------------
+# dataclass <-> argparse
+
+
+def add_dataclass_args(parser: argparse.ArgumentParser, cls) -> argparse.ArgumentParser:
+    """Add one ``--field-name`` option per field of the dataclass ``cls``.
+
+    The help text of a field is its ``metadata["help"]``; booleans get ``--x/--no-x``."""
+    hints = typing.get_type_hints(cls)
+    for f in dataclasses.fields(cls):
+        name = "--" + f.name.replace("_", "-")
+        aliases = list(f.metadata.get("aliases", ()))
+        default = f.default if f.default is not dataclasses.MISSING else None
+        help_text = f"{f.metadata.get('help', '')} (default: {default!r})"
+        typ = hints[f.name]
+        origin = typing.get_origin(typ)
+        if origin is typing.Union or str(origin) == "<class 'types.UnionType'>":
+            inner = [a for a in typing.get_args(typ) if a is not type(None)]
+            typ = inner[0] if inner else str
+        if typ is bool:
+            parser.add_argument(*aliases, name, dest=f.name, default=default,
+                                action=argparse.BooleanOptionalAction, help=help_text)
+        else:
+            parser.add_argument(*aliases, name, dest=f.name, type=typ, default=default,
+                                metavar=f.name.upper(), help=help_text)
+    return parser
+
+
+def dataclass_from_namespace(cls, ns: argparse.Namespace):
+    """Build ``cls`` from the parsed options (fields absent from ``ns`` keep their default)."""
+    values = {f.name: getattr(ns, f.name) for f in dataclasses.fields(cls) if hasattr(ns, f.name)}
+    return cls(**values)
+
+
+def parse_args(cls, argv=None, description: str | None = None):
+    """Parse a baseline's command line into its dataclass."""
+    parser = argparse.ArgumentParser(description=description)
+    add_dataclass_args(parser, cls)
+    return dataclass_from_namespace(cls, parser.parse_args(argv))
+
+
+def arg(default, help: str, **kw):
+    """A dataclass field with a help text (and optional ``aliases``)."""
+    return dataclasses.field(default=default, metadata={"help": help, **kw})
+
+
+# --------------------------------------------------------------------------------------------
+# Training simulators
+
+GS = "gs"
+# --simulator values that name an IALS, and the predictor they give make_ials_vec_env.
+IALS_SIMULATORS = {"ials": "trained", "untrained-ials": "untrained", "marginal": "marginal"}
+
+
+def predictor_for(simulator: str) -> str | None:
+    """The ``predictor`` argument of the IALS factory for a ``--simulator`` value, or None for
+    the GS. Accepted: ``gs``, ``ials``, ``untrained-ials``, ``marginal``, ``fixed:P`` and a
+    path to a saved predictor (``.pt``)."""
+    if simulator == GS:
+        return None
+    if simulator in IALS_SIMULATORS:
+        return IALS_SIMULATORS[simulator]
+    if simulator.startswith("fixed:"):
+        try:
+            p = float(simulator.split(":", 1)[1])
+        except ValueError:
+            p = -1.0
+        if not 0.0 <= p <= 1.0:
+            raise ValueError(f"simulator {simulator!r}: expected fixed:P with P in [0, 1]")
+        return simulator
+    if simulator.endswith(".pt") or os.path.exists(simulator):
+        if not os.path.exists(simulator):
+            raise ValueError(f"simulator {simulator!r}: predictor file not found")
+        return simulator
+    raise ValueError(
+        f"unknown simulator {simulator!r}; expected gs, ials, untrained-ials, fixed:P, "
+        "marginal or a path to a predictor .pt file"
+    )
+
+
+def predictor_record(venv, simulator: str) -> dict | None:
+    """What the training record says about the AIP behind an IALS vec env.
+
+    The IALS factory exposes the predictor's metadata as ``venv.predictor_metadata`` (a dict);
+    ``collection_seconds`` and ``training_seconds`` are the wall-clock of its data collection
+    and training (0 for predictors that need neither: untrained, fixed)."""
+    if simulator == GS:
+        return None
+    meta = {}
+    for obj in (venv, getattr(venv, "predictor", None)):
+        if obj is None:
+            continue
+        for name in ("predictor_metadata", "metadata"):
+            m = getattr(obj, name, None)
+            if isinstance(m, dict) and m:
+                meta = m
+                break
+        if meta:
+            break
+    file = meta.get("file") or meta.get("path")
+    if file is None and os.path.exists(simulator):
+        file = simulator
+    sha = meta.get("sha256")
+    if sha is None and file and os.path.exists(file):
+        from ials_zoo.evaluation import sha256_file
+
+        sha = sha256_file(file)
+    return {
+        "variant": str(meta.get("variant") or meta.get("kind") or predictor_for(simulator)),
+        "file": str(file) if file else None,
+        "sha256": sha,
+        "collection_seconds": float(meta.get("collection_seconds") or 0.0),
+        "training_seconds": float(meta.get("training_seconds") or 0.0),
+        "metadata": _jsonable(meta),
+    }
+
+
+def _jsonable(obj):
+    try:
+        return json.loads(json.dumps(obj, default=str))
+    except (TypeError, ValueError):
+        return str(obj)
+
+
+def as_float_box(venv):
+    """Make sure the observations are a float32 ``Box`` (what VecFrameStack and the evaluator
+    use); wraps ``venv`` only when needed."""
+    from gymnasium import spaces
+    from stable_baselines3.common.vec_env import VecEnvWrapper
+
+    from ials_zoo.single_agent import box_space
+
+    space = venv.observation_space
+    if isinstance(space, spaces.Box) and space.dtype == np.float32:
+        return venv
+
+    class _Float(VecEnvWrapper):
+        def __init__(self, v):
+            super().__init__(v, observation_space=box_space(space))
+
+        def reset(self):
+            return np.asarray(self.venv.reset(), dtype=np.float32)
+
+        def step_wait(self):
+            obs, rew, done, infos = self.venv.step_wait()
+            for info in infos:
+                if "terminal_observation" in info:
+                    info["terminal_observation"] = np.asarray(info["terminal_observation"], np.float32)
+            return np.asarray(obs, dtype=np.float32), rew, done, infos
+
+    return _Float(venv)
+
+
+# --------------------------------------------------------------------------------------------
+# Saving models
+
+
+def save_model(model, path: Path, metadata: dict) -> Path:
+    """Save an SB3 model atomically with its metadata sidecar (``<name>.meta.json``)."""
+    from ials_zoo.evaluation import meta_path, sha256_file
+
+    path = Path(path)
+    with atomic_path(path, suffix=".zip") as tmp:
+        model.save(str(tmp))
+    meta = dict(metadata, model_sha256=sha256_file(path))
+    atomic_write_text(meta_path(path), json.dumps(meta, indent=2, default=str) + "\n")
+    return path
+
+
+# --------------------------------------------------------------------------------------------
+# Periodic evaluation on the GS
+
+
+class Evaluator:
+    """Scores the current policy on the GS, in this process or in a worker process.
+
+    SUMO domains are evaluated in a worker process (libsumo: one simulation per process) from
+    a checkpoint saved just before; other domains in this process from the live model.
+    """
+
+    def __init__(self, env_id: str, agent: str, frame_stack: int, episodes: int,
+                 deterministic: bool, in_subprocess: bool, start_method: str = "forkserver"):
+        self.env_id, self.agent, self.frame_stack = env_id, agent, frame_stack
+        self.episodes, self.deterministic = episodes, deterministic
+        self.in_subprocess = in_subprocess
+        self._pool = None
+        self._start_method = start_method
+
+    def __call__(self, model, checkpoint: Path | None, episodes: int | None = None):
+        from ials_zoo.evaluation import SB3Policy, evaluate
+
+        n = int(episodes or self.episodes)
+        if self.in_subprocess:
+            if checkpoint is None:
+                raise ValueError("subprocess evaluation needs a saved checkpoint")
+            if self._pool is None:
+                import concurrent.futures
+                import multiprocessing
+
+                ctx = multiprocessing.get_context(self._start_method)
+                self._pool = concurrent.futures.ProcessPoolExecutor(max_workers=1, mp_context=ctx)
+            from ials_zoo.evaluation import _evaluate_worker
+
+            return self._pool.submit(
+                _evaluate_worker, self.env_id, self.agent, str(checkpoint),
+                {"episodes": n, "deterministic": self.deterministic},
+            ).result()
+        policy = SB3Policy(model, frame_stack=self.frame_stack, deterministic=self.deterministic,
+                           name=Path(checkpoint).name if checkpoint else "model",
+                           file=str(checkpoint) if checkpoint else None)
+        return evaluate(self.env_id, self.agent, policy, episodes=n)
+
+    def close(self):
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None
+
+
+def curve_point(steps: int, seconds: float, ev) -> dict:
+    return {"env_steps": int(steps), "wall_clock_seconds": float(seconds), "mean": ev.mean,
+            "ci_low": ev.ci_low, "ci_high": ev.ci_high}
+
+
+def make_progress_callback(total: int, evaluate_fn, eval_every: int, progress: bool):
+    """An SB3 callback: a tqdm progress bar, and ``evaluate_fn(num_timesteps)`` every
+    ``eval_every`` environment steps (0 = never)."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class _Callback(BaseCallback):
+        def _on_training_start(self):
+            self.next_eval = eval_every if eval_every > 0 else None
+            self.bar = None
+            if progress:
+                from tqdm import tqdm
+
+                self.bar = tqdm(total=total, unit="step", dynamic_ncols=True)
+            self.last = self.num_timesteps
+
+        def _on_step(self):
+            if self.bar is not None:
+                self.bar.update(self.num_timesteps - self.last)
+            self.last = self.num_timesteps
+            if self.next_eval is not None and self.num_timesteps >= self.next_eval:
+                ev = evaluate_fn(self.num_timesteps)
+                if self.bar is not None:
+                    self.bar.set_postfix(gs=f"{ev.mean:.2f}")
+                while self.next_eval <= self.num_timesteps:
+                    self.next_eval += eval_every
+            return True
+
+        def _on_training_end(self):
+            if self.bar is not None:
+                self.bar.close()
+
+    return _Callback()
+
+
+class Clock:
+    """Training wall-clock that excludes the time spent evaluating and checkpointing."""
+
+    def __init__(self, offset: float = 0.0):
+        self.offset = float(offset)
+        self._start = time.perf_counter()
+        self._paused = 0.0
+
+    def pause(self):
+        return _Pause(self)
+
+    @property
+    def seconds(self) -> float:
+        return self.offset + time.perf_counter() - self._start - self._paused
+
+
+class _Pause:
+    def __init__(self, clock):
+        self.clock = clock
+
+    def __enter__(self):
+        self.t = time.perf_counter()
+
+    def __exit__(self, *exc):
+        self.clock._paused += time.perf_counter() - self.t

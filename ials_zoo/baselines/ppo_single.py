@@ -1,0 +1,248 @@
+"""PPO for one agent, trained on the GS or on an IALS, scored on the GS (SPEC §3).
+
+Usage::
+
+    python -m baselines.ppo_single --env warehouse_v0 --simulator ials
+    ials-zoo train ppo_single --env traffic_grid_v0 --agent intersection_12 --simulator gs
+
+``--simulator``: ``gs`` (the global simulator, other agents scripted), ``ials`` (the local
+simulator + the trained AIP shipped with the package), ``untrained-ials``, ``fixed:P``
+(F-IALS with the fixed probability P), ``marginal`` (F-IALS with the empirical marginal) or a
+path to a predictor ``.pt`` file.
+
+The defaults are the authors' (SPEC §3): lr 2.5e-4 decayed linearly to 0, clip 0.1, entropy
+0.01, value coefficient 1, gamma 0.99, GAE lambda 0.95, 8 parallel envs, 3 epochs, an MLP of
+256-128 (separate policy and value networks), 2M steps, GS evaluation every 100k steps.
+Chosen here (the paper does not say): a rollout of 128 steps per env (1,024 per update) in
+minibatches of 256, SB3's default tanh activations and gradient clipping at 0.5. The warehouse
+policy reads the last 8 observations (``VecFrameStack``, from the domain's ``frame_stack``).
+
+Outputs in ``--out-dir`` (default ``runs/<env>__<agent>__<simulator>__s<seed>``), all written
+atomically:
+
+* ``curve.json`` -- the learning curve, rewritten after every evaluation: GS mean return and
+  95% CI vs environment steps and wall-clock seconds. Wall-clock counts training only
+  (evaluation and checkpointing excluded) plus, for an IALS, the AIP's data collection and
+  training time read from the predictor's metadata (as in the paper's plots);
+* ``checkpoint.zip`` (+ ``checkpoint.meta.json``) -- the latest model, saved at every
+  evaluation so that a crash loses at most ``--eval-every`` steps;
+* ``model.zip`` + ``model.meta.json`` -- the final model and everything needed to score it
+  later without this code (``ials-zoo evaluate --policy runs/.../model.zip``);
+* ``result.json`` -- a leaderboard result (``ials_zoo/leaderboard_schema.json``) with the
+  final GS score over ``--final-eval-episodes`` episodes.
+
+Truncation: every zoo episode ends by a time limit. The GS vec env (``DummyVecEnv`` /
+``SubprocVecEnv`` over :class:`~ials_zoo.single_agent.SingleAgentGS`) and the IALS vec env
+mark the last step ``TimeLimit.truncated`` with its ``terminal_observation``, so SB3's PPO
+bootstraps ``gamma * V(s_T)`` instead of treating the time limit as a terminal state.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from ials_zoo.baselines.common import (
+    GS,
+    Clock,
+    Evaluator,
+    arg,
+    as_float_box,
+    curve_point,
+    make_progress_callback,
+    parse_args,
+    predictor_for,
+    predictor_record,
+    save_model,
+)
+from ials_zoo.utils import atomic_write_text
+
+
+@dataclass
+class Args:
+    """Arguments of :func:`main` (``python -m baselines.ppo_single --help``)."""
+
+    env_id: str = arg("warehouse_v0", "domain id", aliases=("--env",))
+    agent: str | None = arg(None, "learning agent (default: the domain's first default agent)")
+    simulator: str = arg("gs", "gs | ials | untrained-ials | fixed:P | marginal | PATH.pt")
+    seed: int = arg(0, "training seed")
+    total_timesteps: int = arg(2_000_000, "environment steps of training")
+    n_envs: int = arg(8, "parallel environments")
+    n_steps: int = arg(128, "rollout length per environment and update")
+    batch_size: int = arg(256, "minibatch size")
+    n_epochs: int = arg(3, "epochs per update")
+    learning_rate: float = arg(2.5e-4, "initial learning rate")
+    anneal_lr: bool = arg(True, "decay the learning rate linearly to 0")
+    clip_range: float = arg(0.1, "PPO clip range")
+    ent_coef: float = arg(0.01, "entropy coefficient")
+    vf_coef: float = arg(1.0, "value loss coefficient")
+    gamma: float = arg(0.99, "discount")
+    gae_lambda: float = arg(0.95, "GAE lambda")
+    max_grad_norm: float = arg(0.5, "gradient clipping")
+    net_arch: str = arg("256,128", "hidden layer sizes, comma-separated (policy and value nets)")
+    frame_stack: int | None = arg(None, "observations the policy reads (default: the domain's)")
+    dset_kind: str | None = arg(None, "d-set kind of the AIP (dset | full; default: the predictor's)")
+    eval_every: int = arg(100_000, "GS evaluation every this many steps (0: only at the end)")
+    eval_episodes: int = arg(10, "GS episodes per periodic evaluation")
+    final_eval_episodes: int = arg(20, "GS episodes of the final evaluation (result.json)")
+    deterministic_eval: bool = arg(False, "evaluate with the most likely action instead of sampling")
+    vec_env: str = arg("auto", "GS vec env: auto | dummy | subproc (SUMO domains: subproc)")
+    out_dir: str | None = arg(None, "output folder (default: runs/<env>__<agent>__<sim>__s<seed>)")
+    progress: bool = arg(True, "show a progress bar")
+    submitter: str = arg("", "submitter name for result.json")
+    notes: str = arg("", "notes for result.json")
+
+
+def _hidden(net_arch: str) -> list[int]:
+    try:
+        sizes = [int(x) for x in str(net_arch).split(",") if x.strip()]
+    except ValueError:
+        sizes = []
+    if not sizes or min(sizes) < 1:
+        raise ValueError(f"net_arch {net_arch!r}: expected comma-separated positive ints, e.g. 256,128")
+    return sizes
+
+
+def check_args(args: Args) -> None:
+    """Clear errors for bad arguments before anything is built."""
+    for name in ("total_timesteps", "n_envs", "n_steps", "batch_size", "n_epochs",
+                 "eval_episodes", "final_eval_episodes"):
+        if int(getattr(args, name)) < 1:
+            raise ValueError(f"{name} must be >= 1, got {getattr(args, name)}")
+    if args.eval_every < 0:
+        raise ValueError(f"eval_every must be >= 0, got {args.eval_every}")
+    if args.frame_stack is not None and args.frame_stack < 1:
+        raise ValueError(f"frame_stack must be >= 1, got {args.frame_stack}")
+    _hidden(args.net_arch)
+    predictor_for(args.simulator)
+
+
+def make_training_env(args: Args, agent: str):
+    """The training vec env (GS or IALS) and the AIP record (None on the GS)."""
+    from ials_zoo.single_agent import make_gs_vec_env
+
+    predictor = predictor_for(args.simulator)
+    if predictor is None:
+        venv = make_gs_vec_env(args.env_id, agent, n_envs=args.n_envs, vec_env=args.vec_env)
+        venv.seed(args.seed)
+        return venv, None
+    from ials_zoo.influence.ials import make_ials_vec_env
+
+    kw = {} if args.dset_kind is None else {"dset_kind": args.dset_kind}
+    venv = make_ials_vec_env(args.env_id, agent, n_envs=args.n_envs, predictor=predictor,
+                             seed=args.seed, **kw)
+    return venv, predictor_record(venv, args.simulator)
+
+
+def default_out_dir(args: Args, agent: str) -> Path:
+    sim = Path(args.simulator).stem if args.simulator.endswith(".pt") else args.simulator
+    sim = sim.replace(":", "")
+    return Path("runs") / f"{args.env_id}__{agent}__{sim}__s{args.seed}"
+
+
+def main(args: Args | None = None) -> dict:
+    """Train, evaluate and save; returns the result dict (also written to result.json)."""
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.utils import LinearSchedule
+    from stable_baselines3.common.vec_env import VecFrameStack, VecMonitor
+
+    import ials_zoo
+    from ials_zoo.core.domains import get_domain
+    from ials_zoo.leaderboard import make_result, now_iso, write_result
+    from ials_zoo.single_agent import check_agent, needs_own_process
+
+    args = args or Args()
+    torch.set_num_threads(1)
+    dom = get_domain(args.env_id)
+    agent = check_agent(args.env_id, args.agent or dom.default_agents[0])
+    check_args(args)
+    frame_stack = int(args.frame_stack or dom.frame_stack)
+    out = Path(args.out_dir) if args.out_dir else default_out_dir(args, agent)
+    out.mkdir(parents=True, exist_ok=True)
+
+    venv, aip = make_training_env(args, agent)
+    aip_seconds = (aip["collection_seconds"] + aip["training_seconds"]) if aip else 0.0
+    venv = VecMonitor(as_float_box(venv))
+    if frame_stack > 1:
+        venv = VecFrameStack(venv, frame_stack)
+
+    hidden = _hidden(args.net_arch)
+    lr = LinearSchedule(args.learning_rate, 0.0, 1.0) if args.anneal_lr else args.learning_rate
+    model = PPO(
+        "MlpPolicy", venv, learning_rate=lr, n_steps=args.n_steps, batch_size=args.batch_size,
+        n_epochs=args.n_epochs, gamma=args.gamma, gae_lambda=args.gae_lambda,
+        clip_range=args.clip_range, ent_coef=args.ent_coef, vf_coef=args.vf_coef,
+        max_grad_norm=args.max_grad_norm, seed=args.seed, device="cpu", verbose=0,
+        policy_kwargs={"net_arch": {"pi": hidden, "vf": hidden}},
+    )
+
+    training = {
+        "simulator": args.simulator, "aip": aip, "seeds": [args.seed], "env_steps": 0,
+        "wall_clock_seconds": 0.0, "aip_seconds": aip_seconds,
+        "hyperparameters": dataclasses.asdict(args),
+    }
+    meta = {
+        "format": "ials_zoo-model/1", "sb3_class": "PPO", "algorithm": "ppo_single",
+        "env_id": args.env_id, "agent": agent, "agents": [agent], "frame_stack": frame_stack,
+        "seed": args.seed, "training": training, "learning_curve": [],
+        "package_version": ials_zoo.__version__, "created": now_iso(),
+    }
+    curve: list[dict] = meta["learning_curve"]
+    checkpoint = out / "checkpoint.zip"
+    evaluator = Evaluator(args.env_id, agent, frame_stack, args.eval_episodes,
+                          args.deterministic_eval, in_subprocess=needs_own_process(args.env_id))
+    clock = Clock(offset=aip_seconds)
+
+    def record(steps: int, path: Path, episodes: int | None = None):
+        """Checkpoint, evaluate on the GS, append to the curve (clock paused)."""
+        with clock.pause():
+            training["env_steps"] = int(steps)
+            training["wall_clock_seconds"] = clock.seconds - aip_seconds
+            save_model(model, path, meta)
+            ev = evaluator(model, path, episodes)
+            curve.append(curve_point(steps, clock.seconds, ev))
+            atomic_write_text(out / "curve.json", json.dumps(
+                {"env_id": args.env_id, "agent": agent, "simulator": args.simulator,
+                 "seed": args.seed, "points": curve}, indent=2) + "\n")
+            save_model(model, path, meta)  # the checkpoint's metadata now holds the curve
+        return ev
+
+    callback = make_progress_callback(
+        args.total_timesteps, lambda steps: record(steps, checkpoint), args.eval_every,
+        args.progress)
+    start = time.perf_counter()
+    try:
+        model.learn(total_timesteps=args.total_timesteps, callback=callback)
+        final_steps = int(model.num_timesteps)
+        # The final model is scored twice: on the curve's protocol (eval_episodes) unless the
+        # last periodic evaluation was at this very step, and for the result on
+        # final_eval_episodes episodes.
+        if not curve or curve[-1]["env_steps"] != final_steps:
+            record(final_steps, checkpoint)
+        model_path = out / "model.zip"
+        with clock.pause():
+            save_model(model, model_path, meta)
+            final = evaluator(model, model_path, args.final_eval_episodes)
+    finally:
+        evaluator.close()
+        venv.close()
+    final.policy_file = "model.zip"  # relative to the run folder (where result.json lives)
+    result = make_result(
+        [final], algorithm="ppo_single", training=training, training_seeds=[args.seed],
+        learning_curves=[{"seed": args.seed, "points": curve}], trained_agents=[agent],
+        submitter=args.submitter, notes=args.notes,
+    )
+    write_result(out / "result.json", result)
+    if args.progress:
+        print(f"GS score {result['score']['mean']:.3f} "
+              f"[{result['score']['ci_low']:.3f}, {result['score']['ci_high']:.3f}] after "
+              f"{final_steps} steps, {time.perf_counter() - start:.0f} s; wrote {out}/result.json")
+    return result
+
+
+if __name__ == "__main__":
+    main(parse_args(Args, description=__doc__.splitlines()[0]))
