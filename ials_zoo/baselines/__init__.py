@@ -8,4 +8,5 @@ folder; ``baselines/*.py`` at the repository root are thin runners
 
 BASELINES = {
     "ppo_single": "ials_zoo.baselines.ppo_single",
+    "ppo_shared": "ials_zoo.baselines.ppo_shared",
 }

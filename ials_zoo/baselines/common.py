@@ -96,39 +96,41 @@ def predictor_for(simulator: str) -> str | None:
     )
 
 
-def predictor_record(venv, simulator: str) -> dict | None:
-    """What the training record says about the AIP behind an IALS vec env.
+def predictor_record(venv, simulator: str, env_id: str, agent: str) -> dict | None:
+    """What the training record says about the AIP behind an IALS vec env (None on the GS).
 
-    The IALS factory exposes the predictor's metadata as ``venv.predictor_metadata`` (a dict);
-    ``collection_seconds`` and ``training_seconds`` are the wall-clock of its data collection
-    and training (0 for predictors that need neither: untrained, fixed)."""
+    The IALS vec env exposes its predictor as ``venv.predictor``; a trained AIP's
+    ``metadata`` holds its training report, with ``dataset.collect_seconds`` (Algorithm 1)
+    and ``train_seconds``: their sum is added to the training wall-clock, as in the paper's
+    plots. Predictors that need neither (untrained, fixed) count 0; so does ``marginal``,
+    whose metadata does not carry the data collection time (documented limitation)."""
     if simulator == GS:
         return None
-    meta = {}
-    for obj in (venv, getattr(venv, "predictor", None)):
-        if obj is None:
-            continue
-        for name in ("predictor_metadata", "metadata"):
-            m = getattr(obj, name, None)
-            if isinstance(m, dict) and m:
-                meta = m
-                break
-        if meta:
-            break
-    file = meta.get("file") or meta.get("path")
-    if file is None and os.path.exists(simulator):
+    pred = getattr(venv, "predictor", None)
+    meta = dict(getattr(pred, "metadata", None) or {})
+    collect = (meta.get("dataset") or {}).get("collect_seconds") or meta.get("collect_seconds")
+    train = meta.get("train_seconds")
+    file = None
+    if os.path.exists(simulator):
         file = simulator
-    sha = meta.get("sha256")
-    if sha is None and file and os.path.exists(file):
+    elif simulator in ("ials", "marginal"):
+        from ials_zoo.influence.ials import pretrained_path
+
+        shipped = pretrained_path(env_id, agent)
+        file = str(shipped) if shipped.is_file() else None
+    sha = None
+    if file:
         from ials_zoo.evaluation import sha256_file
 
         sha = sha256_file(file)
+    meta.pop("marginal", None)
     return {
-        "variant": str(meta.get("variant") or meta.get("kind") or predictor_for(simulator)),
+        "variant": str(meta.get("variant") or predictor_for(simulator)),
+        "class": type(pred).__name__ if pred is not None else None,
         "file": str(file) if file else None,
         "sha256": sha,
-        "collection_seconds": float(meta.get("collection_seconds") or 0.0),
-        "training_seconds": float(meta.get("training_seconds") or 0.0),
+        "collection_seconds": float(collect or 0.0),
+        "training_seconds": float(train or 0.0),
         "metadata": _jsonable(meta),
     }
 

@@ -134,7 +134,7 @@ def make_training_env(args: Args, agent: str):
     kw = {} if args.dset_kind is None else {"dset_kind": args.dset_kind}
     venv = make_ials_vec_env(args.env_id, agent, n_envs=args.n_envs, predictor=predictor,
                              seed=args.seed, **kw)
-    return venv, predictor_record(venv, args.simulator)
+    return venv, predictor_record(venv, args.simulator, args.env_id, agent)
 
 
 def default_out_dir(args: Args, agent: str) -> Path:

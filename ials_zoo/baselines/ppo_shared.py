@@ -1,0 +1,273 @@
+"""Multi-agent PPO with one policy shared by all agents of the GS (parameter sharing).
+
+Usage::
+
+    python -m baselines.ppo_shared --env warehouse_v0 --total-timesteps 2000000
+    ials-zoo train ppo_shared --env warehouse_v0 --learners robot_19,robot_20,robot_21
+
+Every learning agent of the GS is one "environment" of SB3's PPO (SuperSuit:
+``pettingzoo_env_to_vec_env_v1`` + ``concat_vec_envs_v1``), so the policy learns from all of
+them at once; agents that are not learners stay scripted. ``--total-timesteps`` counts agent
+transitions (what PPO consumes): one GS step of ``n`` learners is ``n`` of them.
+
+**Truncation.** SuperSuit's own stable-baselines3 wrapper reports a truncated episode as a
+terminated one (``done = terminated or truncated``, no ``TimeLimit.truncated``), so PPO would
+treat the time limit as a terminal state and never bootstrap its value. This baseline uses
+:class:`TruncationAwareSB3VecEnv` instead, which sets ``TimeLimit.truncated`` for truncated
+(not terminated) agents; SuperSuit already puts the last observation in
+``terminal_observation``, so SB3 bootstraps ``gamma * V(s_T)``.
+
+**SUMO.** A traffic GS holds a libsumo simulation: with ``--n-copies N > 1`` each copy runs in
+its own process (``num_cpus = N``); the periodic GS evaluation always runs in a worker process.
+
+Evaluation: the shared policy is scored with the standard protocol
+(:mod:`ials_zoo.evaluation`: one agent controlled by the policy, the others scripted) for each
+agent in ``--eval-agents`` (default: the domain's default agents); one ``result_<agent>.json``
+per evaluated agent. The learning curve follows the first evaluated agent. Outputs as in
+:mod:`ials_zoo.baselines.ppo_single` (``curve.json``, ``checkpoint.zip``, ``model.zip`` +
+``model.meta.json``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ials_zoo.baselines.common import (
+    Clock,
+    Evaluator,
+    arg,
+    as_float_box,
+    curve_point,
+    make_progress_callback,
+    parse_args,
+    save_model,
+)
+from ials_zoo.baselines.ppo_single import _hidden
+from ials_zoo.utils import atomic_write_text
+
+
+def _sb3_wrapper_base():
+    from supersuit.vector.sb3_vector_wrapper import SB3VecEnvWrapper
+
+    return SB3VecEnvWrapper
+
+
+class TruncationAwareSB3VecEnv(_sb3_wrapper_base()):
+    """SuperSuit's stable-baselines3 wrapper, with truncation reported the way SB3 expects.
+
+    ``done = terminated or truncated`` as before, and ``infos[i]["TimeLimit.truncated"]`` is
+    True when agent ``i``'s episode was truncated without terminating; the
+    ``terminal_observation`` SuperSuit stored is kept. The info dicts are copied first
+    (SuperSuit's multiprocess backend may hand out one shared empty dict for several agents).
+
+    ``seed(s)`` is applied at the next ``reset`` (copy ``i`` of the GS gets seed ``s + i``), as
+    SB3's VecEnvs do; SuperSuit's wrapper has no working ``seed``.
+    """
+
+    _pending_seed = None
+
+    def seed(self, seed=None):
+        self._pending_seed = seed
+        return [seed]
+
+    def reset(self, seed=None, options=None):
+        seed = self._pending_seed if seed is None else seed
+        self._pending_seed = None
+        observations, self.reset_infos = self.venv.reset(seed=seed, options=options)
+        return observations
+
+    def step_wait(self):
+        observations, rewards, terminations, truncations, infos = self.venv.step_wait()
+        terminations = np.asarray(terminations, dtype=bool)
+        truncations = np.asarray(truncations, dtype=bool)
+        infos = [dict(info) for info in infos]
+        for i, info in enumerate(infos):
+            if truncations[i] and not terminations[i]:
+                info["TimeLimit.truncated"] = True
+        return observations, rewards, terminations | truncations, infos
+
+
+def make_shared_vec_env(env_id: str, learners=None, n_copies: int = 1, seed: int | None = None,
+                        **options):
+    """All learners of ``n_copies`` GS copies as one SB3 ``VecEnv`` (one entry per agent)."""
+    import supersuit as ss
+
+    from ials_zoo.core.domains import get_domain
+    from ials_zoo.single_agent import needs_own_process
+
+    if n_copies < 1:
+        raise ValueError(f"n_copies must be >= 1, got {n_copies}")
+    par = get_domain(env_id).parallel_env(learners=learners, **options)
+    vec = ss.pettingzoo_env_to_vec_env_v1(par)
+    # SUMO: one simulation per process, so one process per copy (SuperSuit runs a single copy
+    # in this process; nothing else in the training process may start libsumo then).
+    num_cpus = n_copies if needs_own_process(env_id) else 0
+    gym_vec = ss.concat_vec_envs_v1(vec, n_copies, num_cpus=num_cpus, base_class="gymnasium")
+    venv = TruncationAwareSB3VecEnv(gym_vec)
+    if seed is not None:
+        venv.seed(seed)
+    return venv
+
+
+@dataclass
+class Args:
+    """Arguments of :func:`main` (``python -m baselines.ppo_shared --help``)."""
+
+    env_id: str = arg("warehouse_v0", "domain id", aliases=("--env",))
+    learners: str = arg("all", "comma-separated learning agents, or 'all'")
+    eval_agents: str | None = arg(None, "comma-separated agents to score (default: the domain's default agents)")
+    seed: int = arg(0, "training seed")
+    total_timesteps: int = arg(2_000_000, "agent transitions of training")
+    n_copies: int = arg(1, "GS copies (SUMO: one process each)")
+    n_steps: int = arg(128, "rollout length per agent and update")
+    batch_size: int = arg(1152, "minibatch size")
+    n_epochs: int = arg(3, "epochs per update")
+    learning_rate: float = arg(2.5e-4, "initial learning rate")
+    anneal_lr: bool = arg(True, "decay the learning rate linearly to 0")
+    clip_range: float = arg(0.1, "PPO clip range")
+    ent_coef: float = arg(0.01, "entropy coefficient")
+    vf_coef: float = arg(1.0, "value loss coefficient")
+    gamma: float = arg(0.99, "discount")
+    gae_lambda: float = arg(0.95, "GAE lambda")
+    max_grad_norm: float = arg(0.5, "gradient clipping")
+    net_arch: str = arg("256,128", "hidden layer sizes, comma-separated")
+    frame_stack: int | None = arg(None, "observations the policy reads (default: the domain's)")
+    eval_every: int = arg(100_000, "GS evaluation every this many agent transitions (0: end only)")
+    eval_episodes: int = arg(10, "GS episodes per periodic evaluation")
+    final_eval_episodes: int = arg(20, "GS episodes of the final evaluation")
+    deterministic_eval: bool = arg(False, "evaluate with the most likely action")
+    out_dir: str | None = arg(None, "output folder (default: runs/<env>__shared__s<seed>)")
+    progress: bool = arg(True, "show a progress bar")
+    submitter: str = arg("", "submitter name for the results")
+    notes: str = arg("", "notes for the results")
+
+
+def _agent_list(text: str | None, env_id: str, default) -> list[str]:
+    from ials_zoo.single_agent import check_agent
+
+    if text is None or text == "":
+        return list(default)
+    if text == "all":
+        from ials_zoo.core.domains import get_domain
+
+        return list(get_domain(env_id).possible_agents())
+    return [check_agent(env_id, a.strip()) for a in text.split(",") if a.strip()]
+
+
+def main(args: Args | None = None) -> list[dict]:
+    """Train, evaluate and save; returns one result dict per evaluated agent."""
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.utils import LinearSchedule
+    from stable_baselines3.common.vec_env import VecFrameStack, VecMonitor
+
+    import ials_zoo
+    from ials_zoo.core.domains import get_domain
+    from ials_zoo.leaderboard import make_result, now_iso, write_result
+    from ials_zoo.single_agent import needs_own_process
+
+    args = args or Args()
+    torch.set_num_threads(1)
+    dom = get_domain(args.env_id)
+    learners = _agent_list(args.learners, args.env_id, dom.possible_agents())
+    eval_agents = _agent_list(args.eval_agents, args.env_id, dom.default_agents)
+    if not learners or not eval_agents:
+        raise ValueError("learners and eval_agents must name at least one agent")
+    for name in ("total_timesteps", "n_copies", "n_steps", "batch_size", "n_epochs",
+                 "eval_episodes", "final_eval_episodes"):
+        if int(getattr(args, name)) < 1:
+            raise ValueError(f"{name} must be >= 1, got {getattr(args, name)}")
+    hidden = _hidden(args.net_arch)
+    frame_stack = int(args.frame_stack or dom.frame_stack)
+    out = Path(args.out_dir or f"runs/{args.env_id}__shared__s{args.seed}")
+    out.mkdir(parents=True, exist_ok=True)
+
+    all_agents = list(dom.possible_agents())
+    venv = make_shared_vec_env(args.env_id,
+                               learners=None if learners == all_agents else learners,
+                               n_copies=args.n_copies, seed=args.seed)
+    venv = VecMonitor(as_float_box(venv))
+    if frame_stack > 1:
+        venv = VecFrameStack(venv, frame_stack)
+    lr = LinearSchedule(args.learning_rate, 0.0, 1.0) if args.anneal_lr else args.learning_rate
+    model = PPO(
+        "MlpPolicy", venv, learning_rate=lr, n_steps=args.n_steps, batch_size=args.batch_size,
+        n_epochs=args.n_epochs, gamma=args.gamma, gae_lambda=args.gae_lambda,
+        clip_range=args.clip_range, ent_coef=args.ent_coef, vf_coef=args.vf_coef,
+        max_grad_norm=args.max_grad_norm, seed=args.seed, device="cpu", verbose=0,
+        policy_kwargs={"net_arch": {"pi": hidden, "vf": hidden}},
+    )
+    training = {
+        "simulator": "gs", "aip": None, "seeds": [args.seed], "env_steps": 0,
+        "wall_clock_seconds": 0.0, "aip_seconds": 0.0,
+        "hyperparameters": dict(dataclasses.asdict(args), learners=learners,
+                                eval_agents=eval_agents),
+    }
+    meta = {
+        "format": "ials_zoo-model/1", "sb3_class": "PPO", "algorithm": "ppo_shared",
+        "env_id": args.env_id, "agent": eval_agents[0], "agents": learners,
+        "frame_stack": frame_stack, "seed": args.seed, "training": training,
+        "learning_curve": [], "package_version": ials_zoo.__version__, "created": now_iso(),
+    }
+    curve = meta["learning_curve"]
+    checkpoint = out / "checkpoint.zip"
+    own = needs_own_process(args.env_id)
+    evaluators = {a: Evaluator(args.env_id, a, frame_stack, args.eval_episodes,
+                               args.deterministic_eval, in_subprocess=own)
+                  for a in eval_agents}
+    clock = Clock()
+
+    def record(steps: int):
+        with clock.pause():
+            training["env_steps"] = int(steps)
+            training["wall_clock_seconds"] = clock.seconds
+            save_model(model, checkpoint, meta)
+            ev = evaluators[eval_agents[0]](model, checkpoint)
+            curve.append(curve_point(steps, clock.seconds, ev))
+            atomic_write_text(out / "curve.json", json.dumps(
+                {"env_id": args.env_id, "agent": eval_agents[0], "simulator": "gs",
+                 "algorithm": "ppo_shared", "seed": args.seed, "points": curve}, indent=2) + "\n")
+            save_model(model, checkpoint, meta)
+        return ev
+
+    callback = make_progress_callback(args.total_timesteps, record, args.eval_every, args.progress)
+    start = time.perf_counter()
+    results = []
+    try:
+        model.learn(total_timesteps=args.total_timesteps, callback=callback)
+        steps = int(model.num_timesteps)
+        if not curve or curve[-1]["env_steps"] != steps:
+            record(steps)
+        model_path = out / "model.zip"
+        with clock.pause():
+            save_model(model, model_path, meta)
+            for a in eval_agents:
+                final = evaluators[a](model, model_path, args.final_eval_episodes)
+                final.policy_file = "model.zip"
+                result = make_result(
+                    [final], algorithm="ppo_shared", training=training,
+                    training_seeds=[args.seed],
+                    learning_curves=[{"seed": args.seed, "points": curve}] if a == eval_agents[0] else [],
+                    trained_agents=learners, submitter=args.submitter, notes=args.notes)
+                write_result(out / f"result_{a}.json", result)
+                results.append(result)
+    finally:
+        for ev in evaluators.values():
+            ev.close()
+        venv.close()
+    if args.progress:
+        for r in results:
+            s = r["score"]
+            print(f"{r['agent']}: GS score {s['mean']:.3f} [{s['ci_low']:.3f}, {s['ci_high']:.3f}]")
+        print(f"{steps} agent transitions in {time.perf_counter() - start:.0f} s; wrote {out}")
+    return results
+
+
+if __name__ == "__main__":
+    main(parse_args(Args, description=__doc__.splitlines()[0]))
