@@ -56,7 +56,14 @@ def box_space(space: spaces.Space) -> spaces.Box:
 
 def check_agent(env_id: str, agent: str, **options) -> str:
     """Raise a ValueError naming the domain's agents when ``agent`` is not one of them."""
-    agents = list(get_domain(env_id).possible_agents(**options))
+    import inspect
+
+    possible = get_domain(env_id).possible_agents
+    # possible_agents takes only the options that shape the agent set (e.g. robots=(R, C)).
+    params = inspect.signature(possible).parameters
+    if not any(p.kind is p.VAR_KEYWORD for p in params.values()):
+        options = {k: v for k, v in options.items() if k in params}
+    agents = list(possible(**options))
     if agent not in agents:
         shown = ", ".join(agents[:6]) + (", ..." if len(agents) > 6 else "")
         raise ValueError(f"unknown agent {agent!r} for {env_id}; expected one of: {shown}")

@@ -76,6 +76,11 @@ class TruncationAwareSB3VecEnv(_sb3_wrapper_base()):
         self._pending_seed = seed
         return [seed]
 
+    def get_attr(self, attr_name, indices=None):
+        if attr_name == "render_mode":  # the GS copies have no separate env objects here
+            return [self.render_mode] * self.num_envs
+        return super().get_attr(attr_name, indices)
+
     def reset(self, seed=None, options=None):
         seed = self._pending_seed if seed is None else seed
         self._pending_seed = None
