@@ -10,7 +10,13 @@ from pettingzoo.utils import parallel_to_aec
 from ials_zoo.core.region import RegionSpec
 from ials_zoo.warehouse import regions as R
 
-_FLOAT_KINDS = "fc"
+# Flat copies of the region tables: 1-d fancy indexing is cheaper than 2-d in the hot loop.
+_MOVE_FLAT = R.MOVE.ravel()
+_LEGAL_FLAT = R.LEGAL_ACTIONS.ravel()
+_N_LEGAL_F = R.N_LEGAL_SAFE.astype(np.float64)
+_NEXT_FLAT = R.NEXT_MOVE.ravel()
+_INFLUENCE_FLAT = R.INFLUENCE_CLASS.ravel()
+_PLAIN_INT_TYPES = frozenset([int, np.int64, np.int32])
 
 
 class WarehouseEnv(ParallelEnv):
@@ -127,7 +133,7 @@ class WarehouseEnv(ParallelEnv):
         self._build_geometry()
         self._rng: np.random.Generator | None = None
         self._pos = np.full(n, R.CENTRE, dtype=np.int64)
-        self._ages = np.zeros(self.n_shelf_cells, dtype=np.int64)
+        self._ages = np.zeros(self.n_shelf_cells + 1, dtype=np.int64)
         self._cycle = 0
         self.episode_returns = np.zeros(n)
         self.items_collected = 0
@@ -161,6 +167,16 @@ class WarehouseEnv(ParallelEnv):
         self._sides = np.arange(R.N_SOURCES)
         self._learner_cells = self._region_cells[self._learner_idx]
         self._learner_nb = nb[self._learner_idx]
+        # _cell_of[25*n + p]: the shelf cell robot n stands on at local position p, or the
+        # dummy cell G (never holds an item) when p is not a shelf cell.
+        shelf_bit = np.where(R.SHELF_INDEX >= 0, R.SHELF_INDEX, R.N_ITEMS)
+        padded = np.concatenate(
+            [self._region_cells, np.full((n, 1), self.n_shelf_cells, dtype=np.int64)], axis=1
+        )
+        self._cell_of = padded[:, shelf_bit].ravel()
+        self._row25 = np.arange(n) * R.N_CELLS
+        self._side25 = np.arange(R.N_SOURCES) * R.N_CELLS
+        self._pos_ext = np.full(n + 1, R.CENTRE, dtype=np.int64)  # last = absent neighbour
 
     # ------------------------------------------------------------------ API
 
@@ -191,8 +207,8 @@ class WarehouseEnv(ParallelEnv):
         if seed is not None or self._rng is None:
             self._rng = np.random.default_rng(seed)
         self._pos = np.full(self.n_robots, R.CENTRE, dtype=np.int64)
-        self._ages = np.zeros(self.n_shelf_cells, dtype=np.int64)
-        self._ages[self._rng.random(self.n_shelf_cells) < self.item_probability] = 1
+        self._ages = np.zeros(self.n_shelf_cells + 1, dtype=np.int64)
+        self._ages[:-1][self._rng.random(self.n_shelf_cells) < self.item_probability] = 1
         self._cycle = 0
         self.episode_returns = np.zeros(self.n_robots)
         self.items_collected = 0
@@ -209,37 +225,34 @@ class WarehouseEnv(ParallelEnv):
             raise RuntimeError("the episode is over (or reset() was never called); call reset()")
         learner_actions = self._parse_actions(actions)
         pos = self._pos
-        region_ages = self._ages[self._region_cells]
+        ages = self._ages  # index G is a dummy cell that never holds an item
+        region_ages = ages[self._region_cells]
         max_age = region_ages.max(axis=1)
 
         # Scripted controller for every robot (cheaper than selecting the scripted ones);
         # the random draws are always made so that the random stream does not depend on the
         # learners' actions.
         rand = self._rng.random(self.n_robots)
-        random_act = R.LEGAL_ACTIONS[pos, (rand * R.N_LEGAL_SAFE[pos]).astype(np.int64)]
-        act = np.where(max_age > 0, R.NEXT_MOVE[pos, region_ages.argmax(axis=1)], random_act)
+        random_act = _LEGAL_FLAT[pos * 4 + (rand * _N_LEGAL_F[pos]).astype(np.int64)]
+        to_oldest = _NEXT_FLAT[pos * R.N_ITEMS + region_ages.argmax(axis=1)]
+        act = np.where(max_age > 0, to_oldest, random_act)
         if learner_actions is not None:
             act[self._learner_idx] = learner_actions
 
-        pos = R.MOVE[pos, act]
+        pos = _MOVE_FLAT[pos * 4 + act]
         self._pos = pos
-        bit = R.SHELF_INDEX[pos]
-        on_shelf = bit >= 0
-        cell = self._region_cells[self._arange_n, bit]  # bit -1 gives a real cell; masked below
-        own_age = np.where(on_shelf, self._ages[cell], 0)
-        reward = R.collect_reward(own_age, max_age)
-        occupied = np.zeros(self.n_shelf_cells, dtype=bool)
-        occupied[cell[on_shelf]] = True
-        self.items_collected += int(np.count_nonzero(self._ages[occupied]))
-        appear = self._rng.random(self.n_shelf_cells) < self.item_probability
-        R.advance_items(self._ages, occupied, appear, self.item_lifetime)
+        cell = self._cell_of[self._row25 + pos]  # the dummy cell for robots off the shelves
+        reward = R.collect_reward(ages[cell], max_age)
+        appear = self._rng.random(self.n_shelf_cells + 1) < self.item_probability
+        appear[-1] = False
+        self.items_collected += R.advance_items(ages, cell, appear, self.item_lifetime)
         self.episode_returns += reward
         self._cycle += 1
 
         agents = self.agents
         obs, dset, full = self._learner_views()
-        nb_pos = np.append(pos, R.CENTRE)[self._learner_nb]  # the dummy robot is never on a shelf
-        influence = R.INFLUENCE_CLASS[self._sides, nb_pos]
+        self._pos_ext[:-1] = pos
+        influence = _INFLUENCE_FLAT[self._side25 + self._pos_ext[self._learner_nb]]
         rewards = dict(zip(agents, reward[self._learner_idx].tolist()))
         done = self._cycle >= self.max_cycles
         terminations = dict.fromkeys(agents, False)
@@ -256,9 +269,7 @@ class WarehouseEnv(ParallelEnv):
     def _learner_views(self):
         pos = self._pos[self._learner_idx]
         items = (self._ages[self._learner_cells] > 0).view(np.uint8)
-        full = np.zeros((self._n_learners, R.OBS_SIZE), dtype=np.uint8)
-        full[self._arange_l, pos] = 1
-        full[:, R.N_CELLS :] = items
+        full = np.concatenate([R.POS_ONEHOT[pos], items], axis=1)
         dset = np.concatenate([items, R.SHELF_ONEHOT[pos]], axis=1)
         return full.astype(np.float32), dset, full
 
@@ -282,6 +293,10 @@ class WarehouseEnv(ParallelEnv):
                 f"actions must have exactly one entry per live agent; missing: {missing}, "
                 f"unknown or finished agents: {unknown}"
             )
+        if not _PLAIN_INT_TYPES.issuperset(map(type, values)):
+            # bools, 0-d arrays, floats, ...: np.asarray would silently turn True into 1.
+            for a, v in zip(agents, values):
+                _check_action(a, v)
         try:
             arr = np.asarray(values)
         except ValueError:
@@ -290,10 +305,11 @@ class WarehouseEnv(ParallelEnv):
             for a, v in zip(agents, values):
                 _check_action(a, v)
             raise TypeError(f"bad actions {actions!r}; expected one int in 0..3 per agent")
-        if arr.min() < 0 or arr.max() > 3:
+        arr = arr.astype(np.int64, copy=False)
+        if np.count_nonzero(arr & -4):  # any value outside 0..3 (negative ones included)
             for a, v in zip(agents, values):
                 _check_action(a, v)
-        return arr.astype(np.int64, copy=False)
+        return arr
 
     # ------------------------------------------------------------------ state access
 
@@ -324,7 +340,7 @@ class WarehouseEnv(ParallelEnv):
     def item_ages_floor(self) -> np.ndarray:
         """Item ages on the whole floor, shape (height, width) (0 = no item)."""
         floor = np.zeros((self.height, self.width), dtype=np.int64)
-        floor[self._shelf_rc[:, 0], self._shelf_rc[:, 1]] = self._ages
+        floor[self._shelf_rc[:, 0], self._shelf_rc[:, 1]] = self._ages[:-1]
         return floor
 
     # ------------------------------------------------------------------ rendering

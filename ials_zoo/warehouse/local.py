@@ -8,6 +8,8 @@ from gymnasium import spaces
 from ials_zoo.core.local import LocalSimulator
 from ials_zoo.warehouse import regions as R
 
+_MOVE_FLAT = R.MOVE.ravel()
+
 
 class WarehouseLocalSimulator(LocalSimulator):
     """``n_envs`` copies of one warehouse region, stepped together (SPEC §1, paper §4).
@@ -90,21 +92,18 @@ class WarehouseLocalSimulator(LocalSimulator):
                 )
         ages = self._ages
         max_age = ages.max(axis=1)
-        pos = R.MOVE[self._pos, actions]
+        pos = _MOVE_FLAT[self._pos * 4 + actions]
         self._pos = pos
         own = R.SHELF_ONEHOT[pos].view(bool)
-        own_age = (ages * own).sum(axis=1)
-        reward = R.collect_reward(own_age, max_age)
-        occupied = own | R.influence_cell_mask(influences)
+        reward = R.collect_reward((ages * own).sum(axis=1), max_age)
+        occupied = own | R.INFLUENCE_MASK[influences @ R.INFLUENCE_CODE]
         R.advance_items(ages, occupied, appear, self.item_lifetime)
         obs, dsets = self._views()
         return obs, reward, dsets
 
     def _views(self):
         items = (self._ages > 0).view(np.uint8)
-        full = np.zeros((self.n_envs, R.OBS_SIZE), dtype=np.uint8)
-        full[self._arange, self._pos] = 1
-        full[:, R.N_CELLS :] = items
+        full = np.concatenate([R.POS_ONEHOT[self._pos], items], axis=1)
         dset = np.concatenate([items, R.SHELF_ONEHOT[self._pos]], axis=1)
         return full.astype(np.float32), {"dset": dset, "full": full}
 
@@ -112,13 +111,14 @@ class WarehouseLocalSimulator(LocalSimulator):
     def _check_ints(name, value, shape, n_classes) -> np.ndarray:
         arr = np.asarray(value)
         if arr.shape != shape:
-            if arr.size == int(np.prod(shape)) and arr.dtype.kind in "iu":
-                arr = arr.reshape(shape)  # e.g. (n, 1) actions from a vectorised policy
+            if len(shape) == 1 and arr.shape == shape + (1,):
+                arr = arr.reshape(shape)  # (n, 1) actions, as some vectorised policies give
             else:
                 raise ValueError(f"{name} must have shape {shape}, got {arr.shape}")
         if arr.dtype.kind not in "iu":
             raise TypeError(f"{name} must be ints in 0..{n_classes - 1}, got dtype {arr.dtype}")
-        if arr.size and (arr.min() < 0 or arr.max() >= n_classes):
+        arr = arr.astype(np.int64, copy=False)
+        if np.count_nonzero(arr & -n_classes):  # n_classes is 4, a power of two: any value outside 0..3
             raise ValueError(
                 f"{name} must be in 0..{n_classes - 1}, got values {arr.min()}..{arr.max()}"
             )

@@ -100,6 +100,9 @@ SHELF_INDEX = np.full(N_CELLS, -1, dtype=np.int64)
 """Item bit of each local position, -1 for inner cells and corners."""
 SHELF_INDEX[ITEM_POS] = np.arange(N_ITEMS)
 
+POS_ONEHOT = np.eye(N_CELLS, dtype=np.uint8)
+"""Row ``p``: the 25-bit one-hot of local position ``p`` (first part of the observation)."""
+
 SHELF_ONEHOT = np.zeros((N_CELLS, N_ITEMS), dtype=np.uint8)
 """Row ``p``: the 12 "robot is on item cell b" bits of the d-set for a robot at ``p``."""
 SHELF_ONEHOT[ITEM_POS, np.arange(N_ITEMS)] = 1
@@ -198,17 +201,24 @@ INFLUENCE_CLASS = _build_influence_class()
 """``INFLUENCE_CLASS[s, p]``: the class of source ``s`` when the neighbour on side ``s`` stands
 at *its own* local position ``p``."""
 
-SOURCE_MASK = np.zeros((N_SOURCES, N_SOURCES, N_ITEMS), dtype=bool)
-"""``SOURCE_MASK[s, u]``: the item cells occupied by the side-``s`` neighbour in class ``u``."""
-for _s in range(N_SOURCES):
-    for _k in range(3):
-        SOURCE_MASK[_s, _k, 3 * _s + _k] = True
-
-
 def influence_cell_mask(influences: np.ndarray) -> np.ndarray:
     """Item cells occupied by neighbours: ``(n, 4)`` classes -> ``(n, 12)`` bool."""
-    # Bit 3*s + k is occupied iff u[s] == k, i.e. a one-hot of u without its "none" column.
-    return np.eye(N_SOURCES, dtype=bool)[influences][:, :, :3].reshape(len(influences), N_ITEMS)
+    return INFLUENCE_MASK[influences @ INFLUENCE_CODE]
+
+
+INFLUENCE_CODE = 4 ** np.arange(N_SOURCES - 1, -1, -1, dtype=np.int64)
+"""Weights that turn a u vector (4 classes in 0..3) into one code in 0..255."""
+
+
+def _build_influence_mask() -> np.ndarray:
+    # Bit 3*s + k is occupied iff u[s] == k.
+    codes = np.arange(N_SOURCES**N_SOURCES)
+    u = (codes[:, None] // INFLUENCE_CODE[None, :]) % N_SOURCES
+    return np.eye(N_SOURCES, dtype=bool)[u][:, :, :3].reshape(len(codes), N_ITEMS)
+
+
+INFLUENCE_MASK = _build_influence_mask()
+"""``INFLUENCE_MASK[code]``: the 12 cells occupied by neighbours for the u with that code."""
 
 
 # ----------------------------------------------------------------------------- names, spec
@@ -328,16 +338,29 @@ def region_spec(
 
 
 def collect_reward(own_age: np.ndarray, max_age: np.ndarray) -> np.ndarray:
-    """Reward of robots standing on cells with item ages ``own_age`` (0 = no item)."""
-    return np.where(own_age > 0, own_age / np.maximum(max_age, 1), 0.0)
+    """Reward of robots standing on cells with item ages ``own_age`` (0 = no item), in
+    regions whose oldest item (before this step's collections) has age ``max_age``."""
+    # own_age == 0 (no item) gives 0; max(., 1) only guards regions without items.
+    return own_age / np.maximum(max_age, 1)
 
 
-def advance_items(ages: np.ndarray, occupied: np.ndarray, appear: np.ndarray, item_lifetime):
-    """Steps 3-4 above, in place: ``ages`` int array, ``occupied``/``appear`` bool masks of
-    the same shape (cells with a robot after the move / cells whose appearance draw fired)."""
+def advance_items(ages: np.ndarray, occupied, appear: np.ndarray, item_lifetime) -> int:
+    """Steps 3-4 above, in place on the int array ``ages``.
+
+    Args:
+        occupied: the cells with a robot after the move: a bool mask like ``ages`` or an
+            index array into it.
+        appear: bool mask like ``ages``: the cells whose appearance draw fired.
+        item_lifetime: None, or the number of steps after which an item vanishes.
+
+    Returns:
+        the number of items collected (removed by a robot).
+    """
+    before = np.count_nonzero(ages)
     ages[occupied] = 0
+    collected = before - np.count_nonzero(ages)
     ages += ages > 0
     if item_lifetime is not None:
         ages[ages > item_lifetime] = 0
     ages += appear & (ages == 0)
-    return ages
+    return collected
