@@ -200,8 +200,10 @@ def validate_result(data) -> dict:
         if err.validator == "required":
             missing = err.message.split("'")[1] if "'" in err.message else err.message
             field = f"{field}.{missing}" if field != "(top level)" else missing
-        if err.validator == "additionalProperties" and field == "(top level)":
-            field = err.message
+        if err.validator == "additionalProperties" and isinstance(err.instance, dict):
+            extra = sorted(set(err.instance) - set(err.schema.get("properties", {})))
+            names = ",".join(extra)
+            field = f"{field}.{names}" if field != "(top level)" else names
         raise ResultError(field, f"schema violation: {err.message}")
 
     env_id = data["env_id"]
