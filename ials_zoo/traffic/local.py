@@ -1,0 +1,168 @@
+"""The traffic local simulator: one intersection alone, in SUMO (SPEC §2, §5)."""
+
+from __future__ import annotations
+
+import numpy as np
+from gymnasium import spaces
+
+from ials_zoo.core.local import LocalSimulator
+from ials_zoo.traffic import network
+from ials_zoo.traffic.env import OBS_SIZE, agent_index, region_spec
+from ials_zoo.traffic.sim import SimHandle, observation
+
+
+class TrafficLocalSimulator(LocalSimulator):
+    """``n_envs`` copies of one intersection with its 4 incoming and 4 outgoing 100 m edges.
+
+    Same geometry, vehicle model, light control (keep/switch with 3 s yellow), observation,
+    reward and d-sets as :class:`~ials_zoo.traffic.env.TrafficGridEnv` -- the observation code
+    is shared (:class:`ials_zoo.traffic.sim._LaneReader`). The copies are disjoint
+    intersections of ONE SUMO network, so one ``simulationStep()`` advances all of them.
+
+    Each step, for every copy and incoming lane (N, E, S, W) whose influence bit is 1, a car
+    is inserted at the start of that lane (``departSpeed=10``; dropped if it cannot be
+    inserted at once, as the GS car would not have entered then). Its turn (right, straight,
+    left) is drawn from the GS's expected turning statistics at this intersection
+    (:func:`ials_zoo.traffic.network.turn_probabilities`: exact under the grid's route
+    distributions, ignoring congestion), or from ``turn_probabilities`` (a ``[4, 3]`` array)
+    if given. Cars leave at the end of the outgoing edges, so spill-back from downstream
+    intersections is not modelled (it is not an influence source in SPEC §2).
+
+    Args:
+        agent: the GS agent whose region this is, e.g. ``"tls_12"``.
+        n_envs: number of copies.
+        grid, inflow_probability: the GS setting (for the turning statistics and the
+            region's parameters).
+        max_cycles: episode length (the caller truncates).
+        backend: ``"auto"`` / ``"inprocess"`` / ``"worker"`` (see
+            :mod:`ials_zoo.traffic.sim`).
+        turn_probabilities: optional ``[4, 3]`` override of the turning probabilities.
+
+    Attributes:
+        last_entries: ``[n_envs, 4]`` uint8, the cars that actually entered each incoming
+            lane during the last step (measured like the GS's influence bits).
+    """
+
+    def __init__(
+        self,
+        agent="tls_12",
+        n_envs: int = 1,
+        grid=(5, 5),
+        inflow_probability: float = 0.1,
+        max_cycles: int = 300,
+        backend: str = "auto",
+        turn_probabilities=None,
+        **unknown,
+    ):
+        if unknown:
+            raise TypeError(
+                f"unknown option(s) {sorted(unknown)} for the traffic local simulator; valid: "
+                "agent, n_envs, grid, inflow_probability, max_cycles, backend, "
+                "turn_probabilities"
+            )
+        self.grid = network.check_grid(grid)
+        self.index = agent_index(agent, self.grid)
+        self.region = region_spec(self.index, self.grid, inflow_probability)
+        self.agent = self.region.agent
+        if isinstance(max_cycles, bool) or not isinstance(max_cycles, (int, np.integer)):
+            raise TypeError(f"max_cycles must be an int, got {max_cycles!r}")
+        if max_cycles < 1:
+            raise ValueError(f"max_cycles must be >= 1, got {max_cycles}")
+        self.max_cycles = int(max_cycles)
+        self.files = network.build_local(n_envs)
+        self.n_envs = int(n_envs)
+        self.observation_space = spaces.Box(0.0, 1.0, (OBS_SIZE,), np.float32)
+        self.action_space = spaces.Discrete(2)
+        if turn_probabilities is None:
+            probs = network.turn_probabilities(self.grid, self.index, inflow_probability)
+        else:
+            probs = np.asarray(turn_probabilities, dtype=np.float64)
+            if probs.shape != (4, 3) or (probs < 0).any() or not np.allclose(probs.sum(1), 1):
+                raise ValueError(
+                    "turn_probabilities must be a [4, 3] array of rows (right, straight, "
+                    f"left) summing to 1, got {turn_probabilities!r}"
+                )
+        self.turn_probabilities = probs
+        self._cum = np.cumsum(probs, axis=1)[:, :2]
+        config = {
+            "net": self.files.net,
+            "routes": self.files.routes,
+            "n": self.n_envs,
+            "states": self.files.meta["states"],
+            "route_ids": self.files.meta["routes"],
+        }
+        self._sim = SimHandle("LocalCore", config, backend)
+        self.backend = self._sim.mode
+        self._rng = np.random.default_rng()
+        self._started = False
+        self.last_entries = np.zeros((self.n_envs, 4), np.uint8)
+
+    def reset(self, seed: int | None = None):
+        if seed is not None:
+            if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+                raise TypeError(f"seed must be an int, got {seed!r}")
+            self._rng = np.random.default_rng(int(seed))
+        sumo_seed = int(self._rng.integers(2**31 - 1))
+        occ, phases = self._sim.call("reset", sumo_seed)
+        self._started = True
+        obs = observation(occ, phases)
+        self.last_entries = np.zeros((self.n_envs, 4), np.uint8)
+        return obs, {"dset": occ, "full": obs.astype(np.uint8)}
+
+    def step(self, actions, influences):
+        if not self._started:
+            raise RuntimeError("step() before reset()")
+        n = self.n_envs
+        actions = np.asarray(actions)
+        if actions.shape != (n,) or actions.dtype.kind not in "iu":
+            raise ValueError(
+                f"actions must be an int array of shape ({n},), got {actions!r} "
+                f"(dtype {actions.dtype})"
+            )
+        if n == 1:
+            if actions[0] != 0 and actions[0] != 1:
+                raise ValueError(f"actions must be 0 (keep) or 1 (switch), got {actions!r}")
+        elif not np.isin(actions, (0, 1)).all():
+            raise ValueError(f"actions must be 0 (keep) or 1 (switch), got {actions!r}")
+        influences = np.asarray(influences)
+        if influences.shape != (n, 4) or influences.dtype.kind not in "iub":
+            raise ValueError(
+                f"influences must be an int array of shape ({n}, 4), got shape "
+                f"{influences.shape} dtype {influences.dtype}"
+            )
+        ks, lanes = np.nonzero(influences)
+        if len(ks):
+            if len(ks) != influences.sum():
+                raise ValueError(f"influence bits must be 0 or 1, got {influences!r}")
+            u = self._rng.random(len(ks))
+            turns = (u[:, None] >= self._cum[lanes]).sum(axis=1)
+            inserts = list(zip(ks.tolist(), lanes.tolist(), turns.tolist()))
+        else:
+            inserts = []
+        occ, entries, reward, phases = self._sim.call("step", actions, inserts)
+        self.last_entries = entries
+        obs = observation(occ, phases)
+        return obs, reward, {"dset": occ, "full": obs.astype(np.uint8)}
+
+    def sumo_query(self, domain: str, method: str, *args):
+        """Call a libsumo getter on this simulator's SUMO (tests, diagnostics)."""
+        return self._sim.call("query", domain, method, *args)
+
+    def close(self) -> None:
+        sim = getattr(self, "_sim", None)
+        if sim is not None:
+            sim.close()
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:
+            pass
+
+
+def local_simulator(agent, n_envs: int = 1, **options) -> TrafficLocalSimulator:
+    """The domain registry's LS factory. Accepts the GS options ``grid`` and
+    ``inflow_probability`` (other GS-only options like ``learners`` are ignored)."""
+    for gs_only in ("learners", "warmup_steps", "render_mode", "scripted_learners"):
+        options.pop(gs_only, None)
+    return TrafficLocalSimulator(agent, n_envs=n_envs, **options)
