@@ -147,3 +147,18 @@ def test_ls_bad_options():
         ls.step(np.zeros(2, np.int64), np.full((2, 4), 3), new_items=np.zeros((2, 12)))
     with pytest.raises(ValueError, match="positions"):
         ls.set_state([0, 12], np.zeros((2, 12), np.int64))
+
+
+def test_region_factories_accept_gs_options():
+    domain = get_domain("warehouse_v0")
+    gs_options = {"learners": ["robot_20"], "render_mode": "ansi", "scripted_learners": False,
+                  "item_lifetime": 8, "robots": (4, 6)}
+    ls = domain.local_simulator("robot_20", n_envs=2, **gs_options)
+    assert ls.item_lifetime == 8
+    assert domain.region_spec("robot_20", **gs_options) == ls.region
+    assert ls.region == domain.parallel_env(**gs_options).region_spec("robot_20")
+    assert len(domain.possible_agents(**gs_options)) == 24
+    with pytest.raises(TypeError, match="colour"):
+        domain.region_spec("robot_20", colour=1)
+    with pytest.raises(TypeError, match="colour"):
+        domain.possible_agents(colour=1)

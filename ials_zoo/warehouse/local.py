@@ -147,5 +147,7 @@ class WarehouseLocalSimulator(LocalSimulator):
 
 
 def local_simulator(agent: str = "robot_20", n_envs: int = 1, **options) -> WarehouseLocalSimulator:
-    """Factory used by the domain registry."""
-    return WarehouseLocalSimulator(agent, n_envs=n_envs, **options)
+    """Factory used by the domain registry. Accepts the GS's options: those that shape the
+    region (``robots``, ``item_probability``, ``item_lifetime``, ``max_cycles``) are used,
+    the GS-only ones (``learners``, ``render_mode``, ``scripted_learners``) are ignored."""
+    return WarehouseLocalSimulator(agent, n_envs=n_envs, **R.drop_gs_only_options(options))

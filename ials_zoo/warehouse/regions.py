@@ -263,8 +263,20 @@ def check_options(
     return float(item_probability), item_lifetime, int(max_cycles)
 
 
-def possible_agents(robots=DEFAULT_ROBOTS) -> list[str]:
-    """All robot ids ``robot_0 .. robot_{R*C-1}``, row-major."""
+GS_ONLY_OPTIONS = ("learners", "render_mode", "scripted_learners")
+"""GS options that do not change a region; the region-level factories accept and ignore
+them so that generic code can pass the GS's options unchanged."""
+
+
+def drop_gs_only_options(options: dict) -> dict:
+    """``options`` without :data:`GS_ONLY_OPTIONS` (anything else is passed on and checked)."""
+    return {k: v for k, v in options.items() if k not in GS_ONLY_OPTIONS}
+
+
+def possible_agents(robots=DEFAULT_ROBOTS, **options) -> list[str]:
+    """All robot ids ``robot_0 .. robot_{R*C-1}``, row-major (other GS options are checked
+    and otherwise ignored)."""
+    check_options(**drop_gs_only_options(options))
     rows, cols = check_robots(robots)
     return [robot_name(i) for i in range(rows * cols)]
 
@@ -295,12 +307,18 @@ def region_spec(
     item_probability=DEFAULT_ITEM_PROBABILITY,
     item_lifetime=None,
     max_cycles=DEFAULT_MAX_CYCLES,
+    **gs_only,
 ) -> RegionSpec:
     """The :class:`RegionSpec` of ``agent``'s region (identical layout for every region).
 
     d-set ``"dset"`` (24 bits): the 12 item bits, then 12 bits "the robot stands on item cell
     b". d-set ``"full"`` (37 bits): the observation (25-bit one-hot position + 12 item bits).
+    The GS-only options (``learners``, ``render_mode``, ``scripted_learners``) are ignored;
+    any other unknown option is a TypeError.
     """
+    unknown = sorted(set(gs_only) - set(GS_ONLY_OPTIONS))
+    if unknown:
+        raise TypeError(f"unknown option(s) {unknown} for {DOMAIN_ID} region_spec")
     robots = check_robots(robots)
     agent_index(agent, robots)
     item_probability, item_lifetime, max_cycles = check_options(
