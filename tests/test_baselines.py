@@ -186,3 +186,18 @@ def test_stock_supersuit_wrapper_does_not_bootstrap():
     assert len(got) == 2
     np.testing.assert_allclose(got, 0.0, atol=1e-6)
     assert np.abs(want).min() > 0
+
+
+def test_training_clock_stands_still_while_paused():
+    import time
+
+    from ials_zoo.baselines.common import Clock
+
+    clock = Clock(offset=100.0)
+    time.sleep(0.01)
+    with clock.pause():
+        inside = clock.seconds
+        time.sleep(0.05)
+        assert clock.seconds == inside
+    after = clock.seconds
+    assert 100.0 < inside <= after < inside + 0.04

@@ -5,6 +5,7 @@ periodic GS evaluation with its learning curve, and saving a model with its meta
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import json
 import os
@@ -276,27 +277,30 @@ def make_progress_callback(total: int, evaluate_fn, eval_every: int, progress: b
 
 
 class Clock:
-    """Training wall-clock that excludes the time spent evaluating and checkpointing."""
+    """Training wall-clock that excludes the time spent evaluating and checkpointing.
+
+    ``offset`` (the AIP's collection + training seconds) is added; inside ``with
+    clock.pause():`` the clock stands still at the value it had when the pause began."""
 
     def __init__(self, offset: float = 0.0):
         self.offset = float(offset)
         self._start = time.perf_counter()
         self._paused = 0.0
+        self._pause_start = None
 
+    @contextlib.contextmanager
     def pause(self):
-        return _Pause(self)
+        if self._pause_start is not None:  # nested: already stopped
+            yield
+            return
+        self._pause_start = time.perf_counter()
+        try:
+            yield
+        finally:
+            self._paused += time.perf_counter() - self._pause_start
+            self._pause_start = None
 
     @property
     def seconds(self) -> float:
-        return self.offset + time.perf_counter() - self._start - self._paused
-
-
-class _Pause:
-    def __init__(self, clock):
-        self.clock = clock
-
-    def __enter__(self):
-        self.t = time.perf_counter()
-
-    def __exit__(self, *exc):
-        self.clock._paused += time.perf_counter() - self.t
+        now = self._pause_start if self._pause_start is not None else time.perf_counter()
+        return self.offset + now - self._start - self._paused
