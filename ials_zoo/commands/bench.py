@@ -1,0 +1,234 @@
+"""``ials-zoo bench``: measure global-simulator (GS) and IALS speed in one run.
+
+For each domain it prints, on this machine, in one process:
+
+* GS steps/s with one learner (the paper's setting: the others scripted) and with every agent
+  learning (random actions);
+* IALS steps/s for one agent (one local simulator + one AIP call per step);
+* IALS agent-steps/s batched: ``--batch`` local simulators advanced together with one
+  batched AIP call per step;
+* the ratios IALS / GS.
+
+``--scaling`` instead grows the system (traffic 3x3..10x10, warehouse 4x4..10x10 robots) and
+reports, per size, the GS time per step and per agent-step against the time per agent-step of
+one batched IALS per agent (all agents' regions, as in DIALS), with a PNG plot.
+
+Numbers are wall-clock on whatever else the machine is doing: run on an idle machine.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+
+import numpy as np
+
+from ials_zoo.core.domains import domain_ids, get_domain
+from ials_zoo.utils import atomic_write_text
+
+SCALING_SIZES = {
+    "traffic_grid_v0": ("grid", [(3, 3), (5, 5), (7, 7), (10, 10)]),
+    "warehouse_v0": ("robots", [(4, 4), (6, 6), (10, 10)]),
+}
+
+
+def configure(parser):
+    parser.add_argument("--domain", choices=["all", *domain_ids()], default="all")
+    parser.add_argument("--steps", type=int, default=None,
+                        help="GS steps per measurement (default: 3 episodes)")
+    parser.add_argument("--batch", type=int, default=64,
+                        help="local simulators in the batched IALS measurement")
+    parser.add_argument("--predictor", default="trained",
+                        help="AIP used by the IALS (trained, untrained, fixed:P, marginal, path)")
+    parser.add_argument("--scaling", action="store_true",
+                        help="measure GS vs IALS cost as the system grows, and plot it")
+    parser.add_argument("--out", default=None, help="write the figures as JSON here")
+    parser.add_argument("--plot", default="bench_scaling.png",
+                        help="PNG for --scaling (default: bench_scaling.png)")
+    parser.add_argument("--seed", type=int, default=0)
+
+
+def _timed_gs(env_id: str, learners, steps: int, seed: int, **options) -> float:
+    """GS steps/s with uniformly random actions for ``learners`` (others scripted)."""
+    domain = get_domain(env_id)
+    env = domain.parallel_env(learners=learners, **options)
+    try:
+        rng = np.random.default_rng(seed)
+        env.reset(seed=seed)
+        for agent in env.possible_agents:
+            env.action_space(agent).seed(int(rng.integers(2**31)))
+        done, t0 = 0, time.perf_counter()
+        while done < steps:
+            if not env.agents:
+                env.reset(seed=int(rng.integers(2**31)))
+            env.step({a: env.action_space(a).sample() for a in env.agents})
+            done += 1
+        return steps / (time.perf_counter() - t0)
+    finally:
+        env.close()
+
+
+def _timed_ials_single(env_id: str, agent: str, steps: int, seed: int, predictor) -> float:
+    from ials_zoo.influence.ials import make_ials
+
+    env = make_ials(env_id, agent, predictor=predictor, seed=seed)
+    try:
+        env.reset(seed=seed)
+        env.action_space.seed(seed)
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+            if terminated or truncated:
+                env.reset()
+        return steps / (time.perf_counter() - t0)
+    finally:
+        env.close()
+
+
+def _timed_ials_batched(env_id: str, agent: str, steps: int, seed: int, predictor,
+                        n_envs: int) -> float:
+    """Agent-steps/s of ``n_envs`` local simulators with one batched AIP call per step."""
+    from ials_zoo.influence.ials import make_ials_vec_env
+
+    venv = make_ials_vec_env(env_id, agent, n_envs=n_envs, predictor=predictor, seed=seed)
+    try:
+        venv.reset()
+        rng = np.random.default_rng(seed)
+        n_actions = venv.action_space.n
+        rounds = max(1, steps // n_envs)
+        t0 = time.perf_counter()
+        for _ in range(rounds):
+            venv.step(rng.integers(n_actions, size=n_envs))
+        return rounds * n_envs / (time.perf_counter() - t0)
+    finally:
+        venv.close()
+
+
+def bench_domain(env_id: str, steps: int | None, batch: int, predictor, seed: int) -> dict:
+    domain = get_domain(env_id)
+    agent = domain.default_agents[0]
+    steps = steps or 3 * domain.episode_length
+    row = {"domain": env_id, "agent": agent, "steps": steps, "batch": batch}
+    print(f"[{env_id}] GS, one learner ({agent}) ...", flush=True)
+    row["gs_one_learner"] = _timed_gs(env_id, [agent], steps, seed)
+    print(f"[{env_id}] GS, every agent learning ...", flush=True)
+    row["gs_all_learners"] = _timed_gs(env_id, None, steps, seed)
+    print(f"[{env_id}] IALS single ...", flush=True)
+    row["ials_single"] = _timed_ials_single(env_id, agent, 3 * steps, seed, predictor)
+    print(f"[{env_id}] IALS batched x{batch} ...", flush=True)
+    row["ials_batched"] = _timed_ials_batched(env_id, agent, 30 * steps, seed, predictor, batch)
+    row["ratio_single"] = row["ials_single"] / row["gs_one_learner"]
+    row["ratio_batched"] = row["ials_batched"] / row["gs_one_learner"]
+    return row
+
+
+def _print_table(rows: list[dict]) -> None:
+    header = (f"{'domain':<16}{'GS 1 learner':>14}{'GS all':>10}{'IALS':>10}"
+              f"{'IALS batched':>14}{'IALS/GS':>9}{'batched/GS':>12}")
+    print("\nsteps/s (batched: agent-steps/s)")
+    print(header)
+    print("-" * len(header))
+    for r in rows:
+        print(f"{r['domain']:<16}{r['gs_one_learner']:>14,.0f}{r['gs_all_learners']:>10,.0f}"
+              f"{r['ials_single']:>10,.0f}{r['ials_batched']:>14,.0f}"
+              f"{r['ratio_single']:>8.1f}x{r['ratio_batched']:>11.1f}x")
+
+
+def bench_scaling(env_id: str, steps: int | None, seed: int) -> list[dict]:
+    """Per size: GS time per step and per agent-step; IALS time per agent-step (DIALS)."""
+    domain = get_domain(env_id)
+    key, sizes = SCALING_SIZES[env_id]
+    rows = []
+    for size in sizes:
+        options = {key: size}
+        agents = domain.possible_agents(**options)
+        n_steps = steps or domain.episode_length
+        print(f"[{env_id}] {key}={size}: GS with {len(agents)} agents ...", flush=True)
+        gs = _timed_gs(env_id, [agents[len(agents) // 2]], n_steps, seed, **options)
+        # DIALS: one local simulator per agent, all advanced together with one AIP call.
+        ials = _timed_ials_scaling(env_id, agents, options, 5 * n_steps, seed)
+        rows.append({
+            "domain": env_id, "size": list(size), "agents": len(agents),
+            "gs_steps_per_s": gs, "gs_agent_steps_per_s": gs * len(agents),
+            "ials_agent_steps_per_s": ials,
+            "gs_us_per_step": 1e6 / gs, "ials_us_per_agent_step": 1e6 / ials,
+        })
+    return rows
+
+
+def _timed_ials_scaling(env_id, agents, options, steps, seed) -> float:
+    from ials_zoo.influence.ials import make_ials_vec_env
+
+    # Every region of a domain has the same layout, so one batched local simulator of
+    # len(agents) copies costs what a DIALS worker pool pays for all agents' IALS steps.
+    agent = agents[len(agents) // 2]
+    n = len(agents)
+    venv = make_ials_vec_env(env_id, agent, n_envs=n, predictor="random-init", seed=seed,
+                             **options)
+    try:
+        venv.reset()
+        rng = np.random.default_rng(seed)
+        rounds = max(1, steps // 4)
+        t0 = time.perf_counter()
+        for _ in range(rounds):
+            venv.step(rng.integers(venv.action_space.n, size=n))
+        return rounds * n / (time.perf_counter() - t0)
+    finally:
+        venv.close()
+
+
+def _plot_scaling(rows: list[dict], path: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    for ax, env_id in zip(axes, SCALING_SIZES):
+        sel = [r for r in rows if r["domain"] == env_id]
+        if not sel:
+            ax.set_visible(False)
+            continue
+        n = [r["agents"] for r in sel]
+        ax.plot(n, [r["gs_us_per_step"] for r in sel], "o-", label="GS: one step (all agents)")
+        ax.plot(n, [r["ials_us_per_agent_step"] for r in sel], "s-",
+                label="IALS: one agent-step")
+        ax.set_xlabel("agents")
+        ax.set_ylabel("µs")
+        ax.set_yscale("log")
+        ax.set_title(env_id)
+        ax.grid(True, alpha=0.3)
+        ax.legend()
+    fig.suptitle("Cost of one step of experience for one agent: GS vs IALS")
+    fig.tight_layout()
+    from ials_zoo.utils import atomic_path
+
+    with atomic_path(path, suffix=".png") as tmp:
+        fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+
+
+def run(args) -> int:
+    if args.steps is not None and args.steps < 1:
+        raise SystemExit(f"--steps must be >= 1, got {args.steps}")
+    if args.batch < 1:
+        raise SystemExit(f"--batch must be >= 1, got {args.batch}")
+    env_ids = domain_ids() if args.domain == "all" else [args.domain]
+    if args.scaling:
+        rows = [r for env_id in env_ids for r in bench_scaling(env_id, args.steps, args.seed)]
+        print(f"\n{'domain':<16}{'size':>9}{'agents':>8}{'GS steps/s':>12}"
+              f"{'GS µs/step':>12}{'IALS µs/agent-step':>20}")
+        for r in rows:
+            print(f"{r['domain']:<16}{'x'.join(map(str, r['size'])):>9}{r['agents']:>8}"
+                  f"{r['gs_steps_per_s']:>12,.0f}{r['gs_us_per_step']:>12,.0f}"
+                  f"{r['ials_us_per_agent_step']:>20,.1f}")
+        _plot_scaling(rows, args.plot)
+        print(f"plot: {args.plot}")
+    else:
+        rows = [bench_domain(e, args.steps, args.batch, args.predictor, args.seed)
+                for e in env_ids]
+        _print_table(rows)
+    if args.out:
+        atomic_write_text(args.out, json.dumps(rows, indent=2) + "\n")
+        print(f"figures written to {args.out}")
+    return 0
