@@ -447,6 +447,16 @@ def make_ials(
         raise
 
 
+def gymnasium_entry_point(env_id: str, agent: str | None = None, **kwargs) -> IALSEnv:
+    """Entry point of ``gymnasium.make("ials_zoo/IALS-<env_id>", agent=..., ...)``: the
+    arguments of :func:`make_ials`; ``agent`` defaults to the domain's first paper agent."""
+    if agent is None:
+        from ials_zoo.core.domains import get_domain
+
+        agent = get_domain(env_id).default_agents[0]
+    return make_ials(env_id, agent, **kwargs)
+
+
 def make_ials_vec_env(
     env_id: str,
     agent: str,
