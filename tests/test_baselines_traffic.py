@@ -54,3 +54,18 @@ def test_ppo_single_traffic_ials(tmp_path, traffic_aip):
         ppo_single.Args(simulator=traffic_aip, out_dir=str(out), **TINY)))
     assert data["training"]["aip"]["collection_seconds"] > 0
     assert data["training"]["aip_seconds"] > 0
+
+
+def test_ppo_shared_traffic_copies_in_own_processes(tmp_path):
+    from ials_zoo.baselines import ppo_shared
+
+    out = tmp_path / "shared"
+    results = ppo_shared.main(ppo_shared.Args(
+        env_id=ENV, learners="tls_12,tls_13", total_timesteps=600, n_copies=2, n_steps=150,
+        batch_size=150, net_arch="16", eval_every=0, eval_episodes=1, final_eval_episodes=1,
+        out_dir=str(out), progress=False))
+    assert [r["agent"] for r in results] == ["tls_12"]  # default: default agents among learners
+    assert load_result(out / "result_tls_12.json")["trained_agents"] == ["tls_12", "tls_13"]
+    with pytest.raises(ValueError, match="must be learners"):
+        ppo_shared.main(ppo_shared.Args(env_id=ENV, learners="tls_12", eval_agents="tls_18",
+                                        out_dir=str(out), progress=False))

@@ -22,7 +22,8 @@ its own process (``num_cpus = N``); the periodic GS evaluation always runs in a 
 
 Evaluation: the shared policy is scored with the standard protocol
 (:mod:`ials_zoo.evaluation`: one agent controlled by the policy, the others scripted) for each
-agent in ``--eval-agents`` (default: the domain's default agents); one ``result_<agent>.json``
+agent in ``--eval-agents`` (default: the domain's default agents that are learners, else
+the first learner); one ``result_<agent>.json``
 per evaluated agent. The learning curve follows the first evaluated agent. Outputs as in
 :mod:`ials_zoo.baselines.ppo_single` (``curve.json``, ``checkpoint.zip``, ``model.zip`` +
 ``model.meta.json``).
@@ -126,7 +127,7 @@ class Args:
 
     env_id: str = arg("warehouse_v0", "domain id", aliases=("--env",))
     learners: str = arg("all", "comma-separated learning agents, or 'all'")
-    eval_agents: str | None = arg(None, "comma-separated agents to score (default: the domain's default agents)")
+    eval_agents: str | None = arg(None, "comma-separated learners to score (default: the domain's default agents among the learners, else the first learner)")
     seed: int = arg(0, "training seed")
     total_timesteps: int = arg(2_000_000, "agent transitions of training")
     n_copies: int = arg(1, "GS copies (SUMO: one process each)")
@@ -181,9 +182,13 @@ def main(args: Args | None = None) -> list[dict]:
     torch.set_num_threads(1)
     dom = get_domain(args.env_id)
     learners = _agent_list(args.learners, args.env_id, dom.possible_agents())
-    eval_agents = _agent_list(args.eval_agents, args.env_id, dom.default_agents)
-    if not learners or not eval_agents:
-        raise ValueError("learners and eval_agents must name at least one agent")
+    if not learners:
+        raise ValueError("learners must name at least one agent")
+    default_eval = [a for a in dom.default_agents if a in learners] or learners[:1]
+    eval_agents = _agent_list(args.eval_agents, args.env_id, default_eval)
+    outside = [a for a in eval_agents if a not in learners]
+    if outside or not eval_agents:
+        raise ValueError(f"eval_agents {outside or eval_agents} must be learners ({learners})")
     for name in ("total_timesteps", "n_copies", "n_steps", "batch_size", "n_epochs",
                  "eval_episodes", "final_eval_episodes"):
         if int(getattr(args, name)) < 1:
