@@ -145,7 +145,7 @@ def test_occupancy_reward_influence_match_sumo(gs):
                 for v in ids:
                     dist = 100.0 - e.sumo_query("vehicle", "getLanePosition", v)
                     if dist < 90.0:
-                        cells[9 * j + int(dist // 10)] = 1
+                        cells[9 * j + int(dist / 10)] = 1
                     speeds.append(e.sumo_query("vehicle", "getSpeed", v))
                 bits[j] = bool(ids - prev[a][j])
                 prev[a][j] = ids
@@ -303,6 +303,20 @@ def test_inprocess_second_env_fails_loudly_and_close_frees(gs):
     e3 = gs(grid=(2, 2), backend="inprocess")
     e3.reset(seed=0)
     e3.step({a: 0 for a in e3.agents})
+
+
+def test_dropped_env_frees_its_simulation():
+    import gc
+
+    e = TrafficGridEnv(grid=(2, 2), backend="inprocess")
+    e.reset(seed=0)
+    del e
+    gc.collect()
+    e2 = TrafficGridEnv(grid=(2, 2), backend="inprocess")
+    try:
+        e2.reset(seed=0)
+    finally:
+        e2.close()
 
 
 def test_killed_worker_raises_then_reset_recovers(gs):

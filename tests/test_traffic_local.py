@@ -164,3 +164,30 @@ def test_domain_factory_and_bad_input(make_ls):
     ]:
         with pytest.raises(exc):
             make_ls(**kw)
+
+
+def test_ls_replaying_gs_influences_tracks_the_gs():
+    """Fed the GS's own influence bits and actions, the LS reproduces the GS's observations
+    closely (not exactly: entry speeds differ and downstream spill-back is not modelled)."""
+    gs = TrafficGridEnv(grid=(3, 3), learners=["tls_4"])
+    ls = TrafficLocalSimulator("tls_4", grid=(3, 3))
+    try:
+        rng = np.random.default_rng(0)
+        gs.reset(seed=3)
+        ls.reset(seed=3)
+        agree, n_u, n_in = [], 0, 0
+        for _ in range(200):
+            a = int(rng.random() < 0.1)
+            o, _, _, _, info = gs.step({"tls_4": a})
+            u = info["tls_4"]["influence"]
+            lo, _, _ = ls.step(np.array([a]), u[None])
+            assert np.array_equal(lo[0, 36:], o["tls_4"][36:])  # same light logic
+            agree.append((lo[0, :36] == o["tls_4"][:36]).mean())
+            n_u += u.sum()
+            n_in += ls.last_entries.sum()
+        assert n_u > 30
+        assert n_in >= 0.9 * n_u  # nearly every entry could be inserted
+        assert np.mean(agree) > 0.9, np.mean(agree)
+    finally:
+        gs.close()
+        ls.close()

@@ -136,7 +136,6 @@ class _LaneReader:
         entries = bytearray(n * 4)
         reward = [0.0] * n
         prev, lengths, lanes = self.prev, self.length, self.flat
-        inv_cell = 1.0 / CELL_LENGTH
         for g in range(n):
             speed_sum = 0.0
             count = 0
@@ -147,7 +146,7 @@ class _LaneReader:
                     base = (4 * g + a) * N_CELLS
                     length = lengths[j]
                     for v in ids:
-                        cell = int((length - get_pos(v)) * inv_cell)
+                        cell = int((length - get_pos(v)) / CELL_LENGTH)
                         if cell < N_CELLS:
                             occ[base + cell] = 1
                         speed_sum += get_speed(v)
@@ -268,9 +267,13 @@ class GridCore:
     def reset(self, seed: int, warmup_steps: int = 0):
         """Start a new simulation; returns ``(occ [L,36], phases [L])``."""
         ls = self.ls
-        if self.running:
+        if self.running or ls.simulation.isLoaded():
+            # also after a SUMO error that left the simulation half-closed
             self.running = False
-            ls.close()
+            try:
+                ls.close()
+            except Exception:
+                pass
         net, routes, tls_add = self.files
         ls.start(_sumo_cmd(net, routes, [tls_add], seed))
         self.running = True
@@ -364,9 +367,13 @@ class LocalCore:
     def reset(self, seed: int):
         """Start a new simulation (all lights north-south green); returns ``(occ, phases)``."""
         ls = self.ls
-        if self.running:
+        if self.running or ls.simulation.isLoaded():
+            # also after a SUMO error that left the simulation half-closed
             self.running = False
-            ls.close()
+            try:
+                ls.close()
+            except Exception:
+                pass
         # a car that cannot be inserted at once is dropped: in the GS it would simply not
         # have entered the lane at this step
         ls.start(_sumo_cmd(*self.files, [], seed, extra=("--max-depart-delay", "0")))
