@@ -164,6 +164,16 @@ def test_gs_vec_env_truncation_is_bootstrapped():
     np.testing.assert_allclose(other, 0.0, atol=1e-6)
 
 
+def test_ials_vec_env_truncation_is_bootstrapped():
+    from ials_zoo.influence.ials import make_ials_vec_env
+
+    venv = make_ials_vec_env(ENV, AGENT, n_envs=2, predictor="untrained", seed=0, max_cycles=5)
+    got, want, other = _bootstrap_added(venv)
+    assert len(got) == 2
+    np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-6)
+    np.testing.assert_allclose(other, 0.0, atol=1e-6)
+
+
 def test_supersuit_adapter_truncation_is_bootstrapped():
     venv = ppo_shared.make_shared_vec_env(ENV, learners=["robot_20", "robot_21", "robot_14"],
                                           n_copies=2, seed=0, max_cycles=5)
