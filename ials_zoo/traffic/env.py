@@ -103,8 +103,10 @@ class TrafficGridEnv(ParallelEnv):
 
     **Agents**: the ``learners`` (default: every intersection). **Action**: ``Discrete(2)``,
     0 = keep the current green, 1 = switch; a switch shows yellow for 3 simulated seconds and
-    then the other green; actions during the yellow are ignored. Lights start in the
-    north-south green (or, after a warm-up, in the actuated program's current/next green).
+    then the other green; actions during the yellow are ignored. Learner lights are driven
+    with ``trafficlight.setRedYellowGreenState`` (SUMO's "online" program) using the same 4
+    states as the actuated program; they start in the north-south green (or, after a
+    warm-up, in the actuated program's current/next green).
 
     **Observation**: ``Box(0, 1, (40,), float32)`` with 0/1 entries: for each incoming lane in
     the order N, E, S, W (the lane arriving from the northern neighbour first), 9 occupancy

@@ -28,7 +28,6 @@ simulation (or worker) and frees the lease.
 from __future__ import annotations
 
 import atexit
-import importlib
 import os
 import subprocess
 import sys
@@ -255,6 +254,8 @@ class GridCore:
         import libsumo
 
         self.ls = libsumo
+        # the raw call: libsumo.simulationStep also runs TraCI step listeners (never used)
+        self._sim_step = libsumo._libsumo.simulation_step
         self.files = (net, routes, tls_add)
         self.observed = list(observed)
         self.controlled = bool(controlled)
@@ -303,7 +304,7 @@ class GridCore:
         lights = self.lights
         if self.controlled:
             lights.act(actions)
-        ls.simulationStep()
+        self._sim_step(0.0)
         occ, entries, reward = self.reader.read()
         if self.controlled:
             lights.tick()
@@ -353,6 +354,7 @@ class LocalCore:
         import libsumo
 
         self.ls = libsumo
+        self._sim_step = libsumo._libsumo.simulation_step
         self.files = (net, routes)
         self.n = int(n)
         self.tls = [f"c{k}" for k in range(self.n)]
@@ -398,7 +400,7 @@ class LocalCore:
             self.counter += 1
             add(f"v{self.counter}", route_ids[k][a][t], typeID="car",
                 departLane="0", departSpeed="10")  # fmt: skip
-        ls.simulationStep()
+        self._sim_step(0.0)
         occ, entries, reward = self.reader.read()
         self.lights.tick()
         return occ, entries, reward, np.array(self.lights.phase, np.int64)
