@@ -211,3 +211,23 @@ def test_training_clock_stands_still_while_paused():
         assert clock.seconds == inside
     after = clock.seconds
     assert 100.0 < inside <= after < inside + 0.04
+
+
+def test_env_options_reach_training_and_evaluation(tmp_path):
+    """GS/LS options (here items vanishing after 2 steps) reach training, scoring, re-scoring."""
+    from ials_zoo.cli import main
+
+    out = tmp_path / "mem"
+    args = dict(TINY, total_timesteps=256, n_envs=2, eval_every=0, final_eval_episodes=2)
+    result = ppo_single.main(ppo_single.Args(simulator="untrained-ials", out_dir=str(out),
+                                             env_options='{"item_lifetime": 2}', **args))
+    assert result["evaluation"]["options"] == {"item_lifetime": 2}
+    plain = evaluate(ENV, AGENT, str(out / "model.zip"), episodes=2)
+    memory = evaluate(ENV, AGENT, str(out / "model.zip"), episodes=2, item_lifetime=2)
+    assert memory.returns == result["scores"][0]["returns"] != plain.returns
+    rc = main(["evaluate", "--policy", str(out / "model.zip"), "--episodes", "2",
+               "--out", str(tmp_path / "r.json"), "--no-progress"])
+    assert rc == 0
+    assert load_result(tmp_path / "r.json")["scores"][0]["returns"] == memory.returns
+    with pytest.raises(ValueError, match="JSON object"):
+        ppo_single.main(ppo_single.Args(env_options="[1]", out_dir=str(out)))

@@ -63,6 +63,19 @@ def arg(default, help: str, **kw):
     return dataclasses.field(default=default, metadata={"help": help, **kw})
 
 
+def parse_env_options(text: str | None) -> dict:
+    """``--env-options`` (a JSON object of GS/LS options, e.g. ``{"item_lifetime": 8}``)."""
+    if not text:
+        return {}
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"env_options {text!r} is not valid JSON: {exc}") from None
+    if not isinstance(value, dict):
+        raise ValueError(f"env_options must be a JSON object, got {text!r}")
+    return value
+
+
 # --------------------------------------------------------------------------------------------
 # Training simulators
 
@@ -200,8 +213,10 @@ class Evaluator:
     """
 
     def __init__(self, env_id: str, agent: str, frame_stack: int, episodes: int,
-                 deterministic: bool, in_subprocess: bool, start_method: str = "forkserver"):
+                 deterministic: bool, in_subprocess: bool, start_method: str = "forkserver",
+                 options: dict | None = None):
         self.env_id, self.agent, self.frame_stack = env_id, agent, frame_stack
+        self.options = dict(options or {})
         self.episodes, self.deterministic = episodes, deterministic
         self.in_subprocess = in_subprocess
         self._pool = None
@@ -224,12 +239,12 @@ class Evaluator:
 
             return self._pool.submit(
                 _evaluate_worker, self.env_id, self.agent, str(checkpoint),
-                {"episodes": n, "deterministic": self.deterministic},
+                {"episodes": n, "deterministic": self.deterministic, **self.options},
             ).result()
         policy = SB3Policy(model, frame_stack=self.frame_stack, deterministic=self.deterministic,
                            name=Path(checkpoint).name if checkpoint else "model",
                            file=str(checkpoint) if checkpoint else None)
-        return evaluate(self.env_id, self.agent, policy, episodes=n)
+        return evaluate(self.env_id, self.agent, policy, episodes=n, **self.options)
 
     def close(self):
         if self._pool is not None:

@@ -47,6 +47,7 @@ from ials_zoo.baselines.common import (
     curve_point,
     make_progress_callback,
     parse_args,
+    parse_env_options,
     save_model,
 )
 from ials_zoo.baselines.ppo_single import _hidden
@@ -144,6 +145,7 @@ class Args:
     max_grad_norm: float = arg(0.5, "gradient clipping")
     net_arch: str = arg("256,128", "hidden layer sizes, comma-separated")
     frame_stack: int | None = arg(None, "observations the policy reads (default: the domain's)")
+    env_options: str = arg("", "GS options as a JSON object, e.g. '{\"item_lifetime\": 8}'")
     eval_every: int = arg(100_000, "GS evaluation every this many agent transitions (0: end only)")
     eval_episodes: int = arg(10, "GS episodes per periodic evaluation")
     final_eval_episodes: int = arg(20, "GS episodes of the final evaluation")
@@ -194,6 +196,7 @@ def main(args: Args | None = None) -> list[dict]:
         if int(getattr(args, name)) < 1:
             raise ValueError(f"{name} must be >= 1, got {getattr(args, name)}")
     hidden = _hidden(args.net_arch)
+    options = parse_env_options(args.env_options)
     frame_stack = int(args.frame_stack or dom.frame_stack)
     out = Path(args.out_dir or f"runs/{args.env_id}__shared__s{args.seed}")
     out.mkdir(parents=True, exist_ok=True)
@@ -201,7 +204,7 @@ def main(args: Args | None = None) -> list[dict]:
     all_agents = list(dom.possible_agents())
     venv = make_shared_vec_env(args.env_id,
                                learners=None if learners == all_agents else learners,
-                               n_copies=args.n_copies, seed=args.seed)
+                               n_copies=args.n_copies, seed=args.seed, **options)
     venv = VecMonitor(as_float_box(venv))
     if frame_stack > 1:
         venv = VecFrameStack(venv, frame_stack)
@@ -222,14 +225,14 @@ def main(args: Args | None = None) -> list[dict]:
     meta = {
         "format": "ials_zoo-model/1", "sb3_class": "PPO", "algorithm": "ppo_shared",
         "env_id": args.env_id, "agent": eval_agents[0], "agents": learners,
-        "frame_stack": frame_stack, "seed": args.seed, "training": training,
+        "frame_stack": frame_stack, "env_options": options, "seed": args.seed, "training": training,
         "learning_curve": [], "package_version": ials_zoo.__version__, "created": now_iso(),
     }
     curve = meta["learning_curve"]
     checkpoint = out / "checkpoint.zip"
     own = needs_own_process(args.env_id)
     evaluators = {a: Evaluator(args.env_id, a, frame_stack, args.eval_episodes,
-                               args.deterministic_eval, in_subprocess=own)
+                               args.deterministic_eval, in_subprocess=own, options=options)
                   for a in eval_agents}
     clock = Clock()
 

@@ -54,6 +54,7 @@ from ials_zoo.baselines.common import (
     curve_point,
     make_progress_callback,
     parse_args,
+    parse_env_options,
     predictor_for,
     predictor_record,
     save_model,
@@ -84,6 +85,7 @@ class Args:
     max_grad_norm: float = arg(0.5, "gradient clipping")
     net_arch: str = arg("256,128", "hidden layer sizes, comma-separated (policy and value nets)")
     frame_stack: int | None = arg(None, "observations the policy reads (default: the domain's)")
+    env_options: str = arg("", "GS/LS options as a JSON object, e.g. '{\"item_lifetime\": 8}' (memory variant)")
     dset_kind: str | None = arg(None, "d-set kind of the AIP (dset | full; default: the predictor's)")
     eval_every: int = arg(100_000, "GS evaluation every this many steps (0: only at the end)")
     eval_episodes: int = arg(10, "GS episodes per periodic evaluation")
@@ -118,6 +120,7 @@ def check_args(args: Args) -> None:
         raise ValueError(f"frame_stack must be >= 1, got {args.frame_stack}")
     _hidden(args.net_arch)
     predictor_for(args.simulator)
+    parse_env_options(args.env_options)
 
 
 def make_training_env(args: Args, agent: str):
@@ -125,13 +128,15 @@ def make_training_env(args: Args, agent: str):
     from ials_zoo.single_agent import make_gs_vec_env
 
     predictor = predictor_for(args.simulator)
+    options = parse_env_options(args.env_options)
     if predictor is None:
-        venv = make_gs_vec_env(args.env_id, agent, n_envs=args.n_envs, vec_env=args.vec_env)
+        venv = make_gs_vec_env(args.env_id, agent, n_envs=args.n_envs, vec_env=args.vec_env,
+                               **options)
         venv.seed(args.seed)
         return venv, None
     from ials_zoo.influence.ials import make_ials_vec_env
 
-    kw = {} if args.dset_kind is None else {"dset_kind": args.dset_kind}
+    kw = dict(options) if args.dset_kind is None else dict(options, dset_kind=args.dset_kind)
     venv = make_ials_vec_env(args.env_id, agent, n_envs=args.n_envs, predictor=predictor,
                              seed=args.seed, **kw)
     return venv, predictor_record(venv, args.simulator, args.env_id, agent)
@@ -188,13 +193,15 @@ def main(args: Args | None = None) -> dict:
     meta = {
         "format": "ials_zoo-model/1", "sb3_class": "PPO", "algorithm": "ppo_single",
         "env_id": args.env_id, "agent": agent, "agents": [agent], "frame_stack": frame_stack,
+        "env_options": parse_env_options(args.env_options),
         "seed": args.seed, "training": training, "learning_curve": [],
         "package_version": ials_zoo.__version__, "created": now_iso(),
     }
     curve: list[dict] = meta["learning_curve"]
     checkpoint = out / "checkpoint.zip"
     evaluator = Evaluator(args.env_id, agent, frame_stack, args.eval_episodes,
-                          args.deterministic_eval, in_subprocess=needs_own_process(args.env_id))
+                          args.deterministic_eval, in_subprocess=needs_own_process(args.env_id),
+                          options=parse_env_options(args.env_options))
     clock = Clock(offset=aip_seconds)
 
     def record(steps: int, path: Path, episodes: int | None = None):

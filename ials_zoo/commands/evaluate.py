@@ -27,6 +27,9 @@ def configure(parser):
                         help="take the most likely action (models) instead of sampling")
     parser.add_argument("--frame-stack", type=int, default=None,
                         help="override the policy's frame stack (callables default to 1)")
+    parser.add_argument("--env-options", default="",
+                        help="GS options as a JSON object, e.g. '{\"item_lifetime\": 8}' "
+                             "(default: the model's training options)")
     parser.add_argument("--out", default=None, help="write the result JSON here (atomic)")
     parser.add_argument("--submitter", default="", help="submitter name in the result")
     parser.add_argument("--notes", default="", help="notes in the result")
@@ -35,7 +38,7 @@ def configure(parser):
 
 
 def result_for(env_id, agent, policy, episodes, deterministic=False, frame_stack=None,
-               submitter="", notes="", progress=False) -> dict:
+               submitter="", notes="", progress=False, options: dict | None = None) -> dict:
     """Evaluate ``policy`` and build its leaderboard result (training record from a model's
     metadata; none for reference policies and callables)."""
     from ials_zoo.core.domains import get_domain
@@ -48,8 +51,9 @@ def result_for(env_id, agent, policy, episodes, deterministic=False, frame_stack
     if env_id is None:
         raise ValueError("--env is required unless the policy is a model with metadata")
     agent = agent or meta.get("agent") or get_domain(env_id).default_agents[0]
+    options = meta.get("env_options", {}) if options is None else options
     ev = evaluate(env_id, agent, probe or policy, episodes=episodes, deterministic=deterministic,
-                  frame_stack=frame_stack, progress=progress)
+                  frame_stack=frame_stack, progress=progress, **options)
     if meta:
         training = meta.get("training")
         curve = meta.get("learning_curve") or []
@@ -64,12 +68,14 @@ def result_for(env_id, agent, policy, episodes, deterministic=False, frame_stack
 
 
 def run(args) -> int:
+    from ials_zoo.baselines.common import parse_env_options
     from ials_zoo.leaderboard import write_result
 
     try:
+        options = parse_env_options(args.env_options) if args.env_options else None
         result = result_for(args.env_id, args.agent, args.policy, args.episodes,
                             args.deterministic, args.frame_stack, args.submitter, args.notes,
-                            args.progress)
+                            args.progress, options)
     except (ValueError, TypeError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
