@@ -167,3 +167,16 @@ def test_schema_file_is_draft_2020_12():
     schema = lb.load_schema()
     assert schema["$schema"].endswith("2020-12/schema")
     jsonschema.Draft202012Validator.check_schema(schema)
+
+
+def test_committed_entries_are_valid_and_rendered():
+    from pathlib import Path
+
+    board = Path(__file__).resolve().parents[1] / "leaderboard"
+    entries = lb.load_entries(board)
+    assert entries, "the repository ships reference entries"
+    readme = (board / "README.md").read_text()
+    for path, data in entries:
+        lb.validate_result(data)
+        assert path.name == lb.entry_name(data)
+        assert f"results/{path.name}" in readme, f"{path.name} missing from README (run render)"

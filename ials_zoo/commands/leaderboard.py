@@ -49,7 +49,7 @@ def run(args) -> int:
             ok = True
             for r in reports:
                 status = "OK" if r["ok"] else "FAILED"
-                print(f"seed {r['seed']}: claimed {r['claimed']:.4f}, re-measured "
+                print(f"seed {'-' if r['seed'] is None else r['seed']}: claimed {r['claimed']:.4f}, re-measured "
                       f"{r['measured']:.4f} [{r['ci'][0]:.4f}, {r['ci'][1]:.4f}] "
                       f"{'(exact)' if r['exact'] else ''} {status}")
                 ok &= r["ok"]
