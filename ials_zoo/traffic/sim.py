@@ -485,8 +485,12 @@ class SimHandle:
         self._conn_w = Connection(w_parent, readable=False)
         self._conn_r = Connection(r_parent, writable=False)
         _live_workers.add(self)
-        self._send(("init", self.core_name, self.config))
-        self._recv()
+        try:
+            self._send(("init", self.core_name, self.config))
+            self._recv()
+        except BaseException:
+            self._kill()
+            raise
 
     def _send(self, msg):
         try:
@@ -565,8 +569,16 @@ class SimHandle:
                     "no live SUMO worker (it died or was never started); call reset() first"
                 )
             self._spawn()
-        self._send(("call", method, args))
-        return self._recv()
+        try:
+            self._send(("call", method, args))
+            return self._recv()
+        except SimulationError:
+            raise  # the worker answered (an error) or is already gone: nothing out of sync
+        except BaseException:
+            # e.g. KeyboardInterrupt while waiting: the answer would arrive out of turn later,
+            # so this worker is dropped; the next reset() starts a fresh one
+            self._kill()
+            raise
 
     def close(self) -> None:
         """End the simulation (or the worker) and free the in-process lease."""
