@@ -1,0 +1,105 @@
+"""``ials-zoo reproduce``: run the paper's experiments (resumable, with a step budget).
+
+Examples::
+
+    ials-zoo reproduce --dry-run
+    ials-zoo reproduce --experiments training --domains warehouse_v0 --budget 300000 --seeds 3
+    ials-zoo reproduce --report-only
+
+Experiments: ``training`` (paper §5.2-5.3: PPO on gs / ials / untrained-ials / fixed:0.1
+[/ marginal], GS-evaluated curves vs wall-clock incl. the AIP's measured collection +
+training time), ``memory`` (§5.4: M-IALS vs NM-IALS x agents with/without frame stack,
+item_lifetime=8, + item-lifetime histograms), ``dset`` (§4.2: d-set vs full-observation AIP,
+off-policy cross-entropy). Each run is a subprocess writing into its own folder under
+``--out``; a run whose marker (``result.json``) exists is skipped, so the study can be
+continued across invocations. Afterwards the finished training runs are submitted to the
+leaderboard and ``<leaderboard>/reproduction.md`` + curve PNGs are re-made.
+
+Default budget: 300,000 PPO steps per run (paper: 2M); see the ``--budget`` help for why.
+"""
+
+from __future__ import annotations
+
+
+def _csv(text: str) -> tuple:
+    return tuple(x.strip() for x in str(text).split(",") if x.strip())
+
+
+def configure(parser):
+    from ials_zoo.reproduce.plan import Config, DEFAULT_SIMULATORS, DOMAINS, EXPERIMENTS
+
+    c = Config()
+    parser.add_argument("--experiments", default=",".join(EXPERIMENTS),
+                        help=f"comma-separated, some of {','.join(EXPERIMENTS)} (default: all)")
+    parser.add_argument("--domains", default=",".join(DOMAINS), help="comma-separated domain ids (default: both)")
+    parser.add_argument("--agents", default="",
+                        help="learning agents, e.g. tls_12,tls_18 (default: robot_20 and tls_12)")
+    parser.add_argument("--simulators", default=",".join(DEFAULT_SIMULATORS),
+                        help="training simulators of the 'training' experiment (gs required; 'marginal' optional)")
+    parser.add_argument("--budget", type=int, default=c.budget,
+                        help="PPO environment steps per run (default 300000: about 3-4 min per warehouse "
+                             "run and ~10-20 min per traffic GS run on 2 cores, so the default study fits "
+                             "in a few hours; the paper used 2M)")
+    parser.add_argument("--seeds", type=int, default=c.seeds, help="training seeds per configuration")
+    parser.add_argument("--jobs", type=int, default=c.jobs, help="runs at once (default 2 = cores)")
+    parser.add_argument("--out", default=c.out, help="study folder")
+    parser.add_argument("--leaderboard", default=c.leaderboard, help="leaderboard folder (figures, reproduction.md)")
+    parser.add_argument("--net-arch", default=c.net_arch, help="PPO hidden layers")
+    parser.add_argument("--n-envs", type=int, default=c.n_envs)
+    parser.add_argument("--eval-points", type=int, default=c.eval_points, help="GS evaluations per curve")
+    parser.add_argument("--eval-episodes", type=int, default=c.eval_episodes)
+    parser.add_argument("--final-eval-episodes", type=int, default=c.final_eval_episodes)
+    parser.add_argument("--aip-steps", type=int, default=c.aip_steps, help="Algorithm 1 steps per AIP")
+    parser.add_argument("--aip-epochs", type=int, default=None, help="AIP epochs (default: the project's)")
+    parser.add_argument("--dset-offpolicy-steps", type=int, default=c.dset_offpolicy_steps)
+    parser.add_argument("--lifetime-episodes", type=int, default=c.lifetime_episodes)
+    parser.add_argument("--dry-run", action="store_true", help="print the plan (done/todo) and exit")
+    parser.add_argument("--report-only", action="store_true",
+                        help="run nothing: re-make figures, reproduction.md and submissions from the run folders")
+    parser.add_argument("--no-submit", action="store_true", help="do not submit results to the leaderboard")
+    parser.add_argument("--no-progress", action="store_true")
+
+
+def config_from_args(args):
+    """The :class:`~ials_zoo.reproduce.plan.Config` of parsed command-line ``args``."""
+    from ials_zoo.reproduce.plan import Config
+
+    return Config(
+        experiments=_csv(args.experiments), domains=_csv(args.domains), agents=_csv(args.agents),
+        simulators=_csv(args.simulators), budget=args.budget, seeds=args.seeds, jobs=args.jobs,
+        out=args.out, leaderboard=args.leaderboard, net_arch=args.net_arch, n_envs=args.n_envs,
+        eval_points=args.eval_points, eval_episodes=args.eval_episodes,
+        final_eval_episodes=args.final_eval_episodes, aip_steps=args.aip_steps, aip_epochs=args.aip_epochs,
+        dset_offpolicy_steps=args.dset_offpolicy_steps, lifetime_episodes=args.lifetime_episodes,
+    ).check()
+
+
+def run(args) -> int:
+    from ials_zoo.reproduce import build_plan, describe_plan, settings
+    from ials_zoo.reproduce.report import submit_results, write_report
+    from ials_zoo.reproduce.runner import run_jobs
+
+    try:
+        cfg = config_from_args(args)
+    except ValueError as exc:
+        raise SystemExit(f"ials-zoo reproduce: {exc}") from None
+    jobs = build_plan(cfg)
+    if args.dry_run:
+        print(describe_plan(jobs))
+        return 0
+    status = {"failed": [], "blocked": []}
+    if not args.report_only:
+        status = run_jobs(jobs, n_jobs=cfg.jobs, progress=not args.no_progress)
+        print(f"jobs: {len(status['done'])} run, {len(status['skipped'])} already done, "
+              f"{len(status['failed'])} failed, {len(status['blocked'])} blocked")
+        for jid in status["failed"]:
+            print(f"  failed: {jid}")
+    if not args.no_submit:
+        sub = submit_results(cfg.out, cfg.leaderboard)
+        print(f"leaderboard: {len(sub['submitted'])} submitted, {len(sub['already'])} already there, "
+              f"{len(sub['rejected'])} rejected")
+        for r in sub["rejected"]:
+            print(f"  rejected: {r}")
+    path = write_report(cfg.out, cfg.leaderboard, settings(cfg))
+    print(f"wrote {path}")
+    return 1 if status["failed"] or status["blocked"] else 0

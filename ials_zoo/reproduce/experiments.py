@@ -1,0 +1,375 @@
+"""What the jobs of ``ials-zoo reproduce`` do (each runs in its own worker process).
+
+* :func:`train_aip` -- Algorithm 1 + AIP training with the project's own ``collect`` and
+  ``train_predictor``, timed here; writes ``aip.pt`` (its metadata carries the measured
+  collection and training seconds, which ``ppo_single`` adds to the wall-clock) and
+  ``marginal.pt`` (F-IALS with the empirical marginal of the same data, charged the same
+  collection time).
+* :func:`train_ppo_with_options` -- the ``ppo_single`` recipe on a domain *variant* (GS
+  options such as ``item_lifetime=8``, which ``ppo_single`` does not take), scored on the GS
+  variant; used by the memory experiment.
+* :func:`item_lifetimes`, :func:`record_item_ages`, :func:`lifetime_histograms` -- how long
+  items stay on the shelves in the GS vs an IALS (paper §5.4).
+* :func:`off_policy_cross_entropy`, :func:`dset_ablation` -- the d-set vs full-history AIP,
+  tested on data from another policy (paper §4.2).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ials_zoo.utils import atomic_write_text
+
+
+def _write_json(path: Path, data) -> None:
+    atomic_write_text(path, json.dumps(data, indent=2, default=str) + "\n")
+
+
+# --------------------------------------------------------------------------------------------
+# AIPs
+
+
+def train_aip(env_id: str, agent: str, out_dir, steps: int = 50_000, epochs: int | None = None,
+              seed: int = 0, options: dict | None = None, arch: str | None = None,
+              dset_kind: str = "dset") -> dict:
+    """Collect ``steps`` steps (uniform random learner, scripted neighbours), train an AIP,
+    save ``aip.pt``, ``marginal.pt`` and ``report.json`` (written last: the done marker)."""
+    from ials_zoo.core.domains import get_domain
+    from ials_zoo.influence.dataset import collect
+    from ials_zoo.influence.predictors import MarginalPredictor, save_predictor
+    from ials_zoo.influence.train import train_predictor
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    arch = arch or get_domain(env_id).default_predictor
+    t0 = time.perf_counter()
+    data = collect(env_id, agent, steps=steps, seed=seed, gs_options=dict(options or {}), progress=False)
+    collect_wall = time.perf_counter() - t0
+    pred, report = train_predictor(data, arch=arch, dset_kind=dset_kind, epochs=epochs, seed=seed,
+                                   progress=False)
+    save_predictor(pred, out / "aip.pt")
+    train_idx, _ = data.split(0.1, seed=seed)
+    marg = MarginalPredictor.fit(data, dset_kind=dset_kind, episodes=train_idx)
+    # Fitting a marginal is counting, but it needs the same collected data: charge that time.
+    marg.metadata.update({"variant": "marginal", "dataset": {"collect_seconds": data.metadata["collect_seconds"]},
+                          "train_seconds": 0.0})
+    save_predictor(marg, out / "marginal.pt")
+    report = dict(report, collect_wall_seconds=round(collect_wall, 3), options=dict(options or {}))
+    _write_json(out / "report.json", report)
+    return report
+
+
+# --------------------------------------------------------------------------------------------
+# PPO on a domain variant (memory experiment)
+
+
+def train_ppo_with_options(params: dict) -> dict:
+    """``ppo_single``'s recipe (same defaults, curve.json / model.zip / result.json) on the GS
+    variant ``params["options"]`` (e.g. ``{"item_lifetime": 8}``); ``params["simulator"]`` is
+    ``gs`` or a predictor file trained on that variant. Evaluated in this process, so only for
+    numpy domains (the warehouse)."""
+    import dataclasses
+
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.utils import LinearSchedule
+    from stable_baselines3.common.vec_env import VecFrameStack, VecMonitor
+
+    import ials_zoo
+    from ials_zoo.baselines.common import (Clock, as_float_box, curve_point, make_progress_callback,
+                                           predictor_record, save_model)
+    from ials_zoo.baselines.ppo_single import Args, _hidden
+    from ials_zoo.evaluation import SB3Policy, evaluate
+    from ials_zoo.leaderboard import make_result, now_iso, write_result
+    from ials_zoo.single_agent import make_gs_vec_env, needs_own_process
+
+    params = dict(params)
+    options = dict(params.pop("options", {}) or {})
+    args = Args(**params)
+    if needs_own_process(args.env_id):
+        raise ValueError(f"train_ppo_with_options evaluates in-process; {args.env_id} needs its own process")
+    torch.set_num_threads(1)
+    out = Path(args.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    agent = args.agent
+    frame_stack = int(args.frame_stack or 1)
+    if args.simulator == "gs":
+        venv = make_gs_vec_env(args.env_id, agent, n_envs=args.n_envs, **options)
+        venv.seed(args.seed)
+        aip = None
+    else:
+        from ials_zoo.influence.ials import make_ials_vec_env
+
+        venv = make_ials_vec_env(args.env_id, agent, n_envs=args.n_envs, predictor=args.simulator,
+                                 seed=args.seed, **options)
+        aip = predictor_record(venv, args.simulator, args.env_id, agent)
+    aip_seconds = (aip["collection_seconds"] + aip["training_seconds"]) if aip else 0.0
+    venv = VecMonitor(as_float_box(venv))
+    if frame_stack > 1:
+        venv = VecFrameStack(venv, frame_stack)
+    hidden = _hidden(args.net_arch)
+    lr = LinearSchedule(args.learning_rate, 0.0, 1.0) if args.anneal_lr else args.learning_rate
+    model = PPO("MlpPolicy", venv, learning_rate=lr, n_steps=args.n_steps, batch_size=args.batch_size,
+                n_epochs=args.n_epochs, gamma=args.gamma, gae_lambda=args.gae_lambda,
+                clip_range=args.clip_range, ent_coef=args.ent_coef, vf_coef=args.vf_coef,
+                max_grad_norm=args.max_grad_norm, seed=args.seed, device="cpu", verbose=0,
+                policy_kwargs={"net_arch": {"pi": hidden, "vf": hidden}})
+    training = {"simulator": args.simulator, "aip": aip, "seeds": [args.seed], "env_steps": 0,
+                "wall_clock_seconds": 0.0, "aip_seconds": aip_seconds,
+                "hyperparameters": dict(dataclasses.asdict(args), options=options)}
+    meta = {"format": "ials_zoo-model/1", "sb3_class": "PPO", "algorithm": "ppo_single",
+            "env_id": args.env_id, "agent": agent, "agents": [agent], "frame_stack": frame_stack,
+            "seed": args.seed, "training": training, "learning_curve": [], "options": options,
+            "package_version": ials_zoo.__version__, "created": now_iso()}
+    curve = meta["learning_curve"]
+    clock = Clock(offset=aip_seconds)
+
+    def score(path: Path, episodes: int):
+        policy = SB3Policy(model, frame_stack=frame_stack, deterministic=args.deterministic_eval,
+                           name=path.name, file=str(path))
+        return evaluate(args.env_id, agent, policy, episodes=episodes, **options)
+
+    def record(steps: int):
+        with clock.pause():
+            training["env_steps"] = int(steps)
+            training["wall_clock_seconds"] = clock.seconds - aip_seconds
+            save_model(model, out / "checkpoint.zip", meta)
+            ev = score(out / "checkpoint.zip", args.eval_episodes)
+            curve.append(curve_point(steps, clock.seconds, ev))
+            _write_json(out / "curve.json", {"env_id": args.env_id, "agent": agent,
+                                             "simulator": args.simulator, "seed": args.seed,
+                                             "options": options, "points": curve})
+        return ev
+
+    callback = make_progress_callback(args.total_timesteps, record, args.eval_every, args.progress)
+    try:
+        model.learn(total_timesteps=args.total_timesteps, callback=callback)
+        steps = int(model.num_timesteps)
+        if not curve or curve[-1]["env_steps"] != steps:
+            record(steps)
+        with clock.pause():
+            save_model(model, out / "model.zip", meta)
+            final = score(out / "model.zip", args.final_eval_episodes)
+    finally:
+        venv.close()
+    final.policy_file = "model.zip"
+    result = make_result([final], algorithm="ppo_single", training=training, training_seeds=[args.seed],
+                         learning_curves=[{"seed": args.seed, "points": curve}], trained_agents=[agent],
+                         notes=args.notes)
+    write_result(out / "result.json", result)
+    return result
+
+
+# --------------------------------------------------------------------------------------------
+# Item lifetimes (memory experiment)
+
+
+def item_lifetimes(ages) -> list[int]:
+    """Lifetimes of the items in an episode of item ages ``ages[T, K]`` (0 = no item; an
+    item's age counts the observations it has been visible in, as in the warehouse).
+
+    An item ends at row ``t`` when the cell's age does not go on to ``ages[t] + 1`` at row
+    ``t + 1``; its lifetime is then ``ages[t]`` (the number of observations it was visible
+    in). Items still present in the last row are censored and left out."""
+    a = np.asarray(ages)
+    if a.ndim != 2:
+        raise ValueError(f"ages must have shape [T, K], got {a.shape}")
+    if a.size and (a < 0).any():
+        raise ValueError("ages must be >= 0")
+    cur, nxt = a[:-1], a[1:]
+    ended = (cur > 0) & (nxt != cur + 1)
+    return sorted(int(x) for x in cur[ended])
+
+
+def _region_item_ages(env, agent: str) -> np.ndarray:
+    from ials_zoo.warehouse import regions as R
+
+    idx = R.agent_index(agent, env.robots)
+    r, c = divmod(idx, env.robots[1])
+    floor = env.item_ages_floor()
+    return np.array([floor[4 * r + i, 4 * c + j] for i, j in R.ITEM_CELLS], dtype=np.int64)
+
+
+def record_item_ages(env_id: str, agent: str, simulator: str = "gs", episodes: int = 10,
+                     seed: int = 0, policy=None, **options) -> list[np.ndarray]:
+    """Item ages ``[T+1, 12]`` of ``agent``'s region per episode, in the warehouse GS
+    (``simulator="gs"``) or an IALS (``simulator`` = a predictor spec for ``make_ials``).
+    ``policy``: ``obs -> action`` (default uniform random)."""
+    if env_id != "warehouse_v0":
+        raise ValueError(f"item lifetimes are a warehouse measurement, got env_id {env_id!r}")
+    rng = np.random.default_rng(seed)
+    act = policy or (lambda obs: int(rng.integers(4)))
+    out = []
+    if simulator == "gs":
+        from ials_zoo.core.domains import get_domain
+
+        env = get_domain(env_id).parallel_env(learners=[agent], **options)
+        try:
+            for ep in range(episodes):
+                obs, _ = env.reset(seed=seed + ep)
+                rows = [_region_item_ages(env, agent)]
+                while env.agents:
+                    obs, *_ = env.step({agent: act(obs[agent])})
+                    rows.append(_region_item_ages(env, agent))
+                out.append(np.stack(rows))
+        finally:
+            env.close()
+        return out
+    from ials_zoo.influence.ials import make_ials
+
+    env = make_ials(env_id, agent, predictor=simulator, seed=seed, **options)
+    try:
+        for ep in range(episodes):
+            obs, _ = env.reset(seed=seed + ep)
+            # The warehouse LS keeps its ages per copy; copy 0 is this env's.
+            rows = [env.ls._ages[0].copy()]
+            done = False
+            while not done:
+                obs, _, term, trunc, _ = env.step(act(obs))
+                rows.append(env.ls._ages[0].copy())
+                done = term or trunc
+            out.append(np.stack(rows))
+    finally:
+        env.close()
+    return out
+
+
+def lifetime_histograms(env_id: str, agent: str, simulators: dict, episodes: int = 20, seed: int = 0,
+                        **options) -> dict:
+    """``{name: sorted lifetimes}`` over ``episodes`` episodes of each simulator (``"gs"`` or
+    a predictor spec), random policy."""
+    hist = {}
+    for name, sim in simulators.items():
+        lives = []
+        for ages in record_item_ages(env_id, agent, sim, episodes=episodes, seed=seed, **options):
+            lives += item_lifetimes(ages)
+        hist[name] = sorted(lives)
+    return hist
+
+
+def plot_lifetimes(hist: dict, path, lifetime: int | None = None, title: str = "") -> Path:
+    """Histogram PNG (one panel per simulator, shares of items by lifetime)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ials_zoo.utils import atomic_path
+
+    names = list(hist)
+    top = max([max(v) for v in hist.values() if v] + [lifetime or 1]) + 1
+    fig, axes = plt.subplots(1, len(names), figsize=(4 * len(names), 3.2), sharey=True, squeeze=False)
+    for ax, name in zip(axes[0], names):
+        v = np.asarray(hist[name], dtype=int)
+        counts = np.bincount(v, minlength=top + 1)[1:top + 1] if v.size else np.zeros(top)
+        share = counts / max(counts.sum(), 1)
+        ax.bar(np.arange(1, top + 1), share, color="tab:orange" if name == "GS" else "tab:blue")
+        if lifetime:
+            ax.axvline(lifetime, color="k", ls="--", lw=0.8)
+        ax.set_title(f"{name} ({v.size} items)")
+        ax.set_xlabel("item lifetime (steps)")
+    axes[0][0].set_ylabel("share of items")
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    path = Path(path)
+    with atomic_path(path, suffix=".png") as tmp:
+        fig.savefig(tmp, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def run_lifetimes(params: dict, out_dir) -> dict:
+    """The lifetimes job: histograms of the GS and each AIP in ``params["aips"]``."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    sims = {"GS": "gs", **params["aips"]}
+    hist = lifetime_histograms(params["env_id"], params["agent"], sims, episodes=params["episodes"],
+                               **params["options"])
+    lifetime = params["options"].get("item_lifetime")
+    plot_lifetimes(hist, out / "lifetimes.png", lifetime,
+                   f"{params['env_id']} {params['agent']}: item lifetimes (item_lifetime={lifetime})")
+    summary = {k: {"items": len(v), "mean": float(np.mean(v)) if v else None,
+                   "share_at_lifetime": float(np.mean(np.asarray(v) == lifetime)) if v and lifetime else None}
+               for k, v in hist.items()}
+    data = {"env_id": params["env_id"], "agent": params["agent"], "options": params["options"],
+            "episodes": params["episodes"], "policy": "uniform_random", "lifetimes": hist, "summary": summary}
+    _write_json(out / "lifetimes.json", data)
+    return data
+
+
+# --------------------------------------------------------------------------------------------
+# d-set ablation
+
+
+def off_policy_cross_entropy(predictors: dict, on_policy, on_policy_episodes, off_policy: dict) -> dict:
+    """Cross-entropy (nats) of each predictor on the on-policy test episodes and on each
+    off-policy data set, and the increase off-policy (``off - on``).
+
+    Returns ``{name: {"on_policy": ce, "off_policy": {data: ce}, "increase": {data: ce - on}}}``."""
+    from ials_zoo.influence.predictors import evaluate_cross_entropy
+
+    if not predictors:
+        raise ValueError("predictors must not be empty")
+    out = {}
+    for name, pred in predictors.items():
+        on = evaluate_cross_entropy(pred, on_policy, on_policy_episodes)
+        off = {k: evaluate_cross_entropy(pred, ds) for k, ds in off_policy.items()}
+        out[name] = {"on_policy": on, "off_policy": off, "increase": {k: v - on for k, v in off.items()}}
+    return out
+
+
+def biased_policy(env_id: str, seed: int = 0, p: float = 0.7):
+    """A random policy that takes action 0 with probability ``p`` (traffic: keep the green,
+    so the light switches rarely; warehouse: mostly up)."""
+    n = 2 if env_id.startswith("traffic") else 4  # SPEC: Discrete(2) / Discrete(4)
+    rng = np.random.default_rng(seed)
+
+    def act(obs):
+        return 0 if rng.random() < p else int(rng.integers(1, n))
+
+    act.__name__ = f"biased_random_p{p}"
+    return act
+
+
+def dset_ablation(params: dict, out_dir) -> dict:
+    """Train AIPs on the d-set and on the full observation (uniform random data), then
+    measure their cross-entropy on data from the scripted controller (the learner follows
+    the domain's scripted/actuated controller) and from a biased random policy."""
+    from ials_zoo.core.domains import get_domain
+    from ials_zoo.influence.dataset import collect
+    from ials_zoo.influence.predictors import MarginalPredictor, UniformPredictor
+    from ials_zoo.influence.train import train_predictor, untrained_probs
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    env_id, agent, seed = params["env_id"], params["agent"], int(params.get("seed", 0))
+    arch = params.get("arch") or get_domain(env_id).default_predictor
+    data = collect(env_id, agent, steps=params["steps"], seed=seed, progress=False)
+    off = {
+        "scripted": collect(env_id, agent, steps=params["offpolicy_steps"], seed=seed + 1,
+                            gs_options={"scripted_learners": True}, progress=False),
+        "biased": collect(env_id, agent, steps=params["offpolicy_steps"], seed=seed + 2,
+                          policy=biased_policy(env_id, seed + 2), progress=False),
+    }
+    _, test_idx = data.split(0.1, seed=seed)
+    preds, reports = {}, {}
+    for kind in ("dset", "full"):
+        pred, rep = train_predictor(data, arch=arch, dset_kind=kind, epochs=params.get("epochs"),
+                                    seed=seed, progress=False)
+        preds[kind] = pred
+        reports[kind] = {k: rep[k] for k in ("cross_entropy", "train_seconds", "hyperparameters")}
+    preds["marginal"] = MarginalPredictor.fit(data, episodes=data.split(0.1, seed=seed)[0])
+    preds["untrained"] = UniformPredictor(data.region, probs=untrained_probs(data.region))
+    ce = off_policy_cross_entropy(preds, data, test_idx, off)
+    result = {"env_id": env_id, "agent": agent, "arch": arch, "train_steps": data.n_steps,
+              "train_policy": data.metadata.get("policy"),
+              "off_policy_data": {k: {"steps": v.n_steps, "policy": v.metadata.get("policy"),
+                                      "gs_options": v.metadata.get("gs_options")} for k, v in off.items()},
+              "cross_entropy": ce, "training": reports}
+    _write_json(out / "dset.json", result)
+    return result

@@ -1,0 +1,260 @@
+"""The study as a list of jobs: what ``ials-zoo reproduce`` runs, where, and in which order.
+
+A :class:`Job` is one subprocess (``python -m ials_zoo.reproduce.worker JOB_DIR/job.json``)
+that writes its outputs into its own folder ``dir``; it is *done* when its ``marker`` file
+exists there (``result.json`` for a PPO run), which is what makes the study resumable: a
+second invocation plans the same jobs and skips the done ones.
+
+Layout under ``--out`` (default ``runs/reproduce``)::
+
+    training/<env_id>__<agent>/aip/            AIP collected + trained once per agent (timed)
+    training/<env_id>__<agent>/<label>__s<seed>/   one ppo_single run (curve.json, result.json)
+    memory/<env_id>__<agent>/aip_gru/, aip_mlp/    M-IALS / NM-IALS AIPs (item_lifetime=8)
+    memory/<env_id>__<agent>/<aip>__fs<k>__s<seed>/ PPO on that IALS with frame stack k
+    memory/<env_id>__<agent>/lifetimes/        item-lifetime histograms (GS, M-IALS, NM-IALS)
+    dset/<env_id>__<agent>/                    d-set vs full-history AIP, off-policy CE
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+EXPERIMENTS = ("training", "memory", "dset")
+DOMAINS = ("warehouse_v0", "traffic_grid_v0")
+# The paper's agents: warehouse robot 20; traffic intersection 12 (and 18, opt-in: --agents).
+DEFAULT_AGENTS = {"warehouse_v0": ("robot_20",), "traffic_grid_v0": ("tls_12",)}
+DEFAULT_SIMULATORS = ("gs", "ials", "untrained-ials", "fixed:0.1")
+KNOWN_SIMULATORS = DEFAULT_SIMULATORS + ("marginal",)
+MEMORY_LIFETIME = 8  # SPEC §1 memory variant
+
+
+@dataclass
+class Config:
+    """Settings of one study (the options of ``ials-zoo reproduce``)."""
+
+    experiments: tuple = EXPERIMENTS
+    domains: tuple = DOMAINS
+    agents: tuple = ()  # extra/override agents, e.g. ("tls_12", "tls_18")
+    simulators: tuple = DEFAULT_SIMULATORS
+    budget: int = 300_000  # PPO environment steps per run
+    seeds: int = 3
+    jobs: int = 2
+    out: str = "runs/reproduce"
+    leaderboard: str = "leaderboard"
+    net_arch: str = "256,128"
+    n_envs: int = 8
+    eval_points: int = 10  # GS evaluations along each curve
+    eval_episodes: int = 10
+    final_eval_episodes: int = 20
+    aip_steps: int = 50_000  # Algorithm 1 data per AIP (the paper's N)
+    aip_epochs: int | None = None  # None: the project's default
+    dset_offpolicy_steps: int = 10_000
+    lifetime_episodes: int = 20
+
+    def check(self) -> "Config":
+        """Clear errors for bad settings; returns self."""
+        for name, allowed in (("experiments", EXPERIMENTS), ("domains", DOMAINS),
+                              ("simulators", KNOWN_SIMULATORS)):
+            values = tuple(getattr(self, name))
+            if not values:
+                raise ValueError(f"{name} must not be empty; expected some of {allowed}")
+            bad = [v for v in values if v not in allowed]
+            if bad:
+                raise ValueError(f"unknown {name} {bad}; expected some of {list(allowed)}")
+        if "gs" not in self.simulators:
+            raise ValueError(f"simulators {list(self.simulators)} must include 'gs' (the reference)")
+        for name in ("budget", "seeds", "jobs", "n_envs", "eval_points", "eval_episodes",
+                     "final_eval_episodes", "aip_steps", "dset_offpolicy_steps", "lifetime_episodes"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValueError(f"{name} must be a positive int, got {v!r}")
+        if self.aip_epochs is not None and (not isinstance(self.aip_epochs, int) or self.aip_epochs < 0):
+            raise ValueError(f"aip_epochs must be None or an int >= 0, got {self.aip_epochs!r}")
+        for a in self.agents:
+            if domain_of_agent(a) is None:
+                raise ValueError(f"unknown agent {a!r}; expected e.g. robot_20, tls_12, tls_18")
+        return self
+
+    def agents_of(self, env_id: str) -> tuple:
+        """The learning agents of ``env_id`` in this study (``--agents`` overrides per domain)."""
+        mine = tuple(a for a in self.agents if domain_of_agent(a) == env_id)
+        return mine or DEFAULT_AGENTS[env_id]
+
+    def eval_every(self) -> int:
+        return max(1, -(-self.budget // self.eval_points))
+
+
+def domain_of_agent(agent: str) -> str | None:
+    """The domain an agent id belongs to (robot_* -> warehouse, tls_* -> traffic)."""
+    if agent.startswith("robot_"):
+        return "warehouse_v0"
+    if agent.startswith("tls_"):
+        return "traffic_grid_v0"
+    return None
+
+
+@dataclass
+class Job:
+    """One subprocess of the study (see the module docstring)."""
+
+    id: str
+    kind: str  # aip | ppo | memory_aip | memory_ppo | lifetimes | dset
+    dir: str
+    marker: str
+    params: dict
+    deps: list = field(default_factory=list)
+    experiment: str = ""
+    label: str = ""
+
+    @property
+    def done(self) -> bool:
+        return (Path(self.dir) / self.marker).is_file()
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Job":
+        return cls(**d)
+
+    def write(self) -> Path:
+        """Write ``job.json`` into the job's folder (what the worker reads)."""
+        from ials_zoo.utils import atomic_write_text
+
+        Path(self.dir).mkdir(parents=True, exist_ok=True)
+        path = Path(self.dir) / "job.json"
+        atomic_write_text(path, json.dumps(self.to_dict(), indent=2) + "\n")
+        return path
+
+
+def label_of(simulator: str) -> str:
+    """Folder-safe name of a simulator (``fixed:0.1`` -> ``fixed0.1``)."""
+    return simulator.replace(":", "")
+
+
+def _ppo_params(cfg: Config, env_id: str, agent: str, simulator: str, seed: int, out: Path,
+                notes: str) -> dict:
+    return {
+        "env_id": env_id, "agent": agent, "simulator": simulator, "seed": seed,
+        "total_timesteps": cfg.budget, "n_envs": cfg.n_envs, "net_arch": cfg.net_arch,
+        "eval_every": cfg.eval_every(), "eval_episodes": cfg.eval_episodes,
+        "final_eval_episodes": cfg.final_eval_episodes, "out_dir": str(out),
+        "progress": False, "notes": notes,
+    }
+
+
+def plan_training(cfg: Config) -> list[Job]:
+    """Paper §5.2-5.3: PPO on the GS and on each IALS variant, ``seeds`` seeds each."""
+    jobs = []
+    root = Path(cfg.out) / "training"
+    for env_id in cfg.domains:
+        for agent in cfg.agents_of(env_id):
+            base = root / f"{env_id}__{agent}"
+            aip_dir = base / "aip"
+            aip = Job(id=f"training/{env_id}/{agent}/aip", kind="aip", dir=str(aip_dir),
+                      marker="report.json", experiment="training", label="aip",
+                      params={"env_id": env_id, "agent": agent, "steps": cfg.aip_steps,
+                              "epochs": cfg.aip_epochs, "seed": 0, "options": {}})
+            jobs.append(aip)
+            for sim in cfg.simulators:
+                deps = []
+                spec = sim
+                if sim == "ials":
+                    spec, deps = str(aip_dir / "aip.pt"), [aip.id]
+                elif sim == "marginal":
+                    spec, deps = str(aip_dir / "marginal.pt"), [aip.id]
+                for seed in range(cfg.seeds):
+                    d = base / f"{label_of(sim)}__s{seed}"
+                    jobs.append(Job(
+                        id=f"training/{env_id}/{agent}/{label_of(sim)}/s{seed}", kind="ppo",
+                        dir=str(d), marker="result.json", deps=deps, experiment="training",
+                        label=sim,
+                        params=_ppo_params(cfg, env_id, agent, spec, seed, d,
+                                           f"ials-zoo reproduce (training, {sim}, budget {cfg.budget})")))
+    return jobs
+
+
+def plan_memory(cfg: Config) -> list[Job]:
+    """Paper §5.4 (warehouse with ``item_lifetime=8``): M-IALS (GRU AIP) vs NM-IALS (MLP AIP)
+    x agents with (frame stack 8) and without (1) memory, plus the item-lifetime histograms."""
+    if "warehouse_v0" not in cfg.domains:
+        return []
+    jobs = []
+    options = {"item_lifetime": MEMORY_LIFETIME}
+    for agent in cfg.agents_of("warehouse_v0"):
+        base = Path(cfg.out) / "memory" / f"warehouse_v0__{agent}"
+        aips = {}
+        for arch in ("gru", "mlp"):
+            d = base / f"aip_{arch}"
+            aips[arch] = Job(id=f"memory/{agent}/aip_{arch}", kind="aip", dir=str(d),
+                             marker="report.json", experiment="memory", label=f"aip_{arch}",
+                             params={"env_id": "warehouse_v0", "agent": agent, "steps": cfg.aip_steps,
+                                     "epochs": cfg.aip_epochs, "seed": 0, "options": options,
+                                     "arch": arch})
+            jobs.append(aips[arch])
+        for arch, name in (("gru", "M-IALS"), ("mlp", "NM-IALS")):
+            for fs in (8, 1):
+                for seed in range(cfg.seeds):
+                    d = base / f"{name}__fs{fs}__s{seed}"
+                    params = _ppo_params(cfg, "warehouse_v0", agent, str(Path(aips[arch].dir) / "aip.pt"),
+                                         seed, d, f"ials-zoo reproduce (memory, {name}, frame stack {fs})")
+                    params.update(frame_stack=fs, options=options)
+                    jobs.append(Job(id=f"memory/{agent}/{name}/fs{fs}/s{seed}", kind="memory_ppo",
+                                    dir=str(d), marker="result.json", deps=[aips[arch].id],
+                                    experiment="memory", label=f"{name} fs{fs}", params=params))
+        d = base / "lifetimes"
+        jobs.append(Job(id=f"memory/{agent}/lifetimes", kind="lifetimes", dir=str(d),
+                        marker="lifetimes.json", deps=[aips["gru"].id, aips["mlp"].id],
+                        experiment="memory", label="lifetimes",
+                        params={"env_id": "warehouse_v0", "agent": agent, "options": options,
+                                "episodes": cfg.lifetime_episodes,
+                                "aips": {"M-IALS": str(Path(aips["gru"].dir) / "aip.pt"),
+                                         "NM-IALS": str(Path(aips["mlp"].dir) / "aip.pt")}}))
+    return jobs
+
+
+def plan_dset(cfg: Config) -> list[Job]:
+    """Paper §4.2 ablation: AIPs on the d-set vs the full observation, tested off-policy."""
+    jobs = []
+    for env_id in cfg.domains:
+        agent = cfg.agents_of(env_id)[0]
+        d = Path(cfg.out) / "dset" / f"{env_id}__{agent}"
+        jobs.append(Job(id=f"dset/{env_id}/{agent}", kind="dset", dir=str(d), marker="dset.json",
+                        experiment="dset", label="dset",
+                        params={"env_id": env_id, "agent": agent, "steps": cfg.aip_steps,
+                                "offpolicy_steps": cfg.dset_offpolicy_steps,
+                                "epochs": cfg.aip_epochs, "seed": 0}))
+    return jobs
+
+
+def build_plan(cfg: Config) -> list[Job]:
+    """Every job of the study, dependencies before dependants."""
+    cfg.check()
+    jobs = []
+    if "training" in cfg.experiments:
+        jobs += plan_training(cfg)
+    if "memory" in cfg.experiments:
+        jobs += plan_memory(cfg)
+    if "dset" in cfg.experiments:
+        jobs += plan_dset(cfg)
+    return jobs
+
+
+def describe_plan(jobs: list[Job]) -> str:
+    """A readable listing of the plan (``--dry-run``)."""
+    lines = []
+    todo = [j for j in jobs if not j.done]
+    lines.append(f"{len(jobs)} jobs, {len(jobs) - len(todo)} already done, {len(todo)} to run")
+    for j in jobs:
+        state = "done" if j.done else "todo"
+        extra = ""
+        if j.kind in ("ppo", "memory_ppo"):
+            p = j.params
+            extra = f" sim={p['simulator']} steps={p['total_timesteps']}"
+            if "frame_stack" in p:
+                extra += f" frame_stack={p['frame_stack']}"
+        lines.append(f"[{state}] {j.id} ({j.kind}){extra} -> {j.dir}")
+    return "\n".join(lines)

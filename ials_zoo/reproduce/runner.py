@@ -1,0 +1,97 @@
+"""Run the jobs of a study as subprocesses, at most ``jobs`` at once, skipping done ones.
+
+Every job is its own process (``python -m ials_zoo.reproduce.worker job.json``) so that each
+SUMO simulation owns its process (libsumo holds one per process) and a crash loses one run
+only. The job's stdout/stderr go to ``log.txt`` in its folder; the study shows one tqdm bar
+over jobs. A job whose dependency failed is not started (reported as ``blocked``).
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from ials_zoo.reproduce.plan import Job
+
+
+def _command(job_file: Path) -> list[str]:
+    return [sys.executable, "-m", "ials_zoo.reproduce.worker", str(job_file)]
+
+
+def run_jobs(jobs: list[Job], n_jobs: int = 2, progress: bool = True, poll: float = 0.5) -> dict:
+    """Run the jobs not yet done, respecting ``deps``; returns ``{"done": [...], "skipped":
+    [...], "failed": [...], "blocked": [...]}`` (job ids)."""
+    if isinstance(n_jobs, bool) or not isinstance(n_jobs, int) or n_jobs < 1:
+        raise ValueError(f"n_jobs must be a positive int, got {n_jobs!r}")
+    ids = {j.id for j in jobs}
+    for j in jobs:
+        missing = [d for d in j.deps if d not in ids]
+        if missing:
+            raise ValueError(f"job {j.id} depends on {missing}, which are not in the plan")
+    status = {j.id: ("skipped" if j.done else "pending") for j in jobs}
+    pending = [j for j in jobs if status[j.id] == "pending"]
+    running: dict[str, tuple[Job, subprocess.Popen, object, float]] = {}
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(pending), desc="reproduce", unit="run", dynamic_ncols=True)
+    env = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", PYTHONUNBUFFERED="1")
+    try:
+        while pending or running:
+            for jid, (job, proc, log, t0) in list(running.items()):
+                rc = proc.poll()
+                if rc is None:
+                    continue
+                log.close()
+                del running[jid]
+                ok = rc == 0 and job.done
+                status[jid] = "done" if ok else "failed"
+                if bar is not None:
+                    bar.update(1)
+                    if not ok:
+                        bar.write(f"FAILED {jid} (exit {rc}); see {Path(job.dir) / 'log.txt'}")
+            for job in list(pending):
+                states = [status[d] for d in job.deps]
+                if any(s in ("failed", "blocked") for s in states):
+                    status[job.id] = "blocked"
+                    pending.remove(job)
+                    if bar is not None:
+                        bar.update(1)
+                        bar.write(f"BLOCKED {job.id}: a dependency failed")
+                    continue
+                if len(running) >= n_jobs or not all(s in ("done", "skipped") for s in states):
+                    continue
+                job_file = job.write()
+                log = open(Path(job.dir) / "log.txt", "a")
+                log.write(f"\n=== {time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime())} {' '.join(_command(job_file))}\n")
+                log.flush()
+                proc = subprocess.Popen(_command(job_file), stdout=log, stderr=subprocess.STDOUT, env=env)
+                running[job.id] = (job, proc, log, time.perf_counter())
+                pending.remove(job)
+            if bar is not None:
+                bar.set_postfix_str(", ".join(sorted(j.split("/", 1)[1] for j in running))[:80])
+            if running:
+                time.sleep(poll)
+    except BaseException:
+        # Interrupted: stop our own children so nothing keeps writing behind our back. Their
+        # folders have no marker file, so the next invocation runs them again.
+        for _, proc, log, _ in running.values():
+            proc.terminate()
+        for _, proc, log, _ in running.values():
+            try:
+                proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+            log.close()
+        raise
+    finally:
+        if bar is not None:
+            bar.close()
+    out = {k: [] for k in ("done", "skipped", "failed", "blocked")}
+    for j in jobs:
+        out[status[j.id]].append(j.id)
+    return out

@@ -1,0 +1,56 @@
+"""Worker process of ``ials-zoo reproduce``: ``python -m ials_zoo.reproduce.worker JOB.json``.
+
+Runs one job (see :mod:`ials_zoo.reproduce.plan`) in this fresh process, with torch on one
+thread, and exits 0 when the job's marker file was written.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+
+def run_job(job) -> None:
+    """Run ``job`` (a :class:`~ials_zoo.reproduce.plan.Job`) in this process."""
+    import torch
+
+    from ials_zoo.reproduce import experiments as X
+
+    torch.set_num_threads(1)
+    p = dict(job.params)
+    if job.kind == "aip":
+        X.train_aip(p["env_id"], p["agent"], job.dir, steps=p["steps"], epochs=p.get("epochs"),
+                    seed=p.get("seed", 0), options=p.get("options"), arch=p.get("arch"))
+    elif job.kind == "ppo":
+        from ials_zoo.baselines.ppo_single import Args, main
+
+        main(Args(**p))
+    elif job.kind == "memory_ppo":
+        X.train_ppo_with_options(p)
+    elif job.kind == "lifetimes":
+        X.run_lifetimes(p, job.dir)
+    elif job.kind == "dset":
+        X.dset_ablation(p, job.dir)
+    else:
+        raise ValueError(f"unknown job kind {job.kind!r}")
+
+
+def main(argv=None) -> int:
+    from ials_zoo.reproduce.plan import Job
+
+    argv = sys.argv[1:] if argv is None else argv
+    if len(argv) != 1:
+        print("usage: python -m ials_zoo.reproduce.worker JOB.json", file=sys.stderr)
+        return 2
+    job = Job.from_dict(json.loads(Path(argv[0]).read_text()))
+    t0 = time.perf_counter()
+    print(f"job {job.id} ({job.kind}) started", flush=True)
+    run_job(job)
+    print(f"job {job.id} finished in {time.perf_counter() - t0:.1f} s", flush=True)
+    return 0 if job.done else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
