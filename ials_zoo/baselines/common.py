@@ -319,3 +319,83 @@ class Clock:
     def seconds(self) -> float:
         now = self._pause_start if self._pause_start is not None else time.perf_counter()
         return self.offset + now - self._start - self._paused
+
+
+# --------------------------------------------------------------------------------------------
+# PPO and the training run
+
+
+def make_ppo(venv, args, hidden: list[int]):
+    """SB3 PPO with the baseline's hyper-parameters (``args``: ppo_single/ppo_shared Args);
+    the learning rate decays linearly to 0 when ``args.anneal_lr``."""
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.utils import LinearSchedule
+
+    lr = LinearSchedule(args.learning_rate, 0.0, 1.0) if args.anneal_lr else args.learning_rate
+    return PPO(
+        "MlpPolicy", venv, learning_rate=lr, n_steps=args.n_steps, batch_size=args.batch_size,
+        n_epochs=args.n_epochs, gamma=args.gamma, gae_lambda=args.gae_lambda,
+        clip_range=args.clip_range, ent_coef=args.ent_coef, vf_coef=args.vf_coef,
+        max_grad_norm=args.max_grad_norm, seed=args.seed, device="cpu", verbose=0,
+        policy_kwargs={"net_arch": {"pi": hidden, "vf": hidden}},
+    )
+
+
+class TrainingRun:
+    """The bookkeeping of one training run in ``out``: at every evaluation point, save
+    ``checkpoint.zip`` (+ metadata), score it on the GS and rewrite ``curve.json``; at the end,
+    save ``model.zip`` and score it for every evaluator's agent.
+
+    ``meta`` is the model metadata; its ``training`` record and ``learning_curve`` are updated
+    in place. The first evaluator's agent is the one the curve follows. The clock starts at
+    ``aip_seconds`` and stands still during evaluation and checkpointing.
+    """
+
+    def __init__(self, model, out: Path, meta: dict, evaluators: dict, aip_seconds: float = 0.0):
+        self.model, self.out, self.meta = model, Path(out), meta
+        self.training, self.curve = meta["training"], meta["learning_curve"]
+        self.evaluators = evaluators
+        self.curve_agent = next(iter(evaluators))
+        self.aip_seconds = float(aip_seconds)
+        self.clock = Clock(offset=self.aip_seconds)
+        self.checkpoint = self.out / "checkpoint.zip"
+
+    def record(self, steps: int):
+        """Checkpoint, evaluate on the GS, append to the curve (clock paused)."""
+        with self.clock.pause():
+            self.training["env_steps"] = int(steps)
+            self.training["wall_clock_seconds"] = self.clock.seconds - self.aip_seconds
+            save_model(self.model, self.checkpoint, self.meta)
+            ev = self.evaluators[self.curve_agent](self.model, self.checkpoint)
+            self.curve.append(curve_point(steps, self.clock.seconds, ev))
+            header = {k: self.meta[k] for k in ("env_id", "algorithm", "seed")}
+            atomic_write_text(self.out / "curve.json", json.dumps(dict(
+                header, agent=self.curve_agent, simulator=self.training["simulator"],
+                points=self.curve), indent=2) + "\n")
+            save_model(self.model, self.checkpoint, self.meta)  # metadata now holds the curve
+        return ev
+
+    def learn(self, total_timesteps: int, eval_every: int, final_episodes: int,
+              progress: bool) -> dict:
+        """Train; return ``{agent: EvaluationResult}`` of the final model (``model.zip``)
+        over ``final_episodes`` GS episodes. Closes the training env and the evaluators."""
+        callback = make_progress_callback(total_timesteps, self.record, eval_every, progress)
+        try:
+            self.model.learn(total_timesteps=total_timesteps, callback=callback)
+            steps = int(self.model.num_timesteps)
+            # The final model is on the curve (unless the last evaluation was at this very
+            # step) and is scored again for the result on final_episodes episodes.
+            if not self.curve or self.curve[-1]["env_steps"] != steps:
+                self.record(steps)
+            model_path = self.out / "model.zip"
+            with self.clock.pause():
+                save_model(self.model, model_path, self.meta)
+                finals = {a: ev(self.model, model_path, final_episodes)
+                          for a, ev in self.evaluators.items()}
+        finally:
+            for ev in self.evaluators.values():
+                ev.close()
+            self.model.get_env().close()
+        for ev in finals.values():
+            ev.policy_file = "model.zip"  # relative to the run folder (where results live)
+        return finals

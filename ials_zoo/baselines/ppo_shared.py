@@ -32,7 +32,6 @@ per evaluated agent. The learning curve follows the first evaluated agent. Outpu
 from __future__ import annotations
 
 import dataclasses
-import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -40,18 +39,15 @@ from pathlib import Path
 import numpy as np
 
 from ials_zoo.baselines.common import (
-    Clock,
     Evaluator,
+    TrainingRun,
     arg,
     as_float_box,
-    curve_point,
-    make_progress_callback,
+    make_ppo,
     parse_args,
     parse_env_options,
-    save_model,
 )
 from ials_zoo.baselines.ppo_single import _hidden
-from ials_zoo.utils import atomic_write_text
 
 
 def _sb3_wrapper_base():
@@ -171,8 +167,6 @@ def _agent_list(text: str | None, env_id: str, default) -> list[str]:
 def main(args: Args | None = None) -> list[dict]:
     """Train, evaluate and save; returns one result dict per evaluated agent."""
     import torch
-    from stable_baselines3 import PPO
-    from stable_baselines3.common.utils import LinearSchedule
     from stable_baselines3.common.vec_env import VecFrameStack, VecMonitor
 
     import ials_zoo
@@ -208,14 +202,7 @@ def main(args: Args | None = None) -> list[dict]:
     venv = VecMonitor(as_float_box(venv))
     if frame_stack > 1:
         venv = VecFrameStack(venv, frame_stack)
-    lr = LinearSchedule(args.learning_rate, 0.0, 1.0) if args.anneal_lr else args.learning_rate
-    model = PPO(
-        "MlpPolicy", venv, learning_rate=lr, n_steps=args.n_steps, batch_size=args.batch_size,
-        n_epochs=args.n_epochs, gamma=args.gamma, gae_lambda=args.gae_lambda,
-        clip_range=args.clip_range, ent_coef=args.ent_coef, vf_coef=args.vf_coef,
-        max_grad_norm=args.max_grad_norm, seed=args.seed, device="cpu", verbose=0,
-        policy_kwargs={"net_arch": {"pi": hidden, "vf": hidden}},
-    )
+    model = make_ppo(venv, args, hidden)
     training = {
         "simulator": "gs", "aip": None, "seeds": [args.seed], "env_steps": 0,
         "wall_clock_seconds": 0.0, "aip_seconds": 0.0,
@@ -228,57 +215,27 @@ def main(args: Args | None = None) -> list[dict]:
         "frame_stack": frame_stack, "env_options": options, "seed": args.seed, "training": training,
         "learning_curve": [], "package_version": ials_zoo.__version__, "created": now_iso(),
     }
-    curve = meta["learning_curve"]
-    checkpoint = out / "checkpoint.zip"
     own = needs_own_process(args.env_id)
     evaluators = {a: Evaluator(args.env_id, a, frame_stack, args.eval_episodes,
                                args.deterministic_eval, in_subprocess=own, options=options)
                   for a in eval_agents}
-    clock = Clock()
-
-    def record(steps: int):
-        with clock.pause():
-            training["env_steps"] = int(steps)
-            training["wall_clock_seconds"] = clock.seconds
-            save_model(model, checkpoint, meta)
-            ev = evaluators[eval_agents[0]](model, checkpoint)
-            curve.append(curve_point(steps, clock.seconds, ev))
-            atomic_write_text(out / "curve.json", json.dumps(
-                {"env_id": args.env_id, "agent": eval_agents[0], "simulator": "gs",
-                 "algorithm": "ppo_shared", "seed": args.seed, "points": curve}, indent=2) + "\n")
-            save_model(model, checkpoint, meta)
-        return ev
-
-    callback = make_progress_callback(args.total_timesteps, record, args.eval_every, args.progress)
+    run = TrainingRun(model, out, meta, evaluators)
     start = time.perf_counter()
+    finals = run.learn(args.total_timesteps, args.eval_every, args.final_eval_episodes,
+                       args.progress)
     results = []
-    try:
-        model.learn(total_timesteps=args.total_timesteps, callback=callback)
-        steps = int(model.num_timesteps)
-        if not curve or curve[-1]["env_steps"] != steps:
-            record(steps)
-        model_path = out / "model.zip"
-        with clock.pause():
-            save_model(model, model_path, meta)
-            for a in eval_agents:
-                final = evaluators[a](model, model_path, args.final_eval_episodes)
-                final.policy_file = "model.zip"
-                result = make_result(
-                    [final], algorithm="ppo_shared", training=training,
-                    training_seeds=[args.seed],
-                    learning_curves=[{"seed": args.seed, "points": curve}] if a == eval_agents[0] else [],
-                    trained_agents=learners, submitter=args.submitter, notes=args.notes)
-                write_result(out / f"result_{a}.json", result)
-                results.append(result)
-    finally:
-        for ev in evaluators.values():
-            ev.close()
-        venv.close()
+    for a, final in finals.items():
+        result = make_result(
+            [final], algorithm="ppo_shared", training=training, training_seeds=[args.seed],
+            learning_curves=[{"seed": args.seed, "points": run.curve}] if a == run.curve_agent else [],
+            trained_agents=learners, submitter=args.submitter, notes=args.notes)
+        write_result(out / f"result_{a}.json", result)
+        results.append(result)
     if args.progress:
         for r in results:
             s = r["score"]
             print(f"{r['agent']}: GS score {s['mean']:.3f} [{s['ci_low']:.3f}, {s['ci_high']:.3f}]")
-        print(f"{steps} agent transitions in {time.perf_counter() - start:.0f} s; wrote {out}")
+        print(f"{training['env_steps']} agent transitions in {time.perf_counter() - start:.0f} s; wrote {out}")
     return results
 
 

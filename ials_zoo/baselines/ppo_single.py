@@ -40,26 +40,21 @@ bootstraps ``gamma * V(s_T)`` instead of treating the time limit as a terminal s
 from __future__ import annotations
 
 import dataclasses
-import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 from ials_zoo.baselines.common import (
-    GS,
-    Clock,
     Evaluator,
+    TrainingRun,
     arg,
     as_float_box,
-    curve_point,
-    make_progress_callback,
+    make_ppo,
     parse_args,
     parse_env_options,
     predictor_for,
     predictor_record,
-    save_model,
 )
-from ials_zoo.utils import atomic_write_text
 
 
 @dataclass
@@ -151,8 +146,6 @@ def default_out_dir(args: Args, agent: str) -> Path:
 def main(args: Args | None = None) -> dict:
     """Train, evaluate and save; returns the result dict (also written to result.json)."""
     import torch
-    from stable_baselines3 import PPO
-    from stable_baselines3.common.utils import LinearSchedule
     from stable_baselines3.common.vec_env import VecFrameStack, VecMonitor
 
     import ials_zoo
@@ -175,79 +168,36 @@ def main(args: Args | None = None) -> dict:
     if frame_stack > 1:
         venv = VecFrameStack(venv, frame_stack)
 
-    hidden = _hidden(args.net_arch)
-    lr = LinearSchedule(args.learning_rate, 0.0, 1.0) if args.anneal_lr else args.learning_rate
-    model = PPO(
-        "MlpPolicy", venv, learning_rate=lr, n_steps=args.n_steps, batch_size=args.batch_size,
-        n_epochs=args.n_epochs, gamma=args.gamma, gae_lambda=args.gae_lambda,
-        clip_range=args.clip_range, ent_coef=args.ent_coef, vf_coef=args.vf_coef,
-        max_grad_norm=args.max_grad_norm, seed=args.seed, device="cpu", verbose=0,
-        policy_kwargs={"net_arch": {"pi": hidden, "vf": hidden}},
-    )
-
+    model = make_ppo(venv, args, _hidden(args.net_arch))
     training = {
         "simulator": args.simulator, "aip": aip, "seeds": [args.seed], "env_steps": 0,
         "wall_clock_seconds": 0.0, "aip_seconds": aip_seconds,
         "hyperparameters": dataclasses.asdict(args),
     }
+    options = parse_env_options(args.env_options)
     meta = {
         "format": "ials_zoo-model/1", "sb3_class": "PPO", "algorithm": "ppo_single",
         "env_id": args.env_id, "agent": agent, "agents": [agent], "frame_stack": frame_stack,
-        "env_options": parse_env_options(args.env_options),
-        "seed": args.seed, "training": training, "learning_curve": [],
+        "env_options": options, "seed": args.seed, "training": training, "learning_curve": [],
         "package_version": ials_zoo.__version__, "created": now_iso(),
     }
-    curve: list[dict] = meta["learning_curve"]
-    checkpoint = out / "checkpoint.zip"
     evaluator = Evaluator(args.env_id, agent, frame_stack, args.eval_episodes,
                           args.deterministic_eval, in_subprocess=needs_own_process(args.env_id),
-                          options=parse_env_options(args.env_options))
-    clock = Clock(offset=aip_seconds)
-
-    def record(steps: int, path: Path, episodes: int | None = None):
-        """Checkpoint, evaluate on the GS, append to the curve (clock paused)."""
-        with clock.pause():
-            training["env_steps"] = int(steps)
-            training["wall_clock_seconds"] = clock.seconds - aip_seconds
-            save_model(model, path, meta)
-            ev = evaluator(model, path, episodes)
-            curve.append(curve_point(steps, clock.seconds, ev))
-            atomic_write_text(out / "curve.json", json.dumps(
-                {"env_id": args.env_id, "agent": agent, "simulator": args.simulator,
-                 "seed": args.seed, "points": curve}, indent=2) + "\n")
-            save_model(model, path, meta)  # the checkpoint's metadata now holds the curve
-        return ev
-
-    callback = make_progress_callback(
-        args.total_timesteps, lambda steps: record(steps, checkpoint), args.eval_every,
-        args.progress)
+                          options=options)
+    run = TrainingRun(model, out, meta, {agent: evaluator}, aip_seconds)
     start = time.perf_counter()
-    try:
-        model.learn(total_timesteps=args.total_timesteps, callback=callback)
-        final_steps = int(model.num_timesteps)
-        # The final model is scored twice: on the curve's protocol (eval_episodes) unless the
-        # last periodic evaluation was at this very step, and for the result on
-        # final_eval_episodes episodes.
-        if not curve or curve[-1]["env_steps"] != final_steps:
-            record(final_steps, checkpoint)
-        model_path = out / "model.zip"
-        with clock.pause():
-            save_model(model, model_path, meta)
-            final = evaluator(model, model_path, args.final_eval_episodes)
-    finally:
-        evaluator.close()
-        venv.close()
-    final.policy_file = "model.zip"  # relative to the run folder (where result.json lives)
+    final = run.learn(args.total_timesteps, args.eval_every, args.final_eval_episodes,
+                      args.progress)[agent]
     result = make_result(
         [final], algorithm="ppo_single", training=training, training_seeds=[args.seed],
-        learning_curves=[{"seed": args.seed, "points": curve}], trained_agents=[agent],
+        learning_curves=[{"seed": args.seed, "points": run.curve}], trained_agents=[agent],
         submitter=args.submitter, notes=args.notes,
     )
     write_result(out / "result.json", result)
     if args.progress:
         print(f"GS score {result['score']['mean']:.3f} "
               f"[{result['score']['ci_low']:.3f}, {result['score']['ci_high']:.3f}] after "
-              f"{final_steps} steps, {time.perf_counter() - start:.0f} s; wrote {out}/result.json")
+              f"{training['env_steps']} steps, {time.perf_counter() - start:.0f} s; wrote {out}/result.json")
     return result
 
 
