@@ -180,3 +180,34 @@ def test_committed_entries_are_valid_and_rendered():
         lb.validate_result(data)
         assert path.name == lb.entry_name(data)
         assert f"results/{path.name}" in readme, f"{path.name} missing from README (run render)"
+
+
+def _trained(ev, seed, wall):
+    return lb.make_result([ev], algorithm="ppo_single", training_seeds=[seed], training={
+        "simulator": "gs", "aip": None, "seeds": [seed], "env_steps": 1000,
+        "wall_clock_seconds": wall, "aip_seconds": 0.0, "hyperparameters": {}})
+
+
+def test_merge_seeds_into_one_result(tmp_path):
+    from ials_zoo.cli import main
+
+    from ials_zoo.evaluation import CallablePolicy
+
+    # two "seeds" of one experiment: two fixed-action policies scored on the same episodes
+    a = _trained(evaluate(ENV, AGENT, CallablePolicy(lambda obs: 0, "up"), episodes=3), 0, 10.0)
+    b = _trained(evaluate(ENV, AGENT, CallablePolicy(lambda obs: 3, "right"), episodes=3), 1, 20.0)
+    merged = lb.merge_results([a, b])
+    assert [s["seed"] for s in merged["scores"]] == [0, 1]
+    assert merged["training"]["seeds"] == [0, 1] and merged["training"]["wall_clock_seconds"] == 15.0
+    mean, lo, hi = mean_ci([a["score"]["mean"], b["score"]["mean"]])
+    assert merged["score"] == {"mean": mean, "ci_low": lo, "ci_high": hi, "ci_over": "seeds"}
+    with pytest.raises(lb.ResultError, match="seeds repeat"):
+        lb.merge_results([a, a])
+    c = copy.deepcopy(b)
+    c["agent"] = "robot_21"
+    with pytest.raises(lb.ResultError, match=r"results\[1\]\.agent"):
+        lb.merge_results([a, c])
+    out = tmp_path / "m.json"
+    rc = main(["leaderboard", "merge", str(_write(tmp_path, a, "a.json")),
+               str(_write(tmp_path, b, "b.json")), "--out", str(out)])
+    assert rc == 0 and lb.load_result(out)["score"]["ci_over"] == "seeds"

@@ -1,6 +1,7 @@
 """``ials-zoo leaderboard {submit,show,render,verify}``: the results board in ``leaderboard/``.
 
     ials-zoo leaderboard submit result.json [--dir leaderboard]
+    ials-zoo leaderboard merge run_s0/result.json run_s1/result.json --out merged.json
     ials-zoo leaderboard show
     ials-zoo leaderboard render
     ials-zoo leaderboard verify leaderboard/results/<file>.json [--policy model.zip]
@@ -28,6 +29,10 @@ def configure(parser):
                    help="policy file (one per training seed) when the recorded path is not valid here")
     p = sub.add_parser("validate", help="check a result file without submitting it")
     p.add_argument("file")
+    p = sub.add_parser("merge", help="combine single-seed results of one experiment")
+    p.add_argument("files", nargs="+")
+    p.add_argument("--out", required=True, help="merged result JSON (atomic)")
+    p.add_argument("--notes", default=None)
 
 
 def run(args) -> int:
@@ -40,6 +45,12 @@ def run(args) -> int:
         elif args.action == "validate":
             lb.load_result(args.file)
             print(f"{args.file}: valid")
+        elif args.action == "merge":
+            merged = lb.merge_results([lb.load_result(f) for f in args.files], notes=args.notes)
+            lb.write_result(args.out, merged)
+            s = merged["score"]
+            print(f"{len(merged['scores'])} seeds: GS score {s['mean']:.3f} "
+                  f"[{s['ci_low']:.3f}, {s['ci_high']:.3f}] (t-interval over seeds); wrote {args.out}")
         elif args.action == "show":
             print(lb.show(args.dir))
         elif args.action == "render":
