@@ -408,6 +408,14 @@ def table_rows(entries: Iterable[tuple[Path, dict]]) -> dict[tuple[str, str], li
     return dict(sorted(groups.items()))
 
 
+def _fmt_duration(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.1f} min"
+    return f"{seconds / 3600:.2f} h"
+
+
 def _fmt_row(d: dict) -> list[str]:
     s = d["score"]
     t = d["training"]
@@ -420,7 +428,7 @@ def _fmt_row(d: dict) -> list[str]:
         str(len(d["scores"])) if t else "-",
         f"{d['evaluation']['episodes']}",
         f"{t['env_steps']:,}" if t else "-",
-        f"{total / 3600:.2f} h" if total is not None else "-",
+        _fmt_duration(total) if total is not None else "-",
         d["created"][:10],
     ]
 
@@ -465,10 +473,12 @@ def _plot(directory: Path, env_id: str, agent: str, rows: list[dict]) -> str | N
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6, 4))
+    longest = max(p["wall_clock_seconds"] for d in curves for c in d["learning_curves"] for p in c["points"])
+    unit, scale = ("hours", 3600.0) if longest >= 7200 else ("minutes", 60.0)
     for d in curves:
         for c in d["learning_curves"]:
             # curve wall-clock already includes the AIP's collection + training time
-            xs = [p["wall_clock_seconds"] / 3600 for p in c["points"]]
+            xs = [p["wall_clock_seconds"] / scale for p in c["points"]]
             ys = [p["mean"] for p in c["points"]]
             lo = [p["ci_low"] for p in c["points"]]
             hi = [p["ci_high"] for p in c["points"]]
@@ -479,7 +489,7 @@ def _plot(directory: Path, env_id: str, agent: str, rows: list[dict]) -> str | N
         if d["training"] is None:
             ax.axhline(d["score"]["mean"], ls="--", lw=1, color="grey")
             ax.text(ax.get_xlim()[0], d["score"]["mean"], f" {d['algorithm']}", va="bottom", fontsize=8)
-    ax.set_xlabel("wall-clock hours (training + AIP collection/training)")
+    ax.set_xlabel(f"wall-clock {unit} (training + AIP data collection and training)")
     ax.set_ylabel("GS mean episodic return")
     ax.set_title(f"{env_id} / {agent}")
     ax.legend(fontsize=7)
