@@ -127,10 +127,13 @@ def test_network_shape(gs):
     assert 'carFollowModel="IDM"' in open(e.files.routes).read()
 
 
-def test_occupancy_reward_influence_match_sumo(gs):
+@pytest.mark.parametrize("internal_links", [True, False])
+def test_occupancy_reward_influence_match_sumo(gs, internal_links):
     """Observation cells, reward and influence bits agree with direct SUMO queries."""
-    e = gs(grid=(3, 3), learners=["tls_4", "tls_0"])
+    e = gs(grid=(3, 3), learners=["tls_4", "tls_0"], internal_links=internal_links)
     e.reset(seed=5)
+    junction_lanes = [x for x in e.sumo_query("lane", "getIDList") if x.startswith(":")]
+    assert bool(junction_lanes) == internal_links
     rng = np.random.default_rng(0)
     prev = {a: [set() for _ in range(4)] for a in e.agents}
     n_entries = n_occ = 0
@@ -362,6 +365,8 @@ def test_sumo_errors_become_clear_exceptions(gs, backend):
         ({"backend": "gpu"}, ValueError, "backend"),
         ({"render_mode": "human"}, ValueError, "render_mode"),
         ({"speed": 3}, TypeError, "speed"),
+        ({"internal_links": "no"}, TypeError, "internal_links"),
+        ({"scripted_learners": 1}, TypeError, "scripted_learners"),
     ],
 )
 def test_bad_options(kwargs, exc, match):

@@ -166,11 +166,13 @@ def test_domain_factory_and_bad_input(make_ls):
             make_ls(**kw)
 
 
-def test_ls_replaying_gs_influences_tracks_the_gs():
+@pytest.mark.parametrize("internal_links", [True, False])
+def test_ls_replaying_gs_influences_tracks_the_gs(internal_links):
     """Fed the GS's own influence bits and actions, the LS reproduces the GS's observations
     closely (not exactly: entry speeds differ and downstream spill-back is not modelled)."""
-    gs = TrafficGridEnv(grid=(3, 3), learners=["tls_4"])
-    ls = TrafficLocalSimulator("tls_4", grid=(3, 3))
+    gs = TrafficGridEnv(grid=(3, 3), learners=["tls_4"], internal_links=internal_links)
+    ls = TrafficLocalSimulator("tls_4", grid=(3, 3), internal_links=internal_links)
+    assert ls.region == gs.region_spec("tls_4")
     try:
         rng = np.random.default_rng(0)
         gs.reset(seed=3)
@@ -187,7 +189,9 @@ def test_ls_replaying_gs_influences_tracks_the_gs():
             n_in += ls.last_entries.sum()
         assert n_u > 30
         assert n_in >= 0.9 * n_u  # nearly every entry could be inserted
-        assert np.mean(agree) > 0.9, np.mean(agree)
+        # measured: about 0.93-0.96 with internal links; 0.88 without, where a GS car can
+        # land anywhere in the lane's first metres while the LS inserts it at 5 m
+        assert np.mean(agree) > (0.9 if internal_links else 0.85), np.mean(agree)
     finally:
         gs.close()
         ls.close()

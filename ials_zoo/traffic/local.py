@@ -31,8 +31,8 @@ class TrafficLocalSimulator(LocalSimulator):
     Args:
         agent: the GS agent whose region this is, e.g. ``"tls_12"``.
         n_envs: number of copies.
-        grid, inflow_probability: the GS setting (for the turning statistics and the
-            region's parameters).
+        grid, inflow_probability, internal_links: the GS setting (for the turning
+            statistics, the junction model and the region's parameters).
         max_cycles: episode length (the caller truncates).
         backend: ``"auto"`` / ``"inprocess"`` / ``"worker"`` (see
             :mod:`ials_zoo.traffic.sim`).
@@ -52,24 +52,25 @@ class TrafficLocalSimulator(LocalSimulator):
         max_cycles: int = 300,
         backend: str = "auto",
         turn_probabilities=None,
+        internal_links: bool = True,
         **unknown,
     ):
         if unknown:
             raise TypeError(
                 f"unknown option(s) {sorted(unknown)} for the traffic local simulator; valid: "
                 "agent, n_envs, grid, inflow_probability, max_cycles, backend, "
-                "turn_probabilities"
+                "turn_probabilities, internal_links"
             )
         self.grid = network.check_grid(grid)
         self.index = agent_index(agent, self.grid)
-        self.region = region_spec(self.index, self.grid, inflow_probability)
+        self.region = region_spec(self.index, self.grid, inflow_probability, internal_links)
         self.agent = self.region.agent
         if isinstance(max_cycles, bool) or not isinstance(max_cycles, (int, np.integer)):
             raise TypeError(f"max_cycles must be an int, got {max_cycles!r}")
         if max_cycles < 1:
             raise ValueError(f"max_cycles must be >= 1, got {max_cycles}")
         self.max_cycles = int(max_cycles)
-        self.files = network.build_local(n_envs)
+        self.files = network.build_local(n_envs, internal_links)
         self.n_envs = int(n_envs)
         self.observation_space = spaces.Box(0.0, 1.0, (OBS_SIZE,), np.float32)
         self.action_space = spaces.Discrete(2)

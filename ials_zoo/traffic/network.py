@@ -98,6 +98,12 @@ def check_grid(grid) -> tuple[int, int]:
     return out[0], out[1]
 
 
+def check_bool(name: str, value) -> bool:
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be a bool, got {value!r}")
+    return bool(value)
+
+
 def check_probability(p) -> float:
     if isinstance(p, bool) or not isinstance(p, (int, float, np.floating, np.integer)):
         raise TypeError(f"inflow_probability must be a number, got {p!r}")
@@ -309,7 +315,7 @@ def _write_plain(tmp: Path, nodes: list, edges: list) -> tuple[Path, Path]:
     return tmp / "plain.nod.xml", tmp / "plain.edg.xml"
 
 
-def _netconvert(tmp: Path, nod: Path, edg: Path) -> Path:
+def _netconvert(tmp: Path, nod: Path, edg: Path, internal_links: bool = True) -> Path:
     import sumo
 
     # sumo.SUMO_HOME, not the environment variable: importing libsumo may point that elsewhere
@@ -318,6 +324,7 @@ def _netconvert(tmp: Path, nod: Path, edg: Path) -> Path:
     cmd = [
         str(exe), "-n", str(nod), "-e", str(edg), "-o", str(net),
         "--no-turnarounds", "true", "--tls.default-type", "static",
+        "--no-internal-links", "false" if internal_links else "true",
         "--no-warnings", "true", "--offset.disable-normalization", "true",
     ]  # fmt: skip
     res = subprocess.run(cmd, capture_output=True, text=True)
@@ -423,10 +430,18 @@ class NetworkFiles:
         return str(p) if p.exists() else None
 
 
-def build_grid(grid=(5, 5), inflow_probability: float = 0.1) -> NetworkFiles:
-    """Build (or fetch from the cache) the grid network, its demand and its actuated lights."""
+def build_grid(
+    grid=(5, 5), inflow_probability: float = 0.1, internal_links: bool = True
+) -> NetworkFiles:
+    """Build (or fetch from the cache) the grid network, its demand and its actuated lights.
+
+    ``internal_links=False`` builds the network without junction-internal lanes (vehicles
+    jump from an incoming lane to the outgoing one): SUMO runs faster, but crossing a
+    junction then takes no time and space.
+    """
     rows, cols = check_grid(grid)
     p = check_probability(inflow_probability)
+    internal_links = check_bool("internal_links", internal_links)
 
     def builder(tmp: Path) -> dict:
         nodes, edges = [], []
@@ -448,7 +463,7 @@ def build_grid(grid=(5, 5), inflow_probability: float = 0.1) -> NetworkFiles:
                     if nb.startswith(("top", "bottom", "left", "right")):
                         edges.append((f"{me}__{nb}", me, nb))
         nod, edg = _write_plain(tmp, nodes, edges)
-        net = _netconvert(tmp, nod, edg)
+        net = _netconvert(tmp, nod, edg, internal_links)
         states = _phase_states(net, approach_of_edge)
         tls_ids = [tls_id(i) for i in range(rows * cols)]
         (tmp / "tls.add.xml").write_text(_tls_additional(states, tls_ids))
@@ -474,7 +489,8 @@ def build_grid(grid=(5, 5), inflow_probability: float = 0.1) -> NetworkFiles:
         return {"kind": "grid", "grid": [rows, cols], "states": states,
                 "entries": sorted(routes)}  # fmt: skip
 
-    d = _cached_build("grid", {"grid": [rows, cols], "inflow_probability": p}, builder)
+    params = {"grid": [rows, cols], "inflow_probability": p, "internal_links": internal_links}
+    d = _cached_build("grid", params, builder)
     return NetworkFiles(d, json.loads((d / "meta.json").read_text()))
 
 
@@ -488,7 +504,7 @@ def local_copy_ids(k: int) -> dict:
     }
 
 
-def build_local(n_copies: int) -> NetworkFiles:
+def build_local(n_copies: int, internal_links: bool = True) -> NetworkFiles:
     """Build (or fetch) ``n_copies`` disjoint single intersections in one network.
 
     Copy ``k`` has its centre junction / TLS ``c<k>``, boundary nodes ``c<k>_N`` ... and
@@ -501,6 +517,7 @@ def build_local(n_copies: int) -> NetworkFiles:
     if n_copies < 1:
         raise ValueError(f"n_envs must be >= 1, got {n_copies}")
     n_copies = int(n_copies)
+    internal_links = check_bool("internal_links", internal_links)
 
     def builder(tmp: Path) -> dict:
         nodes, edges, approach_of_edge = [], [], {}
@@ -535,7 +552,7 @@ def build_local(n_copies: int) -> NetworkFiles:
                 per_app.append(per_turn)
             route_ids.append(per_app)
         nod, edg = _write_plain(tmp, nodes, edges)
-        net = _netconvert(tmp, nod, edg)
+        net = _netconvert(tmp, nod, edg, internal_links)
         states = _phase_states(net, approach_of_edge)
         (tmp / "routes.rou.xml").write_text(
             "\n".join(["<routes>", "  " + VTYPE_XML, *routes_xml, "</routes>"]) + "\n"
@@ -544,5 +561,5 @@ def build_local(n_copies: int) -> NetworkFiles:
             f.unlink()
         return {"kind": "local", "n_copies": n_copies, "states": states, "routes": route_ids}
 
-    d = _cached_build("local", {"n_copies": n_copies}, builder)
+    d = _cached_build("local", {"n_copies": n_copies, "internal_links": internal_links}, builder)
     return NetworkFiles(d, json.loads((d / "meta.json").read_text()))
