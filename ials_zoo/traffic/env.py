@@ -137,6 +137,11 @@ class TrafficGridEnv(ParallelEnv):
     SUMO's internal lanes, so crossing takes time and space; False is about 1.6x faster in
     SUMO but changes the junction dynamics -- the calibration below is for True).
 
+    **Rendering**: ``"rgb_array"`` draws a top view with numpy (grey roads, per intersection
+    a north-south and an east-west mark coloured by its light, blue dots for cars);
+    ``"ansi"`` prints one line per grid row with, per learner, its light (``|`` NS green,
+    ``-`` EW green, ``y`` yellow) and its number of occupied cells (``.``: not a learner).
+
     **Seeding**: ``reset(seed=s)`` starts SUMO with ``--seed s``: the same seed and actions
     give the same trajectory. ``reset()`` without a seed draws one from the generator of the
     last explicit seed.
