@@ -65,8 +65,13 @@ def test_inserted_cars_appear_where_the_influence_says(make_ls):
     assert np.array_equal(ls.last_entries, u)
     for k in range(3):
         for a in range(4):
-            n = ls.sumo_query("lane", "getLastStepVehicleNumber", _lane(k, a))
-            assert n == u[k, a], (k, a)
+            ids = ls.sumo_query("lane", "getLastStepVehicleIDs", _lane(k, a))
+            assert len(ids) == u[k, a], (k, a)
+            for v in ids:  # inserted at the start of the lane at 10 m/s, turning per route
+                assert ls.sumo_query("vehicle", "getSpeed", v) == 10.0
+                assert ls.sumo_query("vehicle", "getLanePosition", v) < 6.0  # "base": 5.1 m
+                route = ls.sumo_query("vehicle", "getRoute", v)
+                assert route[0] == _lane(k, a)[:-2] and route[1].startswith(f"c{k}__")
     # a car inserted at the start of the lane (100 m from the stop line) at 10 m/s reaches
     # the observed 90 m nearest the stop line within 2 steps, in its own lane and copy only
     seen = np.zeros((3, 36), np.uint8)

@@ -396,12 +396,13 @@ class LocalCore:
         at the start of the incoming lanes. Returns ``(occ, entries, reward, phases)``."""
         ls = self.ls
         self.lights.act(actions)
-        add = ls.vehicle.add
-        route_ids = self.route_ids
-        for k, a, t in inserts:
-            self.counter += 1
-            add(f"v{self.counter}", route_ids[k][a][t], typeID="car",
-                departLane="0", departSpeed="10")  # fmt: skip
+        if inserts:
+            # raw call: (id, route, type, depart, departLane, departPos, departSpeed)
+            add = ls._libsumo.vehicle_add
+            route_ids = self.route_ids
+            for k, a, t in inserts:
+                self.counter += 1
+                add(f"v{self.counter}", route_ids[k][a][t], "car", "now", "0", "base", "10")
         self._sim_step(0.0)
         occ, entries, reward = self.reader.read()
         self.lights.tick()
