@@ -166,9 +166,19 @@ def test_fringe_departures_count_as_entries(gs):
     e = gs(grid=(2, 2), learners=["tls_0"])
     e.reset(seed=1)
     seen = np.zeros(4, np.int64)
+    departed = 0
     for _ in range(60):
         _, _, _, _, infos = e.step({"tls_0": 0})
         seen += infos["tls_0"]["influence"]
+        for v in e.sumo_query("simulation", "getDepartedIDList"):
+            departed += 1
+            assert e.sumo_query("vehicle", "getSpeed", v) == 10.0  # departSpeed 10
+            assert e.sumo_query("vehicle", "getRoadID", v).split("__")[0] in (
+                "top_0", "top_1", "left_0", "left_1", "bottom_0", "bottom_1",
+                "right_0", "right_1",
+            )  # fmt: skip
+    # 8 fringe entries at 0.1 per step for 60 steps: 48 expected
+    assert 25 <= departed <= 75
     assert seen[0] > 0 and seen[3] > 0  # N and W: departures from the boundary
     # about 0.1 per step on a fringe entry
     assert 1 <= seen[0] <= 20 and 1 <= seen[3] <= 20
