@@ -200,3 +200,18 @@ def test_ls_replaying_gs_influences_tracks_the_gs(internal_links):
     finally:
         gs.close()
         ls.close()
+
+
+def test_blocked_insertions_are_dropped_not_queued(make_ls):
+    ls = make_ls(n_envs=1)
+    ls.reset(seed=0)
+    ls.step(np.array([1]), np.zeros((1, 4), np.int64))  # north lane turns red
+    u = np.array([[1, 0, 0, 0]])
+    entries = 0
+    for _ in range(40):  # a car asked for every second: more than the lane can take
+        ls.step(np.array([0]), u)
+        entries += ls.last_entries[0, 0]
+        # at most the car that just failed waits; it is removed at the next step
+        assert len(ls.sumo_query("simulation", "getPendingVehicles")) <= 1
+    n_on_lane = ls.sumo_query("lane", "getLastStepVehicleNumber", _lane(0, 0))
+    assert entries == n_on_lane < 20
