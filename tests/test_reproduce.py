@@ -266,3 +266,37 @@ def test_memory_ppo_trains_and_scores_on_the_variant(tmp_path):
                                              tmp_path / "plain.pt"))
     with pytest.raises(ValueError, match="region setting"):
         X.train_ppo_with_options(params)
+
+
+def test_budget_option():
+    from ials_zoo.commands.reproduce import parse_budget
+
+    defaults = {"traffic_grid_v0": 300_000}
+    assert parse_budget(None, 500_000, defaults) == (500_000, defaults)
+    assert parse_budget("20000", 500_000, defaults) == (20_000, {})
+    assert parse_budget("warehouse_v0=1000000", 500_000, defaults) == (
+        500_000, {"traffic_grid_v0": 300_000, "warehouse_v0": 1_000_000})
+    assert parse_budget("1000,traffic_grid_v0=50", 500_000, defaults) == (1000, {"traffic_grid_v0": 50})
+    with pytest.raises(ValueError, match="lots"):
+        parse_budget("lots", 500_000, defaults)
+    cfg = Config(budget=1000, domain_budgets={"traffic_grid_v0": 50}, eval_points=4)
+    assert (cfg.budget_for("warehouse_v0"), cfg.budget_for("traffic_grid_v0")) == (1000, 50)
+    assert cfg.eval_every("traffic_grid_v0") == 13
+    ppo = {j.params["env_id"]: j.params["total_timesteps"] for j in build_plan(cfg) if j.kind == "ppo"}
+    assert ppo == {"warehouse_v0": 1000, "traffic_grid_v0": 50}
+    with pytest.raises(ValueError, match="chess_v0"):
+        Config(domain_budgets={"chess_v0": 5}).check()
+
+
+def test_resuming_with_other_settings_is_refused(tmp_path):
+    cfg = Config(experiments=("training",), domains=("warehouse_v0",), simulators=("gs",), seeds=1,
+                 budget=1000, out=str(tmp_path / "o"))
+    (job,) = [j for j in build_plan(cfg) if j.kind == "ppo"]
+    job.write()
+    assert job.conflict() is None
+    cfg.budget = 2000
+    (other,) = [j for j in build_plan(cfg) if j.kind == "ppo"]
+    assert "total_timesteps" in other.conflict()
+    assert "CONFLICT" in describe_plan([other])
+    with pytest.raises(ValueError, match="other settings"):
+        run_jobs([other], progress=False)

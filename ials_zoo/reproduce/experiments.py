@@ -368,8 +368,10 @@ def dset_ablation(params: dict, out_dir) -> dict:
     ce = off_policy_cross_entropy(preds, data, test_idx, off)
     result = {"env_id": env_id, "agent": agent, "arch": arch, "train_steps": data.n_steps,
               "train_policy": data.metadata.get("policy"),
-              "off_policy_data": {k: {"steps": v.n_steps, "policy": v.metadata.get("policy"),
-                                      "gs_options": v.metadata.get("gs_options")} for k, v in off.items()},
+              "off_policy_data": {k: {"steps": v.n_steps, "gs_options": v.metadata.get("gs_options"),
+                                      # with scripted_learners the learner's actions are ignored
+                                      "policy": ("scripted controller" if k == "scripted"
+                                                 else v.metadata.get("policy"))} for k, v in off.items()},
               "cross_entropy": ce, "training": reports}
     _write_json(out / "dset.json", result)
     return result

@@ -29,6 +29,12 @@ DEFAULT_AGENTS = {"warehouse_v0": ("robot_20",), "traffic_grid_v0": ("tls_12",)}
 DEFAULT_SIMULATORS = ("gs", "ials", "untrained-ials", "fixed:0.1")
 KNOWN_SIMULATORS = DEFAULT_SIMULATORS + ("marginal",)
 MEMORY_LIFETIME = 8  # SPEC §1 memory variant
+# Default PPO steps per run. Measured here (2 shared cores, ials-zoo reproduce's own pilot,
+# see leaderboard/reproduction.md): ppo_single runs ~1,500-2,400 steps/s on the warehouse GS and
+# ~2,800-3,700 on its IALS, but only ~240 on the SUMO traffic GS (vs ~2,000 on its IALS). The
+# traffic GS therefore gets fewer steps so that the default study fits in a few hours
+# (``ials-zoo reproduce`` without ``--budget``).
+DEFAULT_BUDGETS = {"traffic_grid_v0": 300_000}
 
 
 @dataclass
@@ -39,7 +45,8 @@ class Config:
     domains: tuple = DOMAINS
     agents: tuple = ()  # extra/override agents, e.g. ("tls_12", "tls_18")
     simulators: tuple = DEFAULT_SIMULATORS
-    budget: int = 300_000  # PPO environment steps per run
+    budget: int = 500_000  # PPO environment steps per run (see DEFAULT_BUDGETS)
+    domain_budgets: dict = field(default_factory=dict)  # per-domain overrides (CLI default: DEFAULT_BUDGETS)
     seeds: int = 3
     jobs: int = 2
     out: str = "runs/reproduce"
@@ -66,6 +73,11 @@ class Config:
                 raise ValueError(f"unknown {name} {bad}; expected some of {list(allowed)}")
         if "gs" not in self.simulators:
             raise ValueError(f"simulators {list(self.simulators)} must include 'gs' (the reference)")
+        for env_id, steps in dict(self.domain_budgets).items():
+            if env_id not in DOMAINS:
+                raise ValueError(f"unknown domain {env_id!r} in domain_budgets; expected one of {list(DOMAINS)}")
+            if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
+                raise ValueError(f"budget of {env_id} must be a positive int, got {steps!r}")
         for name in ("budget", "seeds", "jobs", "n_envs", "eval_points", "eval_episodes",
                      "final_eval_episodes", "aip_steps", "dset_offpolicy_steps", "lifetime_episodes"):
             v = getattr(self, name)
@@ -83,8 +95,13 @@ class Config:
         mine = tuple(a for a in self.agents if domain_of_agent(a) == env_id)
         return mine or DEFAULT_AGENTS[env_id]
 
-    def eval_every(self) -> int:
-        return max(1, -(-self.budget // self.eval_points))
+    def budget_for(self, env_id: str) -> int:
+        """PPO steps per run in ``env_id`` (a per-domain budget wins over ``budget``)."""
+        return int(dict(self.domain_budgets).get(env_id, self.budget))
+
+    def eval_every(self, env_id: str | None = None) -> int:
+        budget = self.budget if env_id is None else self.budget_for(env_id)
+        return max(1, -(-budget // self.eval_points))
 
 
 def domain_of_agent(agent: str) -> str | None:
@@ -113,6 +130,23 @@ class Job:
     def done(self) -> bool:
         return (Path(self.dir) / self.marker).is_file()
 
+    def conflict(self) -> str | None:
+        """Why the folder cannot be reused for this job (it holds a job of another kind or
+        with other parameters, e.g. another budget), or None. Resuming must never mix runs of
+        different settings into one study."""
+        path = Path(self.dir) / "job.json"
+        if not path.is_file():
+            return None
+        try:
+            old = json.loads(path.read_text())
+        except (OSError, ValueError):
+            return f"{path} is unreadable"
+        if old.get("kind") != self.kind or old.get("params") != json.loads(json.dumps(self.params)):
+            diff = sorted(k for k in set(old.get("params", {})) | set(self.params)
+                          if old.get("params", {}).get(k) != json.loads(json.dumps(self.params)).get(k))
+            return f"{self.dir} holds a {old.get('kind')} job with other settings ({', '.join(diff) or 'kind'})"
+        return None
+
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
 
@@ -139,8 +173,8 @@ def _ppo_params(cfg: Config, env_id: str, agent: str, simulator: str, seed: int,
                 notes: str) -> dict:
     return {
         "env_id": env_id, "agent": agent, "simulator": simulator, "seed": seed,
-        "total_timesteps": cfg.budget, "n_envs": cfg.n_envs, "net_arch": cfg.net_arch,
-        "eval_every": cfg.eval_every(), "eval_episodes": cfg.eval_episodes,
+        "total_timesteps": cfg.budget_for(env_id), "n_envs": cfg.n_envs, "net_arch": cfg.net_arch,
+        "eval_every": cfg.eval_every(env_id), "eval_episodes": cfg.eval_episodes,
         "final_eval_episodes": cfg.final_eval_episodes, "out_dir": str(out),
         "progress": False, "notes": notes,
     }
@@ -173,7 +207,7 @@ def plan_training(cfg: Config) -> list[Job]:
                         dir=str(d), marker="result.json", deps=deps, experiment="training",
                         label=sim,
                         params=_ppo_params(cfg, env_id, agent, spec, seed, d,
-                                           f"ials-zoo reproduce (training, {sim}, budget {cfg.budget})")))
+                                           f"ials-zoo reproduce (training, {sim}, budget {cfg.budget_for(env_id)})")))
     return jobs
 
 
@@ -249,7 +283,7 @@ def describe_plan(jobs: list[Job]) -> str:
     todo = [j for j in jobs if not j.done]
     lines.append(f"{len(jobs)} jobs, {len(jobs) - len(todo)} already done, {len(todo)} to run")
     for j in jobs:
-        state = "done" if j.done else "todo"
+        state = "CONFLICT" if j.conflict() else ("done" if j.done else "todo")
         extra = ""
         if j.kind in ("ppo", "memory_ppo"):
             p = j.params

@@ -22,7 +22,8 @@ def _command(job_file: Path) -> list[str]:
 
 
 def run_jobs(jobs: list[Job], n_jobs: int = 2, progress: bool = True, poll: float = 0.5) -> dict:
-    """Run the jobs not yet done, respecting ``deps``; returns ``{"done": [...], "skipped":
+    """Run the jobs not yet done, respecting ``deps``; a folder holding a job with other
+    settings (:meth:`Job.conflict`) stops everything before anything runs. Returns ``{"done": [...], "skipped":
     [...], "failed": [...], "blocked": [...]}`` (job ids)."""
     if isinstance(n_jobs, bool) or not isinstance(n_jobs, int) or n_jobs < 1:
         raise ValueError(f"n_jobs must be a positive int, got {n_jobs!r}")
@@ -31,6 +32,10 @@ def run_jobs(jobs: list[Job], n_jobs: int = 2, progress: bool = True, poll: floa
         missing = [d for d in j.deps if d not in ids]
         if missing:
             raise ValueError(f"job {j.id} depends on {missing}, which are not in the plan")
+    conflicts = [f"  {j.id}: {j.conflict()}" for j in jobs if j.conflict()]
+    if conflicts:
+        raise ValueError("these run folders hold runs with other settings; use another --out or "
+                         "remove them:\n" + "\n".join(conflicts))
     status = {j.id: ("skipped" if j.done else "pending") for j in jobs}
     pending = [j for j in jobs if status[j.id] == "pending"]
     running: dict[str, tuple[Job, subprocess.Popen, object, float]] = {}
