@@ -205,3 +205,44 @@ def test_trained_uses_the_cache(tmp_path, monkeypatch):
     np.testing.assert_array_equal(env.predictor.w_ih, pred.w_ih)
     with pytest.raises(FileNotFoundError, match="train-aip"):
         ials.trained_predictor(ENV, AGENT, options={"item_probability": 0.07}, train_if_missing=False)
+
+
+def test_collect_and_train_aip_commands(tmp_path, capsys):
+    import json
+
+    from ials_zoo.cli import main
+    from ials_zoo.influence.predictors import load_predictor
+
+    data = tmp_path / "wh.npz"
+    assert main(["collect", "--env", ENV, "--agent", AGENT, "--steps", "300", "--seed", "2",
+                 "--no-progress", "--out", str(data)]) == 0
+    assert InfluenceDataset.load(data).n_steps == 300
+    out = tmp_path / "aip.pt"
+    report = tmp_path / "report.json"
+    assert main(["train-aip", "--data", str(data), "--epochs", "2", "--no-progress",
+                 "--report", str(report), "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    for row in ("trained", "random-init", "untrained", "marginal", "test CE"):
+        assert row in text
+    pred = load_predictor(out, env_id=ENV, agent=AGENT)
+    assert isinstance(pred, GRUPredictor)  # the warehouse's default architecture
+    rep = json.loads(report.read_text())
+    assert rep["dataset"]["steps"] == 300 and rep["hyperparameters"]["epochs"] == 2
+    assert pred.metadata["cross_entropy"]["trained"]["test"] == rep["cross_entropy"]["trained"]["test"]
+    with pytest.raises(SystemExit):
+        main(["train-aip", "--out", str(out), "--no-progress"])  # neither --data nor --env/--agent
+    with pytest.raises(ValueError, match="not an ials_zoo influence data set"):
+        main(["train-aip", "--data", str(report), "--out", str(out), "--no-progress"])
+
+
+def test_trained_architecture_choice_uses_the_cache(tmp_path, monkeypatch):
+    from ials_zoo.influence import ials
+
+    monkeypatch.setenv("IALS_ZOO_CACHE", str(tmp_path))
+    region = R.region_spec(AGENT)
+    mlp = random_init_predictor(region, arch="mlp", seed=1)
+    save_predictor(mlp, ials._cache_path(region, "mlp", "dset"))
+    env = make_ials(ENV, AGENT, predictor="trained:mlp")
+    np.testing.assert_array_equal(env.predictor.w1, mlp.w1)
+    with pytest.raises(ValueError, match="trained:gru"):
+        make_ials(ENV, AGENT, predictor="trained:lstm")

@@ -33,6 +33,7 @@ from typing import Callable
 import numpy as np
 
 from ials_zoo.core.region import DSET_KINDS, INFLUENCE_KEY, RegionSpec, dset_key
+from ials_zoo.influence.predictors import _readable
 
 FORMAT = "ials_zoo.influence_dataset"
 FORMAT_VERSION = 1
@@ -125,6 +126,7 @@ class InfluenceDataset:
                     influences=self.influences,
                     metadata=np.array(json.dumps(meta, sort_keys=True)),
                 )
+            _readable(tmp)
         return path
 
     @classmethod

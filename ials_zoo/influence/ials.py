@@ -15,6 +15,8 @@ advances with ``(action, u_t)``.
     (``ials_zoo/influence/pretrained/<env_id>__<agent>.pt``), else one cached under
     ``$IALS_ZOO_CACHE/aip/`` (default ``~/.cache/ials_zoo/aip/``), else collected and trained
     on demand (Algorithm 1, 50,000 steps, with progress bars) and cached;
+  - ``"trained:gru"`` / ``"trained:mlp"``: the same with a given architecture (memory /
+    no-memory AIP, paper §5.4); the shipped file is used only if it has that architecture;
   - ``"untrained"``: fixed per-class probabilities, the domain's
     ``Domain.extra["uniform_influence"]`` (SPEC §3: 0.25 per class in the warehouse, 0.1 per
     lane in traffic), or uniform over classes when the domain sets none;
@@ -302,7 +304,7 @@ def trained_predictor(
     """The trained AIP of ``agent``: shipped, else cached, else collected + trained + cached.
 
     A shipped/cached AIP is used only if it was trained for exactly this region setting
-    (``RegionSpec`` incl. its params) and d-set kind.
+    (``RegionSpec`` incl. its params), d-set kind and architecture (default: the domain's).
     """
     from ials_zoo.core.domains import get_domain
 
@@ -313,7 +315,7 @@ def trained_predictor(
     for path in (pretrained_path(env_id, agent), _cache_path(region, arch, dset_kind)):
         if path.is_file():
             pred = load_predictor(path, env_id=env_id, agent=agent)
-            if _matches(pred, region, dset_kind) and (path.parent == PRETRAINED_DIR or pred.name == arch):
+            if _matches(pred, region, dset_kind) and pred.name == arch:
                 return pred
     if not train_if_missing:
         raise FileNotFoundError(
@@ -358,8 +360,11 @@ def resolve_predictor(
         kind = check_dset_kind(dset_kind or "dset")
         region = domain.region_spec(agent, **options)
         name = predictor.strip().lower()
-        if name == "trained":
-            pred = trained_predictor(env_id, agent, kind, options=options)
+        if name == "trained" or name.startswith("trained:"):
+            arch = name.split(":", 1)[1] if ":" in name else None
+            if arch is not None and arch not in ("gru", "mlp"):
+                raise ValueError(f"bad predictor {predictor!r}; expected 'trained:gru' or 'trained:mlp'")
+            pred = trained_predictor(env_id, agent, kind, arch=arch, options=options)
         elif name == "untrained":
             probs = domain.extra.get("uniform_influence")
             pred = UniformPredictor(region, dset_kind=kind, probs=probs)
@@ -386,7 +391,8 @@ def resolve_predictor(
             pred = MarginalPredictor(region, marg, dset_kind=kind, metadata={"from": "trained AIP data"})
         else:
             raise ValueError(
-                f"unknown influence predictor {predictor!r}; expected 'trained', 'untrained', "
+                f"unknown influence predictor {predictor!r}; expected 'trained', 'trained:gru', "
+                "'trained:mlp', 'untrained', "
                 "'uniform', 'random-init', 'fixed:P', 'marginal', a path to a .pt file, or an "
                 "InfluencePredictor"
             )

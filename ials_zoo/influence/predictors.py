@@ -39,6 +39,7 @@ package version and creation time.
 from __future__ import annotations
 
 import json
+import os
 import time
 from pathlib import Path
 
@@ -537,7 +538,15 @@ def save_predictor(predictor: InfluencePredictor, path) -> Path:
     path = Path(path)
     with atomic_path(path) as tmp:
         torch.save(payload, tmp)
+        _readable(tmp)
     return path
+
+
+def _readable(path) -> None:
+    """Give a file the usual ``0666 & ~umask`` mode (temporary files are created 0600)."""
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(path, 0o666 & ~umask)
 
 
 def _json_default(o):
