@@ -35,6 +35,9 @@ MEMORY_LIFETIME = 8  # SPEC §1 memory variant
 # traffic GS therefore gets fewer steps so that the default study fits in a few hours
 # (``ials-zoo reproduce`` without ``--budget``).
 DEFAULT_BUDGETS = {"traffic_grid_v0": 300_000}
+# Rough ppo_single steps/s measured here, only used to start the longest runs first.
+NOMINAL_STEPS_PER_SECOND = {("traffic_grid_v0", "gs"): 240, ("traffic_grid_v0", "ials"): 2000,
+                            ("warehouse_v0", "gs"): 1800, ("warehouse_v0", "ials"): 3000}
 
 
 @dataclass
@@ -149,6 +152,18 @@ class Job:
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
+
+    def priority(self) -> tuple:
+        """Sort key for starting ready jobs: AIPs first (they unblock IALS runs), then the
+        longest runs (estimated seconds), so that the study's makespan on few cores is short."""
+        if self.kind == "aip":
+            return (0, 0.0)
+        p = self.params
+        if self.kind in ("ppo", "memory_ppo"):
+            sim = "gs" if p["simulator"] == "gs" else "ials"
+            rate = NOMINAL_STEPS_PER_SECOND.get((p["env_id"], sim), 1000)
+            return (1, -p["total_timesteps"] / rate)
+        return (1, 0.0)
 
     @classmethod
     def from_dict(cls, d: dict) -> "Job":

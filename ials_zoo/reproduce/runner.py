@@ -1,5 +1,7 @@
 """Run the jobs of a study as subprocesses, at most ``jobs`` at once, skipping done ones.
 
+Ready jobs start in :meth:`Job.priority` order (AIPs, then the longest runs first).
+
 Every job is its own process (``python -m ials_zoo.reproduce.worker job.json``) so that each
 SUMO simulation owns its process (libsumo holds one per process) and a crash loses one run
 only. The job's stdout/stderr go to ``log.txt`` in its folder; the study shows one tqdm bar
@@ -59,7 +61,7 @@ def run_jobs(jobs: list[Job], n_jobs: int = 2, progress: bool = True, poll: floa
                     bar.update(1)
                     if not ok:
                         bar.write(f"FAILED {jid} (exit {rc}); see {Path(job.dir) / 'log.txt'}")
-            for job in list(pending):
+            for job in sorted(pending, key=lambda j: j.priority()):
                 states = [status[d] for d in job.deps]
                 if any(s in ("failed", "blocked") for s in states):
                     status[job.id] = "blocked"
