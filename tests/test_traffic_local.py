@@ -215,3 +215,30 @@ def test_blocked_insertions_are_dropped_not_queued(make_ls):
         assert len(ls.sumo_query("simulation", "getPendingVehicles")) <= 1
     n_on_lane = ls.sumo_query("lane", "getLastStepVehicleNumber", _lane(0, 0))
     assert entries == n_on_lane < 20
+
+
+def test_soft_reset_equals_a_restart(make_ls):
+    """The LS reuses its SUMO simulation across episodes (vehicles removed): an episode after
+    that equals one after a full restart."""
+    ls = make_ls(n_envs=2)
+    rng = np.random.default_rng(0)
+    T = 150
+    acts = (rng.random((T, 2)) < 0.1).astype(np.int64)
+    infl = (rng.random((T, 2, 4)) < 0.2).astype(np.int64)
+
+    def episode():
+        return [ls.step(acts[t], infl[t])[:2] for t in range(T)]
+
+    ls.reset(seed=4)
+    first = episode()  # leaves plenty of cars behind
+    assert ls.sumo_query("vehicle", "getIDCount") > 5
+    obs, dsets = ls.reset(seed=4)  # soft
+    assert not obs[:, :36].any() and ls.sumo_query("vehicle", "getIDCount") == 0
+    soft = episode()
+    ls._sim.call("hard_reset", 0)
+    ls._rng = np.random.default_rng(4)
+    ls._rng.integers(2**31 - 1)  # as reset(seed=4) does before starting SUMO
+    hard = episode()
+    for (o1, r1), (o2, r2), (o3, r3) in zip(first, soft, hard):
+        assert np.array_equal(o1, o2) and np.array_equal(o2, o3)
+        assert np.array_equal(r1, r2) and np.array_equal(r2, r3)

@@ -369,27 +369,52 @@ class LocalCore:
         self.counter = 0
 
     def reset(self, seed: int):
-        """Start a new simulation (all lights north-south green); returns ``(occ, phases)``."""
+        """Start a new episode (all lights north-south green); returns ``(occ, phases)``.
+
+        A running simulation is reused: its vehicles (and pending insertions) are removed,
+        which costs ~0.1 ms instead of ~10 ms for a restart -- a third of a 300-step LS
+        episode. Nothing in the LS draws from SUMO's random numbers (deterministic IDM, no
+        speed deviation, fixed depart lane/position/speed; the turns are drawn by the
+        caller), and the dynamics do not depend on the clock, so an episode after this
+        soft reset equals one after a restart (checked in the tests).
+        """
         ls = self.ls
-        if self.running or ls.simulation.isLoaded():
-            # also after a SUMO error that left the simulation half-closed
-            self.running = False
+        soft = False
+        if self.running:
             try:
-                ls.close()
+                remove = ls.vehicle.remove
+                for v in ls.vehicle.getIDList():
+                    remove(v)
+                for v in ls.simulation.getPendingVehicles():
+                    remove(v)
+                soft = True
             except Exception:
-                pass
-        # a car that cannot be inserted at once is dropped: in the GS it would simply not
-        # have entered the lane at this step
-        ls.start(_sumo_cmd(*self.files, [], seed, extra=("--max-depart-delay", "0")))
-        self.running = True
+                soft = False
+        if not soft:
+            if self.running or ls.simulation.isLoaded():
+                # also after a SUMO error that left the simulation half-closed
+                self.running = False
+                try:
+                    ls.close()
+                except Exception:
+                    pass
+            # a car that cannot be inserted at once is dropped: in the GS it would simply
+            # not have entered the lane at this step
+            ls.start(_sumo_cmd(*self.files, [], seed, extra=("--max-depart-delay", "0")))
+            self.running = True
+            self.counter = 0
         if self.reader is None:
             lengths = [[ls.lane.getLength(x) for x in g] for g in self.lanes]
             self.reader = _LaneReader(self.lanes, lengths)
         self.lights = _Lights(ls, self.tls, self.states, [0] * self.n)
         self.reader.reset_prev()
         occ, _, _ = self.reader.read(with_entries=False)
-        self.counter = 0
         return occ, np.zeros(self.n, np.int64)
+
+    def hard_reset(self, seed: int):
+        """Restart SUMO (tests: to compare with the soft reset)."""
+        self.close()
+        return self.reset(seed)
 
     def step(self, actions, inserts):
         """``actions`` per copy; ``inserts``: (copy, approach, turn) triples of cars to put
