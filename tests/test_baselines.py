@@ -184,6 +184,7 @@ def test_supersuit_adapter_truncation_is_bootstrapped():
     np.testing.assert_allclose(other, 0.0, atol=1e-6)
 
 
+@pytest.mark.filterwarnings("ignore:The `render_mode` attribute")
 def test_stock_supersuit_wrapper_does_not_bootstrap():
     """The reason for the adapter: SuperSuit's own SB3 wrapper loses the truncation."""
     import supersuit as ss

@@ -58,6 +58,20 @@ def parse_args(cls, argv=None, description: str | None = None):
     return dataclass_from_namespace(cls, parser.parse_args(argv))
 
 
+def run_cli(module) -> int:
+    """``python -m`` entry point of a baseline module: parse its ``Args``, run its ``main``;
+    bad arguments print one clear line instead of a traceback."""
+    import sys
+
+    args = parse_args(module.Args, description=module.__doc__.splitlines()[0])
+    try:
+        module.main(args)
+    except (ValueError, TypeError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
 def arg(default, help: str, **kw):
     """A dataclass field with a help text (and optional ``aliases``)."""
     return dataclasses.field(default=default, metadata={"help": help, **kw})

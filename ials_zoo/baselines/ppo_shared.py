@@ -44,7 +44,7 @@ from ials_zoo.baselines.common import (
     arg,
     as_float_box,
     make_ppo,
-    parse_args,
+    run_cli,
     parse_env_options,
 )
 from ials_zoo.baselines.ppo_single import _hidden
@@ -240,4 +240,6 @@ def main(args: Args | None = None) -> list[dict]:
 
 
 if __name__ == "__main__":
-    main(parse_args(Args, description=__doc__.splitlines()[0]))
+    import sys
+
+    sys.exit(run_cli(sys.modules[__name__]))

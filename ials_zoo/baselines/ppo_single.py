@@ -50,7 +50,7 @@ from ials_zoo.baselines.common import (
     arg,
     as_float_box,
     make_ppo,
-    parse_args,
+    run_cli,
     parse_env_options,
     predictor_for,
     predictor_record,
@@ -202,4 +202,6 @@ def main(args: Args | None = None) -> dict:
 
 
 if __name__ == "__main__":
-    main(parse_args(Args, description=__doc__.splitlines()[0]))
+    import sys
+
+    sys.exit(run_cli(sys.modules[__name__]))
