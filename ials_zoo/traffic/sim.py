@@ -119,7 +119,8 @@ class _LaneReader:
         self.n = len(lanes)
         self.flat = [ln for g in lanes for ln in g]
         self.length = [x for g in lengths for x in g]
-        self.prev: list[frozenset] = [frozenset()] * len(self.flat)
+        # the vehicle ids on each lane at the previous read (tuples, as libsumo returns them)
+        self.prev: list[tuple] = [()] * len(self.flat)
 
     def read(self, with_entries: bool = True):
         """Returns ``(occ [n, 36] uint8, entries [n, 4] uint8, reward [n] float32)``."""
@@ -152,11 +153,13 @@ class _LaneReader:
                             occ[base + cell] = 1
                     speed_sum += get_mean_speed(lanes[j]) * len(ids)
                     count += len(ids)
-                    if with_entries and not prev[j].issuperset(ids):
-                        entries[j] = 1
-                    prev[j] = frozenset(ids)
+                    before = prev[j]
+                    if ids != before:  # most steps nothing enters or leaves: no set needed
+                        if with_entries and (not before or not set(before).issuperset(ids)):
+                            entries[j] = 1
+                        prev[j] = ids
                 elif prev[j]:
-                    prev[j] = frozenset()
+                    prev[j] = ()
             if count:
                 reward[g] = speed_sum / (count * SPEED_LIMIT)
         return (
@@ -166,7 +169,7 @@ class _LaneReader:
         )
 
     def reset_prev(self) -> None:
-        self.prev = [frozenset() for _ in self.flat]
+        self.prev = [()] * len(self.flat)
         self.read(with_entries=False)
 
 
