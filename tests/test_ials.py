@@ -142,11 +142,18 @@ def test_vec_env_auto_reset_and_infos():
 
 
 def test_vec_env_trains_with_sb3():
+    import torch
     from stable_baselines3 import PPO
 
     venv = make_ials_vec_env(ENV, AGENT, n_envs=2, predictor="fixed:0.1", seed=0)
-    model = PPO("MlpPolicy", venv, n_steps=100, batch_size=100, n_epochs=1, seed=0, device="cpu")
-    model.learn(200)
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        model = PPO("MlpPolicy", venv, n_steps=100, batch_size=200, n_epochs=1, seed=0,
+                    device="cpu", policy_kwargs={"net_arch": [16]})
+        model.learn(200)
+    finally:
+        torch.set_num_threads(threads)
     # Episode statistics reached SB3 through infos["episode"] (no Monitor wrapper).
     assert len(model.ep_info_buffer) == 2 and model.ep_info_buffer[0]["l"] == 100
     venv.close()
