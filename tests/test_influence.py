@@ -254,3 +254,24 @@ def test_dataset_file_roundtrip_and_errors(tmp_path):
         InfluenceDataset(data.region, {"dset": data.dsets["dset"][:, :3], "full": data.dsets["full"]}, data.influences)
     train, test = data.split(0.2, seed=0)
     assert len(test) == 1 and len(train) == 4 and not set(train) & set(test)
+
+
+@pytest.mark.parametrize("classes", [(2, 4), (4, 4, 4)])
+def test_network_sampling_follows_its_probabilities(classes):
+    # Both sampling paths (equal class counts: reshape; mixed: padded gather).
+    region = RegionSpec(
+        "synthetic_v0", "a0", tuple(f"s{i}" for i in range(len(classes))), classes,
+        {"dset": tuple(f"d{i}" for i in range(D)), "full": tuple(f"f{i}" for i in range(D))},
+    )
+    pred = random_init_predictor(region, arch="mlp", seed=3)
+    pred.w_out *= 8  # sharpen the random net so the probabilities are far from uniform
+    n = 20_000
+    d = np.tile((np.arange(D) % 2).astype(np.uint8), (n, 1))
+    pred.reset(n)
+    probs = [p[0] for p in pred.probs(d)]
+    u = pred.sample(d, np.random.default_rng(1))
+    assert u.dtype == np.int64 and u.shape == (n, len(classes))
+    for m, k in enumerate(classes):
+        freq = np.bincount(u[:, m], minlength=k) / n
+        assert len(freq) == k
+        np.testing.assert_allclose(freq, probs[m], atol=0.018)  # 5 se at n = 20,000
