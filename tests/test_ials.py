@@ -145,7 +145,7 @@ def test_vec_env_trains_with_sb3():
     import torch
     from stable_baselines3 import PPO
 
-    venv = make_ials_vec_env(ENV, AGENT, n_envs=2, predictor="fixed:0.1", seed=0)
+    venv = make_ials_vec_env(ENV, AGENT, n_envs=2, predictor="untrained", seed=0)
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
@@ -159,10 +159,22 @@ def test_vec_env_trains_with_sb3():
     venv.close()
 
 
-def test_predictor_names_and_errors(tmp_path):
+def test_fixed_predictor_uses_the_domains_null_class(monkeypatch):
+    from ials_zoo.core.domains import get_domain
+
+    extra = get_domain(ENV).extra
+    monkeypatch.delitem(extra, "null_influence", raising=False)
+    with pytest.raises(ValueError, match="null_influence"):
+        make_ials(ENV, AGENT, predictor="fixed:0.3")
+    monkeypatch.setitem(extra, "null_influence", R.NONE)
     env = make_ials(ENV, AGENT, predictor="fixed:0.3")
     assert isinstance(env.predictor, FixedPredictor) and env.predictor.p == 0.3
+    # P(neighbour elsewhere) = 0.7, each shared cell 0.1.
+    np.testing.assert_allclose(env.predictor.table[:, R.NONE], 0.7)
     np.testing.assert_allclose(env.predictor.table.sum(1), 1.0)
+
+
+def test_predictor_names_and_errors(tmp_path):
     with pytest.raises(ValueError, match="unknown agent 'robot_99'"):
         make_ials(ENV, "robot_99", predictor="untrained")
     with pytest.raises(ValueError, match="unknown influence predictor 'bogus'"):

@@ -23,7 +23,7 @@ advances with ``(action, u_t)``.
   - ``"random-init"``: the domain's AIP network at a random initialisation (seeded);
   - ``"fixed:P"``: F-IALS, each source "active" with probability ``P`` (see
     :class:`FixedPredictor`; the inactive class is ``Domain.extra["null_influence"]``,
-    default 0);
+    0 for bit sources when the domain does not say; required for categorical sources);
   - ``"marginal"``: F-IALS with the empirical marginal of the trained AIP's data.
 
 Episodes end only by truncation after the LS's ``max_cycles`` steps.
@@ -379,7 +379,9 @@ def resolve_predictor(
                 p = float(name.split(":", 1)[1])
             except ValueError:
                 raise ValueError(f"bad fixed predictor {predictor!r}; expected 'fixed:P' with P a number in [0, 1]") from None
-            pred = FixedPredictor(region, p, dset_kind=kind, null_class=domain.extra.get("null_influence", 0))
+            if not 0.0 <= p <= 1.0:
+                raise ValueError(f"bad fixed predictor {predictor!r}: P must be in [0, 1]")
+            pred = FixedPredictor(region, p, dset_kind=kind, null_class=_null_class(domain, region))
         elif name == "marginal":
             trained = trained_predictor(env_id, agent, kind, options=options)
             marg = trained.metadata.get("marginal")
@@ -408,6 +410,24 @@ def resolve_predictor(
     if dset_kind is not None and pred.dset_kind != check_dset_kind(dset_kind):
         raise ValueError(f"the influence predictor reads the {pred.dset_kind!r} d-set, not {dset_kind!r}")
     return pred
+
+
+def _null_class(domain, region) -> int:
+    """The "no influence" class of the domain's sources, ``Domain.extra["null_influence"]``.
+
+    Bits default to 0 (nothing comes in); for sources with more classes the domain must say
+    which one it is -- guessing would silently give an F-IALS with nonsense probabilities.
+    """
+    null = domain.extra.get("null_influence")
+    if null is not None:
+        return int(null)
+    if all(k == 2 for k in region.influence_classes):
+        return 0
+    raise ValueError(
+        f"'fixed:P' needs the class that means 'no influence' for the {max(region.influence_classes)}-"
+        f"class sources of {domain.env_id}, but the domain does not declare "
+        "Domain.extra['null_influence']"
+    )
 
 
 def _check_agent(domain, agent, options):
