@@ -300,3 +300,26 @@ def test_resuming_with_other_settings_is_refused(tmp_path):
     assert "CONFLICT" in describe_plan([other])
     with pytest.raises(ValueError, match="other settings"):
         run_jobs([other], progress=False)
+
+
+def test_interrupt_stops_running_jobs(tmp_path, monkeypatch):
+    # A KeyboardInterrupt while a job runs stops that job (no result.json), and a later run
+    # starts it again.
+    import ials_zoo.reproduce.runner as runner
+
+    cfg = Config(experiments=("training",), domains=("warehouse_v0",), simulators=("gs",), seeds=1,
+                 budget=10_000_000, out=str(tmp_path / "o"))
+    (job,) = [j for j in build_plan(cfg) if j.kind == "ppo"]
+    calls = {"n": 0}
+    real_sleep = runner.time.sleep
+
+    def sleep(s):
+        calls["n"] += 1
+        if calls["n"] > 3:
+            raise KeyboardInterrupt
+        real_sleep(s)
+
+    monkeypatch.setattr(runner.time, "sleep", sleep)
+    with pytest.raises(KeyboardInterrupt):
+        run_jobs([job], progress=False)
+    assert not job.done and job.conflict() is None

@@ -11,12 +11,20 @@ over jobs. A job whose dependency failed is not started (reported as ``blocked``
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 import time
 from pathlib import Path
 
 from ials_zoo.reproduce.plan import Job
+
+
+def _signal_group(proc: subprocess.Popen, sig) -> None:
+    try:
+        os.killpg(proc.pid, sig)  # the job's own process group (start_new_session=True)
+    except ProcessLookupError:
+        pass
 
 
 def _command(job_file: Path) -> list[str]:
@@ -76,7 +84,10 @@ def run_jobs(jobs: list[Job], n_jobs: int = 2, progress: bool = True, poll: floa
                 log = open(Path(job.dir) / "log.txt", "a")
                 log.write(f"\n=== {time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime())} {' '.join(_command(job_file))}\n")
                 log.flush()
-                proc = subprocess.Popen(_command(job_file), stdout=log, stderr=subprocess.STDOUT, env=env)
+                # Own session: an interrupt can then stop the job with everything it started
+                # (SUMO vec-env workers, evaluation pools) by its process group id.
+                proc = subprocess.Popen(_command(job_file), stdout=log, stderr=subprocess.STDOUT, env=env,
+                                        start_new_session=True)
                 running[job.id] = (job, proc, log, time.perf_counter())
                 pending.remove(job)
             if bar is not None:
@@ -87,12 +98,12 @@ def run_jobs(jobs: list[Job], n_jobs: int = 2, progress: bool = True, poll: floa
         # Interrupted: stop our own children so nothing keeps writing behind our back. Their
         # folders have no marker file, so the next invocation runs them again.
         for _, proc, log, _ in running.values():
-            proc.terminate()
+            _signal_group(proc, signal.SIGTERM)
         for _, proc, log, _ in running.values():
             try:
                 proc.wait(timeout=10)
             except subprocess.TimeoutExpired:
-                proc.kill()
+                _signal_group(proc, signal.SIGKILL)
             log.close()
         raise
     finally:
