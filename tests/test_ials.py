@@ -162,16 +162,18 @@ def test_vec_env_trains_with_sb3():
 def test_fixed_predictor_uses_the_domains_null_class(monkeypatch):
     from ials_zoo.core.domains import get_domain
 
+    # Convention without a declaration: the last class of a categorical source is "none",
+    # which is the warehouse's encoding (class 3: the neighbour is on no shared cell).
     extra = get_domain(ENV).extra
     monkeypatch.delitem(extra, "null_influence", raising=False)
-    with pytest.raises(ValueError, match="null_influence"):
-        make_ials(ENV, AGENT, predictor="fixed:0.3")
-    monkeypatch.setitem(extra, "null_influence", R.NONE)
     env = make_ials(ENV, AGENT, predictor="fixed:0.3")
     assert isinstance(env.predictor, FixedPredictor) and env.predictor.p == 0.3
     # P(neighbour elsewhere) = 0.7, each shared cell 0.1.
     np.testing.assert_allclose(env.predictor.table[:, R.NONE], 0.7)
-    np.testing.assert_allclose(env.predictor.table.sum(1), 1.0)
+    np.testing.assert_allclose(env.predictor.table[:, :3], 0.1)
+    monkeypatch.setitem(extra, "null_influence", 0)  # a domain's declaration wins
+    env = make_ials(ENV, AGENT, predictor="fixed:0.3")
+    np.testing.assert_allclose(env.predictor.table[:, 0], 0.7)
 
 
 def test_predictor_names_and_errors(tmp_path):

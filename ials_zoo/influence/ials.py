@@ -23,7 +23,7 @@ advances with ``(action, u_t)``.
   - ``"random-init"``: the domain's AIP network at a random initialisation (seeded);
   - ``"fixed:P"``: F-IALS, each source "active" with probability ``P`` (see
     :class:`FixedPredictor`; the inactive class is ``Domain.extra["null_influence"]``,
-    0 for bit sources when the domain does not say; required for categorical sources);
+    by default 0 for bits and the last class for categorical sources);
   - ``"marginal"``: F-IALS with the empirical marginal of the trained AIP's data.
 
 Episodes end only by truncation after the LS's ``max_cycles`` steps.
@@ -413,20 +413,21 @@ def resolve_predictor(
 
 
 def _null_class(domain, region) -> int:
-    """The "no influence" class of the domain's sources, ``Domain.extra["null_influence"]``.
-
-    Bits default to 0 (nothing comes in); for sources with more classes the domain must say
-    which one it is -- guessing would silently give an F-IALS with nonsense probabilities.
-    """
+    """The "no influence" class of the domain's sources: ``Domain.extra["null_influence"]``,
+    else the zoo's convention -- class 0 for bits (1 = something comes in), the last class
+    for categorical sources (classes 0..K-2 say where the influence acts, K-1 = nowhere;
+    the warehouse's "neighbour on none of the shared cells" is class 3)."""
     null = domain.extra.get("null_influence")
     if null is not None:
         return int(null)
-    if all(k == 2 for k in region.influence_classes):
+    ks = set(region.influence_classes)
+    if ks == {2}:
         return 0
+    if len(ks) == 1:
+        return ks.pop() - 1
     raise ValueError(
-        f"'fixed:P' needs the class that means 'no influence' for the {max(region.influence_classes)}-"
-        f"class sources of {domain.env_id}, but the domain does not declare "
-        "Domain.extra['null_influence']"
+        f"'fixed:P' needs the 'no influence' class of the sources of {region.domain} (classes "
+        f"{region.influence_classes}); declare it in Domain.extra['null_influence']"
     )
 
 
