@@ -186,7 +186,6 @@ class IALSVecEnv(_VecEnvBase):
         self._actions = None
         self._returns = np.zeros(n)
         self._t_start = time.perf_counter()
-        self._dones = np.zeros(n, dtype=bool)
         self._empty_infos = [{} for _ in range(n)]
 
     def reset(self):
@@ -226,7 +225,7 @@ class IALSVecEnv(_VecEnvBase):
         self._returns += rewards
         rewards = np.asarray(rewards, dtype=np.float32)
         if self._t < self.max_cycles:
-            return obs, rewards, self._dones, [{} for _ in range(self.num_envs)]
+            return obs, rewards, np.zeros(self.num_envs, dtype=bool), [{} for _ in range(self.num_envs)]
         t = round(time.perf_counter() - self._t_start, 6)
         infos = [
             {
