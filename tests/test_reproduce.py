@@ -323,3 +323,35 @@ def test_interrupt_stops_running_jobs(tmp_path, monkeypatch):
     with pytest.raises(KeyboardInterrupt):
         run_jobs([job], progress=False)
     assert not job.done and job.conflict() is None
+
+
+def _run(label, seed, finals, curve, steps=1000, seconds=10.0, aip=0.0):
+    return {"job": {"label": label, "params": {"env_id": "warehouse_v0", "agent": "robot_20", "seed": seed}},
+            "curve": {"points": [{"wall_clock_seconds": t, "mean": m} for t, m in curve]},
+            "result": {"score": {"mean": finals},
+                       "training": {"wall_clock_seconds": seconds, "aip_seconds": aip, "env_steps": steps}}}
+
+
+def test_summary_ratios_and_claims():
+    from ials_zoo.reproduce.report import summarize_training, training_section
+
+    runs = [_run("gs", 0, 10.0, [(0, 0), (100, 10)], seconds=100),
+            _run("gs", 1, 10.2, [(0, 0), (100, 10)], seconds=100),
+            _run("ials", 0, 9.9, [(20, 0), (40, 10)], seconds=20, aip=20),
+            _run("ials", 1, 10.1, [(20, 0), (40, 10)], seconds=20, aip=20),
+            _run("untrained-ials", 0, 2.0, [(0, 0), (20, 2)], seconds=20),
+            _run("untrained-ials", 1, 2.2, [(0, 0), (20, 2)], seconds=20)]
+    (key, s), = summarize_training(runs).items()
+    sims = s["simulators"]
+    assert list(sims) == ["gs", "ials", "untrained-ials"]
+    assert s["target_95pct"] == pytest.approx(9.5)
+    assert sims["gs"]["seconds_to_95pct_gs"] == pytest.approx(95.0, abs=2.1)  # on a 50-point grid
+    assert sims["ials"]["seconds_to_95pct_gs"] == pytest.approx(39.0, abs=0.5)
+    assert sims["ials"]["time_ratio_to_gs"] == pytest.approx(
+        sims["ials"]["seconds_to_95pct_gs"] / sims["gs"]["seconds_to_95pct_gs"])
+    assert sims["ials"]["score_ratio_to_gs"] == pytest.approx(1.0 / 1.01)
+    assert sims["ials"]["total_seconds"] == 40 and sims["ials"]["ppo_steps_per_second"] == 50
+    assert sims["untrained-ials"]["seconds_to_95pct_gs"] is None
+    text = "\n".join(training_section(key, s, None, {}, "x.png", "note"))
+    assert "ratio 0.99 -> holds" in text and "ratio 0.41 -> does not hold" in text
+    assert "-> yes (paper: yes in traffic)" in text
