@@ -107,7 +107,7 @@ def test_ials_env_api():
 
 
 def test_gymnasium_registration():
-    env = gymnasium.make("ials_zoo/IALS-warehouse_v0", agent=AGENT, predictor="untrained")
+    env = gymnasium.make("ials_zoo/IALS-warehouse_v0", agent=AGENT, predictor="uniform")
     obs, _ = env.reset(seed=0)
     assert obs.shape == (37,)
     assert isinstance(env.unwrapped.predictor, UniformPredictor)
@@ -243,7 +243,7 @@ def test_collect_and_train_aip_commands(tmp_path, capsys):
     assert main(["train-aip", "--data", str(data), "--epochs", "2", "--no-progress",
                  "--report", str(report), "--out", str(out)]) == 0
     text = capsys.readouterr().out
-    for row in ("trained", "random-init", "untrained", "marginal", "test CE"):
+    for row in ("trained", "untrained", "uniform", "marginal", "test CE"):
         assert row in text
     pred = load_predictor(out, env_id=ENV, agent=AGENT)
     assert isinstance(pred, GRUPredictor)  # the warehouse's default architecture

@@ -1,8 +1,8 @@
 """Fidelity of the IALS: statistics of the agent's region under the same (uniform random)
 policy in the global simulator (GS) and in the IALS.
 
-With the shipped trained AIP the statistics must agree; with the untrained AIP (SPEC §3:
-0.25 per class in the warehouse, 0.1 per lane in traffic) they must measurably not.
+With the shipped trained AIP the statistics must agree; with the untrained AIP (a randomly
+initialised network, the paper's untrained-IALS) they must measurably not.
 
 Statistics are per-episode values, so episodes are the independent samples; ``se`` is the
 standard error of the difference of the two means (Welch). Two kinds of check:
@@ -164,8 +164,8 @@ def test_traffic_ials_inflow_and_occupancy(traffic_gs):
     tr_in, tr_occ = _traffic_ials("trained")
     un_in, un_occ = _traffic_ials("untrained")
     # Inflow into the region, cars that entered per lane and step: ~0.069 in the GS
-    # (episode sd ~0.007), shipped AIP ~0.063 (-0.006), untrained ~0.082 (+0.013: it
-    # samples 0.1 per lane, some insertions are dropped on a blocked lane). Margin 0.02;
+    # (episode sd ~0.007), shipped AIP ~0.063 (-0.006), untrained far above (a random
+    # network samples about 0.5 per lane; blocked insertions are dropped). Margin 0.02;
     # with 6 GS and 32 IALS episodes the 99.9% half-width is ~0.009.
     assert_equivalent(gs_in, tr_in, 0.02, "trained: inflow per lane")
     assert_different(gs_in, un_in, 0.0, "untrained: inflow per lane")

@@ -17,10 +17,13 @@ advances with ``(action, u_t)``.
     on demand (Algorithm 1, 50,000 steps, with progress bars) and cached;
   - ``"trained:gru"`` / ``"trained:mlp"``: the same with a given architecture (memory /
     no-memory AIP, paper §5.4); the shipped file is used only if it has that architecture;
-  - ``"untrained"``: fixed per-class probabilities, the domain's
+  - ``"untrained"`` (alias ``"random-init"``): the domain's AIP network at a random
+    initialisation (seeded) -- the paper's untrained-IALS (its cross-entropy, 1.46 in the
+    warehouse, is the paper's "untrained" bar);
+  - ``"uniform"``: fixed per-class probabilities, the domain's
     ``Domain.extra["uniform_influence"]`` (SPEC §3: 0.25 per class in the warehouse, 0.1 per
-    lane in traffic), or uniform over classes when the domain sets none;
-  - ``"random-init"``: the domain's AIP network at a random initialisation (seeded);
+    lane in traffic -- in traffic that equals ``"fixed:0.1"``), or uniform over classes when
+    the domain sets none;
   - ``"fixed:P"``: F-IALS, each source "active" with probability ``P`` (see
     :class:`FixedPredictor`; the inactive class is ``Domain.extra["null_influence"]``,
     by default 0 for bits and the last class for categorical sources);
@@ -364,12 +367,10 @@ def resolve_predictor(
             if arch is not None and arch not in ("gru", "mlp"):
                 raise ValueError(f"bad predictor {predictor!r}; expected 'trained:gru' or 'trained:mlp'")
             pred = trained_predictor(env_id, agent, kind, arch=arch, options=options)
-        elif name == "untrained":
+        elif name == "uniform":
             probs = domain.extra.get("uniform_influence")
             pred = UniformPredictor(region, dset_kind=kind, probs=probs)
-        elif name in ("uniform",):
-            pred = UniformPredictor(region, dset_kind=kind)
-        elif name in ("random-init", "random_init"):
+        elif name in ("untrained", "random-init", "random_init"):
             pred = random_init_predictor(
                 region, arch=domain.default_predictor, dset_kind=kind, seed=0 if seed is None else seed
             )

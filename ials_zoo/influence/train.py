@@ -129,8 +129,9 @@ def train_predictor(
         (nats, see :func:`evaluate_cross_entropy`) on the train and test split of
 
         * ``trained`` -- the returned predictor,
-        * ``random-init`` -- the same network at its random initialisation (seed ``seed``),
-        * ``untrained`` -- the fixed probabilities of the domain's untrained AIP
+        * ``untrained`` -- the same network at its random initialisation (seed ``seed``):
+          the paper's untrained AIP,
+        * ``uniform`` -- the domain's fixed class probabilities
           (``Domain.extra["uniform_influence"]``, else uniform over classes),
         * ``marginal`` -- the empirical marginal ``P(u)`` of the training split;
 
@@ -227,7 +228,7 @@ def _train(dataset, arch, dset_kind, epochs, seed, progress, lr, hidden, batch_s
     marginal = MarginalPredictor.fit(dataset, dset_kind=dset_kind, episodes=train_idx)
 
     ce = {}
-    for name, pred in (("trained", trained), ("random-init", untrained), ("untrained", uniform), ("marginal", marginal)):
+    for name, pred in (("trained", trained), ("untrained", untrained), ("uniform", uniform), ("marginal", marginal)):
         ce[name] = {
             "train": float(np.mean(cross_entropy_per_source(pred, dataset, train_idx))),
             "test": float(np.mean(cross_entropy_per_source(pred, dataset, test_idx))) if len(test_idx) else None,
@@ -279,7 +280,7 @@ def format_report(report: dict) -> str:
         f"{report['dataset']['test_episodes']} test episodes)",
         f"{'predictor':<12}{'train CE':>10}{'test CE':>10}   (nats, mean over sources)",
     ]
-    for name in ("trained", "random-init", "untrained", "marginal"):
+    for name in ("trained", "untrained", "uniform", "marginal"):
         tr, te = ce[name]["train"], ce[name]["test"]
         te_s = f"{te:>10.4f}" if te is not None else f"{'-':>10}"
         lines.append(f"{name:<12}{tr:>10.4f}{te_s}")

@@ -21,7 +21,7 @@ DOMAIN = Domain(
     episode_length=300,
     frame_stack=1,
     # untrained AIP: each lane gets a car w.p. 0.1 per step, the GS inflow rate (SPEC §3)
-    extra={"uniform_influence": [[0.9, 0.1]] * 4},
+    extra={"null_influence": 0, "uniform_influence": [[0.9, 0.1]] * 4},
 )
 
 __all__ = ["DOMAIN"]

@@ -22,7 +22,7 @@ DOMAIN = Domain(
     default_predictor="gru",
     episode_length=100,
     frame_stack=8,
-    extra={"uniform_influence": [[0.25, 0.25, 0.25, 0.25]] * 4},
+    extra={"null_influence": 3, "uniform_influence": [[0.25, 0.25, 0.25, 0.25]] * 4},
 )
 
 __all__ = [
