@@ -23,7 +23,7 @@ def test_dry_run_plans_the_right_runs(tmp_path):
     jobs = build_plan(cfg)
     ids = [j.id for j in jobs]
     assert len(ids) == len(set(ids))
-    ppo = [j for j in jobs if j.kind == "ppo"]
+    ppo = [j for j in jobs if j.kind == "ppo" and j.experiment == "training"]
     # 3 agents (robot_20, tls_12, tls_18) x 4 simulators x 2 seeds
     assert len(ppo) == 3 * 4 * 2
     assert {(j.params["agent"], j.label) for j in ppo} == {
@@ -39,11 +39,14 @@ def test_dry_run_plans_the_right_runs(tmp_path):
             assert aip.kind == "aip" and j.params["simulator"] == str(Path(aip.dir) / "aip.pt")
         else:
             assert j.deps == [] and j.params["simulator"] == j.label
-    mem = [j for j in jobs if j.kind == "memory_ppo"]
+    mem = [j for j in jobs if j.experiment == "memory" and j.kind == "ppo"]
     assert len(mem) == 2 * 2 * 2  # {M, NM}-IALS x frame stack {8, 1} x 2 seeds
     assert {(j.label, j.params["frame_stack"]) for j in mem} == {
         ("M-IALS fs8", 8), ("M-IALS fs1", 1), ("NM-IALS fs8", 8), ("NM-IALS fs1", 1)}
-    assert all(j.params["options"] == {"item_lifetime": 8} for j in mem)
+    assert all(json.loads(j.params["env_options"]) == {"item_lifetime": 8} for j in mem)
+    from ials_zoo.baselines.ppo_single import Args
+
+    Args(**mem[0].params)  # ppo_single takes every planned parameter
     arch = {j.id: j.params.get("arch") for j in jobs if j.kind == "aip" and j.experiment == "memory"}
     assert sorted(arch.values()) == ["gru", "mlp"]
     assert len([j for j in jobs if j.kind == "lifetimes"]) == 1
@@ -234,38 +237,12 @@ def test_dset_ablation_job_on_warehouse(tmp_path):
     params = {"env_id": "warehouse_v0", "agent": "robot_20", "steps": 1000, "offpolicy_steps": 200,
               "epochs": 1, "seed": 0}
     d = X.dset_ablation(params, tmp_path)
-    assert set(d["cross_entropy"]) == {"dset", "full", "marginal", "untrained"}
+    assert set(d["cross_entropy"]) == {"dset", "full", "marginal", "uniform", "untrained"}
     assert d["off_policy_data"]["scripted"]["gs_options"] == {"scripted_learners": True}
     assert d["off_policy_data"]["biased"]["policy"].startswith("biased_random")
     for c in d["cross_entropy"].values():
         assert np.isfinite(c["on_policy"]) and all(np.isfinite(v) for v in c["off_policy"].values())
     assert json.loads((tmp_path / "dset.json").read_text())["train_steps"] == 1000
-
-
-# ------------------------------------------------------------------- PPO on a domain variant
-
-
-def test_memory_ppo_trains_and_scores_on_the_variant(tmp_path):
-    from ials_zoo.core.domains import get_domain
-    from ials_zoo.influence.predictors import FixedPredictor, save_predictor
-
-    region = get_domain("warehouse_v0").region_spec("robot_20", item_lifetime=8)
-    aip = save_predictor(FixedPredictor(region, 0.1, null_class=3), tmp_path / "fixed.pt")
-    params = {"env_id": "warehouse_v0", "agent": "robot_20", "simulator": str(aip), "seed": 0,
-              "total_timesteps": 256, "n_envs": 2, "net_arch": "8", "eval_every": 0, "eval_episodes": 1,
-              "final_eval_episodes": 2, "out_dir": str(tmp_path / "run"), "progress": False,
-              "frame_stack": 8, "options": {"item_lifetime": 8}}
-    r = X.train_ppo_with_options(params)
-    assert r["training"]["hyperparameters"]["options"] == {"item_lifetime": 8}
-    assert r["training"]["env_steps"] >= 256
-    assert json.loads((tmp_path / "run" / "result.json").read_text())["score"] == r["score"]
-    meta = json.loads((tmp_path / "run" / "model.meta.json").read_text())
-    assert meta["frame_stack"] == 8 and meta["options"] == {"item_lifetime": 8}
-    # An AIP for the default warehouse does not fit the variant's local simulator.
-    params["simulator"] = str(save_predictor(FixedPredictor(get_domain("warehouse_v0").region_spec("robot_20"), 0.1),
-                                             tmp_path / "plain.pt"))
-    with pytest.raises(ValueError, match="region setting"):
-        X.train_ppo_with_options(params)
 
 
 def test_budget_option():

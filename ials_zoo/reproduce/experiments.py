@@ -5,9 +5,6 @@
   collection and training seconds, which ``ppo_single`` adds to the wall-clock) and
   ``marginal.pt`` (F-IALS with the empirical marginal of the same data, charged the same
   collection time).
-* :func:`train_ppo_with_options` -- the ``ppo_single`` recipe on a domain *variant* (GS
-  options such as ``item_lifetime=8``, which ``ppo_single`` does not take), scored on the GS
-  variant; used by the memory experiment.
 * :func:`item_lifetimes`, :func:`record_item_ages`, :func:`lifetime_histograms` -- how long
   items stay on the shelves in the GS vs an IALS (paper §5.4).
 * :func:`off_policy_cross_entropy`, :func:`dset_ablation` -- the d-set vs full-history AIP,
@@ -61,107 +58,6 @@ def train_aip(env_id: str, agent: str, out_dir, steps: int = 50_000, epochs: int
     report = dict(report, collect_wall_seconds=round(collect_wall, 3), options=dict(options or {}))
     _write_json(out / "report.json", report)
     return report
-
-
-# --------------------------------------------------------------------------------------------
-# PPO on a domain variant (memory experiment)
-
-
-def train_ppo_with_options(params: dict) -> dict:
-    """``ppo_single``'s recipe (same defaults, curve.json / model.zip / result.json) on the GS
-    variant ``params["options"]`` (e.g. ``{"item_lifetime": 8}``); ``params["simulator"]`` is
-    ``gs`` or a predictor file trained on that variant. Evaluated in this process, so only for
-    numpy domains (the warehouse)."""
-    import dataclasses
-
-    import torch
-    from stable_baselines3 import PPO
-    from stable_baselines3.common.utils import LinearSchedule
-    from stable_baselines3.common.vec_env import VecFrameStack, VecMonitor
-
-    import ials_zoo
-    from ials_zoo.baselines.common import (Clock, as_float_box, curve_point, make_progress_callback,
-                                           predictor_record, save_model)
-    from ials_zoo.baselines.ppo_single import Args, _hidden
-    from ials_zoo.evaluation import SB3Policy, evaluate
-    from ials_zoo.leaderboard import make_result, now_iso, write_result
-    from ials_zoo.single_agent import make_gs_vec_env, needs_own_process
-
-    params = dict(params)
-    options = dict(params.pop("options", {}) or {})
-    args = Args(**params)
-    if needs_own_process(args.env_id):
-        raise ValueError(f"train_ppo_with_options evaluates in-process; {args.env_id} needs its own process")
-    torch.set_num_threads(1)
-    out = Path(args.out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    agent = args.agent
-    frame_stack = int(args.frame_stack or 1)
-    if args.simulator == "gs":
-        venv = make_gs_vec_env(args.env_id, agent, n_envs=args.n_envs, **options)
-        venv.seed(args.seed)
-        aip = None
-    else:
-        from ials_zoo.influence.ials import make_ials_vec_env
-
-        venv = make_ials_vec_env(args.env_id, agent, n_envs=args.n_envs, predictor=args.simulator,
-                                 seed=args.seed, **options)
-        aip = predictor_record(venv, args.simulator, args.env_id, agent)
-    aip_seconds = (aip["collection_seconds"] + aip["training_seconds"]) if aip else 0.0
-    venv = VecMonitor(as_float_box(venv))
-    if frame_stack > 1:
-        venv = VecFrameStack(venv, frame_stack)
-    hidden = _hidden(args.net_arch)
-    lr = LinearSchedule(args.learning_rate, 0.0, 1.0) if args.anneal_lr else args.learning_rate
-    model = PPO("MlpPolicy", venv, learning_rate=lr, n_steps=args.n_steps, batch_size=args.batch_size,
-                n_epochs=args.n_epochs, gamma=args.gamma, gae_lambda=args.gae_lambda,
-                clip_range=args.clip_range, ent_coef=args.ent_coef, vf_coef=args.vf_coef,
-                max_grad_norm=args.max_grad_norm, seed=args.seed, device="cpu", verbose=0,
-                policy_kwargs={"net_arch": {"pi": hidden, "vf": hidden}})
-    training = {"simulator": args.simulator, "aip": aip, "seeds": [args.seed], "env_steps": 0,
-                "wall_clock_seconds": 0.0, "aip_seconds": aip_seconds,
-                "hyperparameters": dict(dataclasses.asdict(args), options=options)}
-    meta = {"format": "ials_zoo-model/1", "sb3_class": "PPO", "algorithm": "ppo_single",
-            "env_id": args.env_id, "agent": agent, "agents": [agent], "frame_stack": frame_stack,
-            "seed": args.seed, "training": training, "learning_curve": [], "options": options,
-            "package_version": ials_zoo.__version__, "created": now_iso()}
-    curve = meta["learning_curve"]
-    clock = Clock(offset=aip_seconds)
-
-    def score(path: Path, episodes: int):
-        policy = SB3Policy(model, frame_stack=frame_stack, deterministic=args.deterministic_eval,
-                           name=path.name, file=str(path))
-        return evaluate(args.env_id, agent, policy, episodes=episodes, **options)
-
-    def record(steps: int):
-        with clock.pause():
-            training["env_steps"] = int(steps)
-            training["wall_clock_seconds"] = clock.seconds - aip_seconds
-            save_model(model, out / "checkpoint.zip", meta)
-            ev = score(out / "checkpoint.zip", args.eval_episodes)
-            curve.append(curve_point(steps, clock.seconds, ev))
-            _write_json(out / "curve.json", {"env_id": args.env_id, "agent": agent,
-                                             "simulator": args.simulator, "seed": args.seed,
-                                             "options": options, "points": curve})
-        return ev
-
-    callback = make_progress_callback(args.total_timesteps, record, args.eval_every, args.progress)
-    try:
-        model.learn(total_timesteps=args.total_timesteps, callback=callback)
-        steps = int(model.num_timesteps)
-        if not curve or curve[-1]["env_steps"] != steps:
-            record(steps)
-        with clock.pause():
-            save_model(model, out / "model.zip", meta)
-            final = score(out / "model.zip", args.final_eval_episodes)
-    finally:
-        venv.close()
-    final.policy_file = "model.zip"
-    result = make_result([final], algorithm="ppo_single", training=training, training_seeds=[args.seed],
-                         learning_curves=[{"seed": args.seed, "points": curve}], trained_agents=[agent],
-                         notes=args.notes)
-    write_result(out / "result.json", result)
-    return result
 
 
 # --------------------------------------------------------------------------------------------
@@ -342,7 +238,7 @@ def dset_ablation(params: dict, out_dir) -> dict:
     the domain's scripted/actuated controller) and from a biased random policy."""
     from ials_zoo.core.domains import get_domain
     from ials_zoo.influence.dataset import collect
-    from ials_zoo.influence.predictors import MarginalPredictor, UniformPredictor
+    from ials_zoo.influence.predictors import MarginalPredictor, UniformPredictor, random_init_predictor
     from ials_zoo.influence.train import train_predictor, untrained_probs
 
     out = Path(out_dir)
@@ -364,7 +260,8 @@ def dset_ablation(params: dict, out_dir) -> dict:
         preds[kind] = pred
         reports[kind] = {k: rep[k] for k in ("cross_entropy", "train_seconds", "hyperparameters")}
     preds["marginal"] = MarginalPredictor.fit(data, episodes=data.split(0.1, seed=seed)[0])
-    preds["untrained"] = UniformPredictor(data.region, probs=untrained_probs(data.region))
+    preds["uniform"] = UniformPredictor(data.region, probs=untrained_probs(data.region))
+    preds["untrained"] = random_init_predictor(data.region, arch=arch, seed=seed)
     ce = off_policy_cross_entropy(preds, data, test_idx, off)
     result = {"env_id": env_id, "agent": agent, "arch": arch, "train_steps": data.n_steps,
               "train_policy": data.metadata.get("policy"),

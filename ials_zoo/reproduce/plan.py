@@ -121,7 +121,7 @@ class Job:
     """One subprocess of the study (see the module docstring)."""
 
     id: str
-    kind: str  # aip | ppo | memory_aip | memory_ppo | lifetimes | dset
+    kind: str  # aip | ppo | lifetimes | dset
     dir: str
     marker: str
     params: dict
@@ -159,7 +159,7 @@ class Job:
         if self.kind == "aip":
             return (0, 0.0)
         p = self.params
-        if self.kind in ("ppo", "memory_ppo"):
+        if self.kind == "ppo":
             sim = "gs" if p["simulator"] == "gs" else "ials"
             rate = NOMINAL_STEPS_PER_SECOND.get((p["env_id"], sim), 1000)
             return (1, -p["total_timesteps"] / rate)
@@ -250,8 +250,9 @@ def plan_memory(cfg: Config) -> list[Job]:
                     d = base / f"{name}__fs{fs}__s{seed}"
                     params = _ppo_params(cfg, "warehouse_v0", agent, str(Path(aips[arch].dir) / "aip.pt"),
                                          seed, d, f"ials-zoo reproduce (memory, {name}, frame stack {fs})")
-                    params.update(frame_stack=fs, options=options)
-                    jobs.append(Job(id=f"memory/{agent}/{name}/fs{fs}/s{seed}", kind="memory_ppo",
+                    # ppo_single trains on, and scores on, the item_lifetime=8 variant.
+                    params.update(frame_stack=fs, env_options=json.dumps(options, sort_keys=True))
+                    jobs.append(Job(id=f"memory/{agent}/{name}/fs{fs}/s{seed}", kind="ppo",
                                     dir=str(d), marker="result.json", deps=[aips[arch].id],
                                     experiment="memory", label=f"{name} fs{fs}", params=params))
         d = base / "lifetimes"
@@ -300,7 +301,7 @@ def describe_plan(jobs: list[Job]) -> str:
     for j in jobs:
         state = "CONFLICT" if j.conflict() else ("done" if j.done else "todo")
         extra = ""
-        if j.kind in ("ppo", "memory_ppo"):
+        if j.kind == "ppo":
             p = j.params
             extra = f" sim={p['simulator']} steps={p['total_timesteps']}"
             if "frame_stack" in p:

@@ -31,6 +31,12 @@ TARGET_SCORE_RATIO = 0.95
 TARGET_TIME_RATIO = 1 / 3
 # A difference in cross-entropy increase below this (nats) is not called a difference.
 CLEAR_CE_GAP = 0.02
+# Rows of a train_predictor report besides "trained" ("random-init" is the name older
+# reports gave the randomly initialised network, now "untrained").
+CE_ROWS = (("untrained", "untrained (randomly initialised network, the paper's)"),
+           ("random-init", "random-init network"),
+           ("uniform", "uniform (fixed class probabilities)"),
+           ("marginal", "marginal"))
 
 
 def _load(path: Path):
@@ -50,7 +56,7 @@ def load_runs(out, experiment: str) -> list[dict]:
     runs = []
     for jf in sorted(Path(out, experiment).glob("*/*/job.json")):
         job = _load(jf)
-        if not job or job.get("kind") not in ("ppo", "memory_ppo"):
+        if not job or job.get("kind") != "ppo":
             continue
         d = jf.parent
         runs.append({"job": job, "dir": d, "curve": _load(d / "curve.json"), "result": _load(d / "result.json")})
@@ -258,10 +264,12 @@ def training_section(key, summary, aip_report, refs, png_name, budget_note) -> l
               f"| data collection (s) | {_f(aip_report['dataset'].get('collect_seconds'), 1)} "
               f"({aip_report['dataset']['steps']} steps) | {paper.get('collect_s', '-')} |",
               f"| AIP training (s) | {_f(aip_report.get('train_seconds'), 1)} | {paper.get('train_s', '-')} |",
-              f"| test CE trained | {_f(ce['trained']['test'])} | {paper.get('ce_trained', '-')} |",
-              f"| test CE untrained (fixed probabilities) | {_f(ce['untrained']['test'])} | {paper.get('ce_untrained', '-')} |",
-              f"| test CE random-init network | {_f(ce['random-init']['test'])} | - |",
-              f"| test CE marginal | {_f(ce['marginal']['test'])} | - |", ""]
+              f"| test CE trained | {_f(ce['trained']['test'])} | {paper.get('ce_trained', '-')} |"]
+        for name, what in CE_ROWS:
+            if name in ce:
+                paper_v = paper.get("ce_untrained", "-") if name == "untrained" else "-"
+                L.append(f"| test CE {what} | {_f(ce[name]['test'])} | {paper_v} |")
+        L.append("")
     else:
         L += ["AIP: not trained yet (no report.json).", ""]
     # Claims, computed from the numbers above.

@@ -27,8 +27,6 @@ def run_job(job) -> None:
         from ials_zoo.baselines.ppo_single import Args, main
 
         main(Args(**p))
-    elif job.kind == "memory_ppo":
-        X.train_ppo_with_options(p)
     elif job.kind == "lifetimes":
         X.run_lifetimes(p, job.dir)
     elif job.kind == "dset":
