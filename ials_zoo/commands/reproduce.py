@@ -27,7 +27,7 @@ def _csv(text: str) -> tuple:
 
 
 def configure(parser):
-    from ials_zoo.reproduce.plan import Config, DEFAULT_SIMULATORS, DOMAINS, EXPERIMENTS
+    from ials_zoo.reproduce.plan import DEFAULT_BUDGETS, DEFAULT_SIMULATORS, DOMAINS, EXPERIMENTS, Config
 
     c = Config()
     parser.add_argument("--experiments", default=",".join(EXPERIMENTS),
@@ -40,21 +40,24 @@ def configure(parser):
     parser.add_argument("--budget", default=None,
                         help="PPO environment steps per run: N for every domain, and/or DOMAIN=N pairs, "
                              "e.g. 200000 or warehouse_v0=1000000,traffic_grid_v0=300000 (default "
-                             f"{c.budget} for the warehouse, {c.domain_budgets.get('traffic_grid_v0')} for "
+                             f"{c.budget} for the warehouse, {DEFAULT_BUDGETS['traffic_grid_v0']} for "
                              "traffic, whose SUMO GS trains ~8x slower; the paper used 2M)")
     parser.add_argument("--seeds", type=int, default=c.seeds, help="training seeds per configuration")
     parser.add_argument("--jobs", type=int, default=c.jobs, help="runs at once (default 2 = cores)")
     parser.add_argument("--out", default=c.out, help="study folder")
     parser.add_argument("--leaderboard", default=c.leaderboard, help="leaderboard folder (figures, reproduction.md)")
     parser.add_argument("--net-arch", default=c.net_arch, help="PPO hidden layers")
-    parser.add_argument("--n-envs", type=int, default=c.n_envs)
+    parser.add_argument("--n-envs", type=int, default=c.n_envs, help="parallel envs per PPO run")
     parser.add_argument("--eval-points", type=int, default=c.eval_points, help="GS evaluations per curve")
-    parser.add_argument("--eval-episodes", type=int, default=c.eval_episodes)
-    parser.add_argument("--final-eval-episodes", type=int, default=c.final_eval_episodes)
+    parser.add_argument("--eval-episodes", type=int, default=c.eval_episodes, help="GS episodes per curve point")
+    parser.add_argument("--final-eval-episodes", type=int, default=c.final_eval_episodes,
+                        help="GS episodes of each run's final score (result.json)")
     parser.add_argument("--aip-steps", type=int, default=c.aip_steps, help="Algorithm 1 steps per AIP")
     parser.add_argument("--aip-epochs", type=int, default=None, help="AIP epochs (default: the project's)")
-    parser.add_argument("--dset-offpolicy-steps", type=int, default=c.dset_offpolicy_steps)
-    parser.add_argument("--lifetime-episodes", type=int, default=c.lifetime_episodes)
+    parser.add_argument("--dset-offpolicy-steps", type=int, default=c.dset_offpolicy_steps,
+                        help="steps of each off-policy test set of the d-set ablation")
+    parser.add_argument("--lifetime-episodes", type=int, default=c.lifetime_episodes,
+                        help="episodes per simulator of the item-lifetime histograms")
     parser.add_argument("--dry-run", action="store_true", help="print the plan (done/todo) and exit")
     parser.add_argument("--report-only", action="store_true",
                         help="run nothing: re-make figures, reproduction.md and submissions from the run folders")
