@@ -31,12 +31,21 @@ TARGET_SCORE_RATIO = 0.95
 TARGET_TIME_RATIO = 1 / 3
 # A difference in cross-entropy increase below this (nats) is not called a difference.
 CLEAR_CE_GAP = 0.02
-# Rows of a train_predictor report besides "trained" ("random-init" is the name older
-# reports gave the randomly initialised network, now "untrained").
+# Rows of a train_predictor report besides "trained".
 CE_ROWS = (("untrained", "untrained (randomly initialised network, the paper's)"),
-           ("random-init", "random-init network"),
            ("uniform", "uniform (fixed class probabilities)"),
            ("marginal", "marginal"))
+
+
+def normalize_ce(ce: dict) -> dict:
+    """Cross-entropy rows under today's names: reports written before the influence package
+    renamed its rows called the random network "random-init" and the fixed probabilities
+    "untrained"; now they are "untrained" and "uniform"."""
+    if "random-init" in ce and "uniform" not in ce:
+        ce = dict(ce)
+        ce["uniform"] = ce.pop("untrained")
+        ce["untrained"] = ce.pop("random-init")
+    return ce
 
 
 def _load(path: Path):
@@ -258,7 +267,7 @@ def training_section(key, summary, aip_report, refs, png_name, budget_note) -> l
     paper = PAPER.get(env_id, {})
     L += [""]
     if aip_report:
-        ce = aip_report["cross_entropy"]
+        ce = normalize_ce(aip_report["cross_entropy"])
         L += ["AIP (trained once for this study, timed here):", "",
               "| | measured | paper (SPEC §4) |", "|---|---|---|",
               f"| data collection (s) | {_f(aip_report['dataset'].get('collect_seconds'), 1)} "
@@ -301,7 +310,7 @@ def training_section(key, summary, aip_report, refs, png_name, budget_note) -> l
                  f"{'yes' if fx['score_ratio_to_gs'] >= TARGET_SCORE_RATIO else 'no'} "
                  f"(paper: yes in traffic, no in the warehouse).")
     if aip_report:
-        ce = aip_report["cross_entropy"]
+        ce = normalize_ce(aip_report["cross_entropy"])
         L.append(f"- AIP test CE trained << untrained: {ce['trained']['test']:.3f} vs {ce['untrained']['test']:.3f} "
                  f"(ratio {ce['trained']['test'] / max(ce['untrained']['test'], 1e-12):.2f}; paper "
                  f"{paper.get('ce_trained', '-')} vs {paper.get('ce_untrained', '-')}).")
