@@ -94,6 +94,13 @@ class IALSEnv(gym.Env):
         self._t = 0
         self._d = None
         self._actions = np.zeros(1, dtype=np.int64)
+        # A local simulator with a scalar single-copy path (WarehouseLocalSimulator) is
+        # stepped through it: same results, without building batched arrays per step.
+        self._fast = bool(getattr(local_simulator, "supports_step_single", False))
+        if self._fast:
+            self._step_single = local_simulator.step_single
+            self._observe_single = local_simulator.observe_single
+            self._n_actions = int(self.action_space.n)
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         if seed is None and self._seed is not None:
@@ -112,6 +119,8 @@ class IALSEnv(gym.Env):
             raise RuntimeError("call reset() before step()")
         if self._t >= self.max_cycles:
             raise RuntimeError("the episode is over (truncated); call reset()")
+        if self._fast:
+            return self._step_fast(action)
         u = self.predictor.sample(self._d, self.np_random)
         self._actions[0] = _scalar_action(action)
         obs, rewards, dsets = self.ls.step(self._actions, u)
@@ -119,6 +128,20 @@ class IALSEnv(gym.Env):
         self._t += 1
         truncated = self._t >= self.max_cycles
         return obs[0], float(rewards[0]), False, truncated, {"influence": u[0]}
+
+    def _step_fast(self, action):
+        if type(action) is int or isinstance(action, np.integer):
+            a = int(action)
+        else:
+            a = int(_scalar_action(action))
+        if not 0 <= a < self._n_actions:
+            raise ValueError(f"actions must be in 0..{self._n_actions - 1}, got values {a}..{a}")
+        u = self.predictor.sample(self._d, self.np_random)[0]
+        reward = self._step_single(a, *u.tolist())
+        obs, dsets = self._observe_single()
+        self._d = dsets[self._kind]
+        self._t += 1
+        return obs.copy(), reward, False, self._t >= self.max_cycles, {"influence": u}
 
     def close(self):
         self.ls.close()

@@ -9,6 +9,32 @@ from ials_zoo.core.local import LocalSimulator
 from ials_zoo.warehouse import regions as R
 
 _MOVE_FLAT = R.MOVE.ravel()
+_MOVE_L = R.MOVE_LIST
+_SHELF_L = R.SHELF_INDEX_LIST
+_INFL_BITS = R.INFLUENCE_BITS
+_BITS = R.BIT_INDICES
+_ITEM_U8 = R.ITEM_BITS_U8
+_POW2 = 1 << np.arange(R.N_ITEMS, dtype=np.int64)
+_ALL_ITEMS = (1 << R.N_ITEMS) - 1
+_DRAW_STEPS = 64  # appearance draws fetched per rng call by the single-copy path
+
+# (position, item bitmask) -> read-only (obs float32 (37,), {"dset": (1, 24), "full": (1, 37)}).
+# Filled on demand by the single-copy path; at most 21 * 4096 entries (a few MB).
+_VIEW_CACHE: dict = {}
+
+
+def _single_views(key: int):
+    views = _VIEW_CACHE.get(key)
+    if views is None:
+        pos, items = divmod(key, 1 << R.N_ITEMS)
+        bits = _ITEM_U8[items]
+        full = np.concatenate([R.POS_ONEHOT[pos], bits])[None]
+        dset = np.concatenate([bits, R.SHELF_ONEHOT[pos]])[None]
+        obs = full[0].astype(np.float32)
+        for a in (full, dset, obs):
+            a.flags.writeable = False
+        views = _VIEW_CACHE[key] = (obs, {"dset": dset, "full": full})
+    return views
 
 
 class WarehouseLocalSimulator(LocalSimulator):
@@ -28,6 +54,12 @@ class WarehouseLocalSimulator(LocalSimulator):
     ``{"dset": (n_envs, 24), "full": (n_envs, 37)}``. At reset every robot is at its
     region's centre and each shelf cell holds a new item with probability
     ``item_probability`` (as in the GS).
+
+    With ``n_envs=1`` the state is kept in plain Python ints (position, item bitmask, list of
+    ages) and stepped without numpy (:meth:`step_single`, used by :class:`IALSEnv`): numpy's
+    per-call overhead on 12-element arrays dominates a single copy's step. It draws the same
+    random numbers in the same order (fetched ``64`` steps at a time) and gives the same
+    results as the array path.
     """
 
     def __init__(
@@ -59,15 +91,100 @@ class WarehouseLocalSimulator(LocalSimulator):
         self._arange = np.arange(self.n_envs)
         self._pos = np.full(self.n_envs, R.CENTRE, dtype=np.int64)
         self._ages = np.zeros((self.n_envs, R.N_ITEMS), dtype=np.int64)
+        # Single-copy state (used iff self._scalar): position, item bitmask, 12 ages.
+        self._scalar = self.n_envs == 1
+        self._p = R.CENTRE
+        self._items = 0
+        self._age = [0] * R.N_ITEMS
+        self._draws: list[int] = []  # pending appearance bitmasks, next one last
 
     def reset(self, seed: int | None = None):
         if seed is not None:
             self._rng = np.random.default_rng(seed)
+            self._draws = []
+        if self._scalar:
+            self._set_single(R.CENTRE, self._next_draw())
+            return self.observe()
         self._pos = np.full(self.n_envs, R.CENTRE, dtype=np.int64)
         self._ages = (self._rng.random((self.n_envs, R.N_ITEMS)) < self.item_probability).astype(
             np.int64
         )
         return self._views()
+
+    # ------------------------------------------------------------------ single copy
+
+    @property
+    def supports_step_single(self) -> bool:
+        """Whether :meth:`step_single` / :meth:`observe_single` may be used (``n_envs=1``)."""
+        return self._scalar
+
+    def _next_draw(self) -> int:
+        """The next ``rng.random(12) < item_probability`` draw as a bitmask.
+
+        Draws ``_DRAW_STEPS`` steps' numbers per rng call: the same doubles, in the same
+        order, as one ``rng.random((1, 12))`` per step.
+        """
+        draws = self._draws
+        if not draws:
+            hits = self._rng.random((_DRAW_STEPS, R.N_ITEMS)) < self.item_probability
+            draws.extend((hits @ _POW2)[::-1].tolist())
+        return draws.pop()
+
+    def _set_single(self, pos: int, items: int, ages=None) -> None:
+        self._p = pos
+        self._items = items
+        self._age = [(items >> b) & 1 for b in range(R.N_ITEMS)] if ages is None else ages
+
+    def step_single(self, action: int, u0: int, u1: int, u2: int, u3: int) -> float:
+        """Advance the single copy (``n_envs=1``) by one step; returns the reward.
+
+        The fast form of ``step([action], [[u0, u1, u2, u3]])``: Python ints in 0..3 (not
+        checked here: callers check them), the observation and d-sets of the new state
+        come from :meth:`observe`.
+        """
+        age = self._age
+        max_age = max(age)
+        p = _MOVE_L[self._p * 4 + action]
+        self._p = p
+        b = _SHELF_L[p]
+        occupied = _INFL_BITS[u0 * 64 + u1 * 16 + u2 * 4 + u3]
+        if b >= 0:
+            # regions.collect_reward: own age / max(largest age before collection, 1).
+            reward = age[b] / (max_age if max_age > 1 else 1)
+            occupied |= 1 << b
+        else:
+            reward = 0.0
+        self._advance_single(occupied, self._next_draw())
+        return reward
+
+    def _advance_single(self, occupied: int, appear: int) -> None:
+        """:func:`regions.advance_items` on the bitmask state."""
+        age = self._age
+        items = self._items
+        gone = items & occupied
+        if gone:
+            for i in _BITS[gone]:
+                age[i] = 0
+            items ^= gone
+        lifetime = self.item_lifetime
+        for i in _BITS[items]:
+            a = age[i] + 1
+            if lifetime is not None and a > lifetime:
+                age[i] = 0
+                items ^= 1 << i
+            else:
+                age[i] = a
+        new = appear & ~items
+        if new:
+            for i in _BITS[new]:
+                age[i] = 1
+            items |= new
+        self._items = items
+
+    def observe_single(self):
+        """``(obs (37,), {"dset": (1, 24), "full": (1, 37)})`` of the single copy: shared
+        read-only arrays (copy the observation before handing it out)."""
+        return _single_views(self._p << R.N_ITEMS | self._items)
 
     def step(self, actions, influences, new_items=None):
         """Advance every copy (see the class docstring).
@@ -81,15 +198,17 @@ class WarehouseLocalSimulator(LocalSimulator):
         """
         actions = self._check_ints("actions", actions, (self.n_envs,), 4)
         influences = self._check_ints("influences", influences, (self.n_envs, R.N_SOURCES), 4)
-        if new_items is None:
-            appear = self._rng.random((self.n_envs, R.N_ITEMS)) < self.item_probability
-        else:
+        if new_items is not None:
             appear = np.asarray(new_items)
             if appear.shape != (self.n_envs, R.N_ITEMS) or appear.dtype != bool:
                 raise ValueError(
                     f"new_items must be a bool array of shape {(self.n_envs, R.N_ITEMS)}, got "
                     f"{appear.dtype} {appear.shape}"
                 )
+        if self._scalar:
+            return self._step_single_arrays(int(actions[0]), influences[0], new_items)
+        if new_items is None:
+            appear = self._rng.random((self.n_envs, R.N_ITEMS)) < self.item_probability
         ages = self._ages
         max_age = ages.max(axis=1)
         pos = _MOVE_FLAT[self._pos * 4 + actions]
@@ -100,6 +219,20 @@ class WarehouseLocalSimulator(LocalSimulator):
         R.advance_items(ages, occupied, appear, self.item_lifetime)
         obs, dsets = self._views()
         return obs, reward, dsets
+
+    def _step_single_arrays(self, action, u, new_items):
+        if new_items is None:
+            reward = self.step_single(action, *u.tolist())
+        else:
+            # step_single with the given appearance draws instead of the rng's.
+            draws = self._draws
+            self._draws = [int(np.asarray(new_items)[0] @ _POW2)]
+            try:
+                reward = self.step_single(action, *u.tolist())
+            finally:
+                self._draws = draws
+        obs, dsets = self.observe()
+        return obs, np.array([reward]), dsets
 
     def _views(self):
         items = (self._ages > 0).view(np.uint8)
@@ -128,6 +261,8 @@ class WarehouseLocalSimulator(LocalSimulator):
 
     def get_state(self) -> tuple[np.ndarray, np.ndarray]:
         """``(positions (n_envs,), item ages (n_envs, 12))``, copies."""
+        if self._scalar:
+            return np.array([self._p], dtype=np.int64), np.array([self._age], dtype=np.int64)
         return self._pos.copy(), self._ages.copy()
 
     def set_state(self, positions, item_ages) -> None:
@@ -138,11 +273,18 @@ class WarehouseLocalSimulator(LocalSimulator):
             raise ValueError(f"item_ages must be non-negative ints of shape {(self.n_envs, R.N_ITEMS)}")
         if ((pos < 0) | (pos >= R.N_CELLS) | np.isin(pos, R.CORNERS)).any():
             raise ValueError(f"positions must be non-corner local positions 0..24, got {pos}")
+        if self._scalar:
+            age = [int(a) for a in ages[0]]
+            self._set_single(int(pos[0]), int((ages[0] > 0) @ _POW2), age)
+            return
         self._pos = pos.copy()
         self._ages = ages.copy()
 
     def observe(self):
         """``(obs, dsets)`` of the current state (as returned by ``reset``/``step``)."""
+        if self._scalar:
+            obs, dsets = self.observe_single()
+            return obs[None].copy(), {k: v.copy() for k, v in dsets.items()}
         return self._views()
 
 

@@ -382,3 +382,20 @@ def advance_items(ages: np.ndarray, occupied, appear: np.ndarray, item_lifetime)
         ages[ages > item_lifetime] = 0
     ages += appear & (ages == 0)
     return collected
+
+
+# ----------------------------------------------------------------------------- scalar tables
+# Plain-Python versions of the tables above for the single-copy (n_envs=1) local simulator,
+# where numpy's per-call overhead on 12-element arrays costs more than the work itself. An
+# item set is then an int bitmask: bit b set <=> item cell b holds an item.
+
+MOVE_LIST = MOVE.ravel().tolist()
+"""``MOVE_LIST[4 * p + a]`` == ``MOVE[p, a]`` as a Python int."""
+SHELF_INDEX_LIST = SHELF_INDEX.tolist()
+"""``SHELF_INDEX_LIST[p]`` == ``SHELF_INDEX[p]`` as a Python int (-1: not an item cell)."""
+INFLUENCE_BITS = [int(m) for m in INFLUENCE_MASK @ (1 << np.arange(N_ITEMS))]
+"""``INFLUENCE_BITS[code]``: :data:`INFLUENCE_MASK` ``[code]`` as an item bitmask."""
+BIT_INDICES = tuple(tuple(b for b in range(N_ITEMS) if m >> b & 1) for m in range(1 << N_ITEMS))
+"""``BIT_INDICES[mask]``: the item bits set in ``mask``, ascending."""
+ITEM_BITS_U8 = ((np.arange(1 << N_ITEMS)[:, None] >> np.arange(N_ITEMS)) & 1).astype(np.uint8)
+"""``ITEM_BITS_U8[mask]``: the 12 item bits of ``mask`` (observation/d-set order)."""
