@@ -51,6 +51,10 @@ FORMAT = "ials_zoo.influence_predictor"
 FORMAT_VERSION = 1
 
 
+_max_reduce = np.maximum.reduce
+_add_accumulate = np.add.accumulate
+
+
 def _sigmoid(x, out=None):
     # 0.5 * (1 + tanh(x / 2)) never overflows, unlike 1 / (1 + exp(-x)).
     out = np.multiply(x, 0.5, out=out)
@@ -95,6 +99,7 @@ class InfluencePredictor:
         self._pad_mask = flat < 0
         self._kmax_minus1 = (classes - 1)[None, :]
         self._same_k = bool((classes == classes[0]).all())
+        self._sample_bufs = None
         self.n = 0
 
     # -- interface -------------------------------------------------------------------------
@@ -158,6 +163,29 @@ class InfluencePredictor:
         r = rng.random((n, self.n_sources, 1), dtype=z.dtype)
         r *= z[:, :, -1:]
         return (z < r).sum(axis=-1)
+
+    def _sample_logits1(self, logits: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """:meth:`_sample_logits` for one history (``n=1``) with equal class counts: the same
+        float operations in the same order (bitwise the same draws), on preallocated buffers
+        and without numpy's Python-level wrappers (``max``, ``cumsum``, ``sum``)."""
+        bufs = self._sample_bufs
+        if bufs is None or bufs[0].dtype != logits.dtype:
+            shape = (1, self.n_sources, self.max_classes)
+            bufs = self._sample_bufs = (
+                np.empty(shape, logits.dtype),
+                np.empty((1, self.n_sources, 1), logits.dtype),
+                np.empty(shape, bool),
+            )
+        z, m, less = bufs
+        x = logits.reshape(z.shape)
+        _max_reduce(x, axis=-1, keepdims=True, out=m)
+        np.subtract(x, m, out=z)
+        np.exp(z, out=z)
+        _add_accumulate(z, axis=-1, out=z)
+        r = rng.random((1, self.n_sources, 1), dtype=z.dtype)
+        r *= z[:, :, -1:]
+        np.less(z, r, out=less)
+        return less.sum(axis=-1)
 
     def _logits_to_padded(self, logits: np.ndarray) -> np.ndarray:
         z = logits[:, self._gather]
@@ -349,7 +377,10 @@ class MLPPredictor(InfluencePredictor):
         return self._logits_to_padded(self._logits(dsets))
 
     def sample(self, dsets, rng):
-        return self._sample_logits(self._logits(dsets), rng)
+        logits = self._logits(dsets)
+        if self.n == 1 and self._same_k:
+            return self._sample_logits1(logits, rng)
+        return self._sample_logits(logits, rng)
 
     def _arrays(self):
         return {"w1": self.w1, "b1": self.b1, "w_out": self.w_out, "b_out": self.b_out}
@@ -393,16 +424,66 @@ class GRUPredictor(InfluencePredictor):
         self.w_ih, self.w_hh, self.b_ih, self.b_hh, self.w_out, self.b_out = (
             np.ascontiguousarray(a[k]) for k in shapes
         )
+        self._gi_cache = {}
 
     def reset(self, n=1):
         super().reset(n)
         self.h = np.zeros((self.n, self.hidden), dtype=np.float32)
+        if self.n == 1 and getattr(self, "_bufs1", None) is None:
+            H = self.hidden
+            self._bufs1 = (
+                np.empty((1, 3 * H), np.float32),  # gh
+                np.empty((1, 2 * H), np.float32),  # r, z
+                np.empty((1, H), np.float32),  # n
+                np.empty((1, H), np.float32),  # spare hidden state (swapped with h)
+            )
 
     def probs_padded(self, dsets):
         return self._logits_to_padded(self._logits(dsets))
 
     def sample(self, dsets, rng):
+        if self.n == 1:
+            logits = self._logits1(self._check_dsets(dsets))
+            if self._same_k:
+                return self._sample_logits1(logits, rng)
+            return self._sample_logits(logits, rng)
         return self._sample_logits(self._logits(dsets), rng)
+
+    # The d-set projection d @ w_ih + b_ih of at most this many distinct d-sets is memoised
+    # for single-history sampling (binary d-sets repeat a lot; 8192 x 3H floats = 6 MB).
+    _GI_CACHE_SIZE = 8192
+
+    def _logits1(self, d):
+        """:meth:`_logits` for one history: the same float operations in the same order
+        (bitwise the same logits), with ``d @ w_ih + b_ih`` memoised per d-set and the
+        intermediate arrays preallocated. Returns a buffer reused by the next call."""
+        H = self.hidden
+        key = d.tobytes()
+        gi = self._gi_cache.get(key)
+        if gi is None:
+            gi = d.astype(np.float32) @ self.w_ih
+            gi += self.b_ih
+            gi.flags.writeable = False
+            if len(self._gi_cache) >= self._GI_CACHE_SIZE:
+                self._gi_cache.clear()
+            self._gi_cache[key] = gi
+        gh, rz, n, h = self._bufs1
+        np.dot(self.h, self.w_hh, out=gh)
+        gh += self.b_hh
+        np.add(gi[:, : 2 * H], gh[:, : 2 * H], out=rz)
+        _sigmoid(rz, out=rz)
+        np.multiply(rz[:, :H], gh[:, 2 * H :], out=n)
+        n += gi[:, 2 * H :]
+        np.tanh(n, out=n)
+        # h' = (1 - z) * n + z * h = n + z * (h - n)
+        np.subtract(self.h, n, out=h)
+        h *= rz[:, H:]
+        h += n
+        self._bufs1 = (gh, rz, n, self.h)
+        self.h = h
+        logits = np.dot(h, self.w_out)
+        logits += self.b_out
+        return logits
 
     def _logits(self, dsets):
         d = self._check_dsets(dsets)
