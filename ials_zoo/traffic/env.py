@@ -83,6 +83,8 @@ def _check_int(name, value, low):
 
 def check_action(agent, action) -> int:
     """A keep (0) / switch (1) action as an int; a clear error for anything else."""
+    if action.__class__ is int and (action == 0 or action == 1):  # the common case, fast
+        return action
     if isinstance(action, np.ndarray) and action.shape == ():
         action = action[()]
     if isinstance(action, (bool, np.bool_)) or not isinstance(action, (int, np.integer)):
@@ -292,6 +294,9 @@ class TrafficGridEnv(ParallelEnv):
         self._t += 1
         self._occ, self._phases = occ, phases
         obs = observation(occ, phases)
+        # converted once for all agents; each agent gets its own row
+        influence = entries.astype(np.int64)
+        full = obs.astype(np.uint8)
         trunc = self._t >= self.max_cycles
         observations, rewards, terms, truncs, infos = {}, {}, {}, {}, {}
         for k, a in enumerate(self.agents):
@@ -300,9 +305,9 @@ class TrafficGridEnv(ParallelEnv):
             terms[a] = False
             truncs[a] = trunc
             infos[a] = {
-                INFLUENCE_KEY: entries[k].astype(np.int64),
+                INFLUENCE_KEY: influence[k],
                 "dset": occ[k],
-                "dset_full": obs[k].astype(np.uint8),
+                "dset_full": full[k],
             }
         if trunc:
             self.agents = []

@@ -199,36 +199,39 @@ class _Lights:
         self.tls = tls
         self.states = [states[t] for t in tls]
         self.phase = [int(p) for p in phases]
-        self.left = [0] * len(tls)
-        self.yellow = 0  # number of lights in a yellow, to skip tick() when none is
+        # the lights now in a yellow (index -> steps left), so tick() visits only those
+        self.yellow: dict[int, int] = {}
         for k in range(len(tls)):
             self._set(k)
 
     def _set(self, k):
-        self.ls.trafficlight.setRedYellowGreenState(self.tls[k], self.states[k][self.phase[k]])
+        # the raw call skips libsumo's Python wrapper
+        self.ls._libsumo.trafficlight_setRedYellowGreenState(
+            self.tls[k], self.states[k][self.phase[k]]
+        )
 
     def act(self, actions) -> None:
         if not actions.any():
             return
-        phase, left = self.phase, self.left
+        phase, yellow = self.phase, self.yellow
         for k in np.flatnonzero(actions).tolist():
             if phase[k] % 2 == 0:
                 phase[k] += 1
-                left[k] = YELLOW_STEPS
-                self.yellow += 1
+                yellow[k] = YELLOW_STEPS
                 self._set(k)
 
     def tick(self) -> None:
-        if not self.yellow:
+        yellow = self.yellow
+        if not yellow:
             return
-        left = self.left
-        for k in range(len(left)):
-            if left[k]:
-                left[k] -= 1
-                if not left[k]:
-                    self.phase[k] = (self.phase[k] + 1) % 4
-                    self.yellow -= 1
-                    self._set(k)
+        for k in list(yellow):
+            left = yellow[k] - 1
+            if left:
+                yellow[k] = left
+            else:
+                del yellow[k]
+                self.phase[k] = (self.phase[k] + 1) % 4
+                self._set(k)
 
 
 def _sumo_cmd(net, routes, additionals, seed, extra=()):
