@@ -191,6 +191,7 @@ def test_lifetimes_job_writes_histogram(tmp_path):
     d = X.run_lifetimes(params, tmp_path)
     assert set(d["lifetimes"]) == {"GS", "untrained"}
     assert all(1 <= x <= 8 for v in d["lifetimes"].values() for x in v)
+    assert len(d["lifetimes"]["untrained"]) > 5  # items appear and go in the IALS too
     assert (tmp_path / "lifetimes.png").stat().st_size > 1000
     assert json.loads((tmp_path / "lifetimes.json").read_text())["summary"]["GS"]["items"] == len(d["lifetimes"]["GS"])
 
@@ -332,3 +333,13 @@ def test_summary_ratios_and_claims():
     text = "\n".join(training_section(key, s, None, {}, "x.png", "note"))
     assert "ratio 0.99 -> holds" in text and "ratio 0.41 -> does not hold" in text
     assert "-> yes (paper: yes in traffic)" in text
+
+
+def test_second_invocation_on_the_same_study_is_refused(tmp_path):
+    from ials_zoo.reproduce.runner import study_lock
+
+    cfg = Config(experiments=("training",), domains=("warehouse_v0",), simulators=("gs",), seeds=1,
+                 out=str(tmp_path / "o"))
+    with study_lock(tmp_path / "o"):
+        with pytest.raises(RuntimeError, match="another ials-zoo reproduce"):
+            run_jobs(build_plan(cfg), progress=False, lock_dir=cfg.out)

@@ -118,8 +118,8 @@ def run(args) -> int:
     status = {"failed": [], "blocked": []}
     if not args.report_only:
         try:
-            status = run_jobs(jobs, n_jobs=cfg.jobs, progress=not args.no_progress)
-        except ValueError as exc:
+            status = run_jobs(jobs, n_jobs=cfg.jobs, progress=not args.no_progress, lock_dir=cfg.out)
+        except (ValueError, RuntimeError) as exc:
             raise SystemExit(f"ials-zoo reproduce: {exc}") from None
         print(f"jobs: {len(status['done'])} run, {len(status['skipped'])} already done, "
               f"{len(status['failed'])} failed, {len(status['blocked'])} blocked")

@@ -21,7 +21,7 @@ def reproduce(cfg: Config, progress: bool = True, report: bool = True, submit: b
     from ials_zoo.reproduce.runner import run_jobs
 
     jobs = build_plan(cfg)
-    status = run_jobs(jobs, n_jobs=cfg.jobs, progress=progress)
+    status = run_jobs(jobs, n_jobs=cfg.jobs, progress=progress, lock_dir=cfg.out)
     out = {"jobs": status, "report": None, "leaderboard": None}
     if submit:
         out["leaderboard"] = submit_results(cfg.out, cfg.leaderboard)

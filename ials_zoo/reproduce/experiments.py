@@ -121,12 +121,12 @@ def record_item_ages(env_id: str, agent: str, simulator: str = "gs", episodes: i
     try:
         for ep in range(episodes):
             obs, _ = env.reset(seed=seed + ep)
-            # The warehouse LS keeps its ages per copy; copy 0 is this env's.
-            rows = [env.ls._ages[0].copy()]
+            # The warehouse LS's public state: (positions, item ages [n_envs, 12]); one copy here.
+            rows = [env.ls.get_state()[1][0]]
             done = False
             while not done:
                 obs, _, term, trunc, _ = env.step(act(obs))
-                rows.append(env.ls._ages[0].copy())
+                rows.append(env.ls.get_state()[1][0])
                 done = term or trunc
             out.append(np.stack(rows))
     finally:

@@ -10,6 +10,7 @@ over jobs. A job whose dependency failed is not started (reported as ``blocked``
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -31,10 +32,13 @@ def _command(job_file: Path) -> list[str]:
     return [sys.executable, "-m", "ials_zoo.reproduce.worker", str(job_file)]
 
 
-def run_jobs(jobs: list[Job], n_jobs: int = 2, progress: bool = True, poll: float = 0.5) -> dict:
+def run_jobs(jobs: list[Job], n_jobs: int = 2, progress: bool = True, poll: float = 0.5,
+             lock_dir=None) -> dict:
     """Run the jobs not yet done, respecting ``deps``; a folder holding a job with other
-    settings (:meth:`Job.conflict`) stops everything before anything runs. Returns ``{"done": [...], "skipped":
-    [...], "failed": [...], "blocked": [...]}`` (job ids)."""
+    settings (:meth:`Job.conflict`) stops everything before anything runs, and so does
+    another invocation running in ``lock_dir`` (default: the jobs' common folder; the study
+    passes its ``--out``). Returns ``{"done": [...], "skipped": [...], "failed": [...],
+    "blocked": [...]}`` (job ids)."""
     if isinstance(n_jobs, bool) or not isinstance(n_jobs, int) or n_jobs < 1:
         raise ValueError(f"n_jobs must be a positive int, got {n_jobs!r}")
     ids = {j.id for j in jobs}
@@ -47,6 +51,46 @@ def run_jobs(jobs: list[Job], n_jobs: int = 2, progress: bool = True, poll: floa
         raise ValueError("these run folders hold runs with other settings; use another --out or "
                          "remove them:\n" + "\n".join(conflicts))
     status = {j.id: ("skipped" if j.done else "pending") for j in jobs}
+    if any(v == "pending" for v in status.values()):
+        lock = Path(lock_dir) if lock_dir is not None else Path(os.path.commonpath([j.dir for j in jobs]))
+        with study_lock(lock):
+            return _run(jobs, status, n_jobs, progress, poll)
+    return _summary(jobs, status)
+
+
+@contextlib.contextmanager
+def study_lock(folder: Path):
+    """Hold ``<folder>/.reproduce.lock`` (flock) while jobs run: a second invocation on the
+    same study would start the same unfinished jobs twice, so it is refused."""
+    import fcntl
+
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / ".reproduce.lock"
+    f = open(path, "a+")
+    try:
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            f.seek(0)
+            raise RuntimeError(f"another ials-zoo reproduce is running in {folder} "
+                               f"(lock {path}, held by pid {f.read().strip() or '?'})") from None
+        f.seek(0)
+        f.truncate()
+        f.write(str(os.getpid()))
+        f.flush()
+        yield
+    finally:
+        f.close()
+
+
+def _summary(jobs, status) -> dict:
+    out = {k: [] for k in ("done", "skipped", "failed", "blocked")}
+    for j in jobs:
+        out[status[j.id]].append(j.id)
+    return out
+
+
+def _run(jobs, status, n_jobs, progress, poll) -> dict:
     pending = [j for j in jobs if status[j.id] == "pending"]
     running: dict[str, tuple[Job, subprocess.Popen, object, float]] = {}
     bar = None
@@ -109,7 +153,4 @@ def run_jobs(jobs: list[Job], n_jobs: int = 2, progress: bool = True, poll: floa
     finally:
         if bar is not None:
             bar.close()
-    out = {k: [] for k in ("done", "skipped", "failed", "blocked")}
-    for j in jobs:
-        out[status[j.id]].append(j.id)
-    return out
+    return _summary(jobs, status)
