@@ -136,7 +136,10 @@ class IALSEnv(gym.Env):
             a = int(_scalar_action(action))
         if not 0 <= a < self._n_actions:
             raise ValueError(f"actions must be in 0..{self._n_actions - 1}, got values {a}..{a}")
-        u = self.predictor.sample(self._d, self.np_random)[0]
+        rng = self._np_random  # the np_random property's lazy creation, without its cost
+        if rng is None:
+            rng = self.np_random
+        u = self.predictor.sample(self._d, rng)[0]
         reward = self._step_single(a, *u.tolist())
         obs, dsets = self._observe_single()
         self._d = dsets[self._kind]

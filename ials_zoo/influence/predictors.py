@@ -53,6 +53,8 @@ FORMAT_VERSION = 1
 
 _max_reduce = np.maximum.reduce
 _add_accumulate = np.add.accumulate
+_HALF32 = np.array(0.5, dtype=np.float32)
+_ONE32 = np.array(1.0, dtype=np.float32)
 
 
 def _sigmoid(x, out=None):
@@ -178,14 +180,14 @@ class InfluencePredictor:
             )
         z, m, less = bufs
         x = logits.reshape(z.shape)
-        _max_reduce(x, axis=-1, keepdims=True, out=m)
-        np.subtract(x, m, out=z)
-        np.exp(z, out=z)
-        _add_accumulate(z, axis=-1, out=z)
+        _max_reduce(x, -1, None, m, True)
+        np.subtract(x, m, z)
+        np.exp(z, z)
+        _add_accumulate(z, -1, None, z)
         r = rng.random((1, self.n_sources, 1), dtype=z.dtype)
-        r *= z[:, :, -1:]
-        np.less(z, r, out=less)
-        return less.sum(axis=-1)
+        np.multiply(r, z[:, :, -1:], r)
+        np.less(z, r, less)
+        return less.sum(-1)
 
     def _logits_to_padded(self, logits: np.ndarray) -> np.ndarray:
         z = logits[:, self._gather]
@@ -468,17 +470,23 @@ class GRUPredictor(InfluencePredictor):
                 self._gi_cache.clear()
             self._gi_cache[key] = gi
         gh, rz, n, h = self._bufs1
-        np.dot(self.h, self.w_hh, out=gh)
-        gh += self.b_hh
-        np.add(gi[:, : 2 * H], gh[:, : 2 * H], out=rz)
-        _sigmoid(rz, out=rz)
-        np.multiply(rz[:, :H], gh[:, 2 * H :], out=n)
-        n += gi[:, 2 * H :]
-        np.tanh(n, out=n)
+        add, mul = np.add, np.multiply
+        np.dot(self.h, self.w_hh, gh)
+        add(gh, self.b_hh, gh)
+        add(gi[:, : 2 * H], gh[:, : 2 * H], rz)
+        # _sigmoid(rz, out=rz), with 0-d float32 constants (a Python float operand costs a
+        # scalar conversion per call; the values are exact in float32, so same results).
+        mul(rz, _HALF32, rz)
+        np.tanh(rz, rz)
+        add(rz, _ONE32, rz)
+        mul(rz, _HALF32, rz)
+        mul(rz[:, :H], gh[:, 2 * H :], n)
+        add(n, gi[:, 2 * H :], n)
+        np.tanh(n, n)
         # h' = (1 - z) * n + z * h = n + z * (h - n)
-        np.subtract(self.h, n, out=h)
-        h *= rz[:, H:]
-        h += n
+        np.subtract(self.h, n, h)
+        mul(h, rz[:, H:], h)
+        add(h, n, h)
         self._bufs1 = (gh, rz, n, self.h)
         self.h = h
         logits = np.dot(h, self.w_out)
