@@ -237,13 +237,20 @@ def test_off_policy_cross_entropy_exposes_a_spurious_cue():
 def test_dset_ablation_job_on_warehouse(tmp_path):
     params = {"env_id": "warehouse_v0", "agent": "robot_20", "steps": 1000, "offpolicy_steps": 200,
               "epochs": 1, "seed": 0}
-    d = X.dset_ablation(params, tmp_path)
+    d = X.dset_ablation(params, tmp_path / "dset" / "wh")
     assert set(d["cross_entropy"]) == {"dset", "full", "marginal", "uniform", "untrained"}
     assert d["off_policy_data"]["scripted"]["gs_options"] == {"scripted_learners": True}
     assert d["off_policy_data"]["biased"]["policy"].startswith("biased_random")
     for c in d["cross_entropy"].values():
         assert np.isfinite(c["on_policy"]) and all(np.isfinite(v) for v in c["off_policy"].values())
-    assert json.loads((tmp_path / "dset.json").read_text())["train_steps"] == 1000
+    assert json.loads((tmp_path / "dset" / "wh" / "dset.json").read_text())["train_steps"] == 1000
+    rev = d["reverse"]
+    assert rev["train_steps"] == 200 and set(rev["off_policy_data"]) == {"random", "biased"}
+    assert set(rev["cross_entropy"]["full"]["off_policy"]) == {"random", "biased"}
+    from ials_zoo.reproduce.report import dset_section
+
+    text = "\n".join(dset_section(tmp_path))
+    assert "Reverse direction" in text and "| full |" in text
 
 
 def test_budget_option():

@@ -232,19 +232,42 @@ def biased_policy(env_id: str, seed: int = 0, p: float = 0.7):
     return act
 
 
-def dset_ablation(params: dict, out_dir) -> dict:
-    """Train AIPs on the d-set and on the full observation (uniform random data), then
-    measure their cross-entropy on data from the scripted controller (the learner follows
-    the domain's scripted/actuated controller) and from a biased random policy."""
-    from ials_zoo.core.domains import get_domain
-    from ials_zoo.influence.dataset import collect
+def _ablation_direction(train, test_sets: dict, arch: str, epochs, seed: int) -> dict:
+    """AIPs on the d-set and the full observation (+ references) trained on ``train``, scored
+    on its own test split and on each data set of ``test_sets``."""
     from ials_zoo.influence.predictors import MarginalPredictor, UniformPredictor, random_init_predictor
     from ials_zoo.influence.train import train_predictor, untrained_probs
+
+    train_idx, test_idx = train.split(0.1, seed=seed)
+    preds, reports = {}, {}
+    for kind in ("dset", "full"):
+        pred, rep = train_predictor(train, arch=arch, dset_kind=kind, epochs=epochs, seed=seed, progress=False)
+        preds[kind] = pred
+        reports[kind] = {k: rep[k] for k in ("cross_entropy", "train_seconds", "hyperparameters")}
+    preds["marginal"] = MarginalPredictor.fit(train, episodes=train_idx)
+    preds["uniform"] = UniformPredictor(train.region, probs=untrained_probs(train.region))
+    preds["untrained"] = random_init_predictor(train.region, arch=arch, seed=seed)
+    return {"cross_entropy": off_policy_cross_entropy(preds, train, test_idx, test_sets), "training": reports}
+
+
+def dset_ablation(params: dict, out_dir) -> dict:
+    """The d-set ablation in both directions.
+
+    Main direction (the paper's setting): AIPs on the d-set and on the full observation
+    trained on uniform-random-policy data, tested on data from the scripted controller (the
+    learner follows the domain's scripted/actuated controller) and from a biased random
+    policy. Reverse direction (``"reverse"``): trained on the scripted controller's data --
+    a policy whose actions depend on the local state, so the full observation (e.g. the light
+    state in traffic) can carry correlations with the influence sources that do not hold
+    under another policy -- and tested on the random and biased data."""
+    from ials_zoo.core.domains import get_domain
+    from ials_zoo.influence.dataset import collect
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     env_id, agent, seed = params["env_id"], params["agent"], int(params.get("seed", 0))
     arch = params.get("arch") or get_domain(env_id).default_predictor
+    epochs = params.get("epochs")
     data = collect(env_id, agent, steps=params["steps"], seed=seed, progress=False)
     off = {
         "scripted": collect(env_id, agent, steps=params["offpolicy_steps"], seed=seed + 1,
@@ -252,23 +275,21 @@ def dset_ablation(params: dict, out_dir) -> dict:
         "biased": collect(env_id, agent, steps=params["offpolicy_steps"], seed=seed + 2,
                           policy=biased_policy(env_id, seed + 2), progress=False),
     }
-    _, test_idx = data.split(0.1, seed=seed)
-    preds, reports = {}, {}
-    for kind in ("dset", "full"):
-        pred, rep = train_predictor(data, arch=arch, dset_kind=kind, epochs=params.get("epochs"),
-                                    seed=seed, progress=False)
-        preds[kind] = pred
-        reports[kind] = {k: rep[k] for k in ("cross_entropy", "train_seconds", "hyperparameters")}
-    preds["marginal"] = MarginalPredictor.fit(data, episodes=data.split(0.1, seed=seed)[0])
-    preds["uniform"] = UniformPredictor(data.region, probs=untrained_probs(data.region))
-    preds["untrained"] = random_init_predictor(data.region, arch=arch, seed=seed)
-    ce = off_policy_cross_entropy(preds, data, test_idx, off)
+
+    def describe(k, v):
+        # with scripted_learners the learner's actions are ignored: the controller acts
+        return {"steps": v.n_steps, "gs_options": v.metadata.get("gs_options"),
+                "policy": "scripted controller" if k == "scripted" else v.metadata.get("policy")}
+
+    main = _ablation_direction(data, off, arch, epochs, seed)
+    reverse = _ablation_direction(off["scripted"], {"random": data, "biased": off["biased"]}, arch, epochs, seed)
     result = {"env_id": env_id, "agent": agent, "arch": arch, "train_steps": data.n_steps,
               "train_policy": data.metadata.get("policy"),
-              "off_policy_data": {k: {"steps": v.n_steps, "gs_options": v.metadata.get("gs_options"),
-                                      # with scripted_learners the learner's actions are ignored
-                                      "policy": ("scripted controller" if k == "scripted"
-                                                 else v.metadata.get("policy"))} for k, v in off.items()},
-              "cross_entropy": ce, "training": reports}
+              "off_policy_data": {k: describe(k, v) for k, v in off.items()},
+              "cross_entropy": main["cross_entropy"], "training": main["training"],
+              "reverse": {"train_policy": "scripted controller", "train_steps": off["scripted"].n_steps,
+                          "off_policy_data": {"random": describe("random", data),
+                                              "biased": describe("biased", off["biased"])},
+                          "cross_entropy": reverse["cross_entropy"], "training": reverse["training"]}}
     _write_json(out / "dset.json", result)
     return result

@@ -356,36 +356,46 @@ def memory_section(out) -> list[str]:
     return L
 
 
+def _dset_table(title: str, d: dict) -> list[str]:
+    ce = d["cross_entropy"]
+    offs = list(d["off_policy_data"])
+    L = [title, "",
+         "| AIP input | CE on-policy (test) | " + " | ".join(f"CE off-policy: {k}" for k in offs) + " | "
+         + " | ".join(f"increase: {k}" for k in offs) + " |",
+         "|---|---|" + "---|" * (2 * len(offs))]
+    for name, c in ce.items():
+        L.append(f"| {name} | {c['on_policy']:.3f} | " + " | ".join(f"{c['off_policy'][k]:.3f}" for k in offs)
+                 + " | " + " | ".join(f"{c['increase'][k]:+.3f}" for k in offs) + " |")
+    L.append("")
+    if "dset" in ce and "full" in ce:
+        for k in offs:
+            gap = ce["full"]["increase"][k] - ce["dset"]["increase"][k]
+            if abs(gap) < CLEAR_CE_GAP:
+                verdict = f"no clear difference (|gap| {abs(gap):.3f} < {CLEAR_CE_GAP} nats)"
+            elif gap > 0:
+                verdict = "the full-history AIP degrades more (consistent with spurious correlations)"
+            else:
+                verdict = "the d-set AIP degrades more (not what the paper predicts)"
+            L.append(f"- off-policy data `{k}` ({d['off_policy_data'][k]['policy']}, options "
+                     f"{d['off_policy_data'][k]['gs_options']}): the full-observation AIP's CE changes by "
+                     f"{ce['full']['increase'][k]:+.3f}, the d-set AIP's by {ce['dset']['increase'][k]:+.3f} "
+                     f"-> {verdict}.")
+    L.append("")
+    return L
+
+
 def dset_section(out) -> list[str]:
     L = []
     for f in sorted(Path(out, "dset").glob("*/dset.json")):
         d = _load(f)
         if not d:
             continue
-        ce = d["cross_entropy"]
-        offs = list(d["off_policy_data"])
-        L += [f"### d-set ablation (paper §4.2): {d['env_id']} / {d['agent']} ({d['arch']} AIP, "
-              f"{d['train_steps']} training steps from the {d['train_policy']} policy)", "",
-              "| AIP input | CE on-policy (test) | " + " | ".join(f"CE off-policy: {k}" for k in offs) + " | "
-              + " | ".join(f"increase: {k}" for k in offs) + " |",
-              "|---|---|" + "---|" * (2 * len(offs))]
-        for name, c in ce.items():
-            L.append(f"| {name} | {c['on_policy']:.3f} | " + " | ".join(f"{c['off_policy'][k]:.3f}" for k in offs)
-                     + " | " + " | ".join(f"{c['increase'][k]:+.3f}" for k in offs) + " |")
-        if "dset" in ce and "full" in ce:
-            for k in offs:
-                gap = ce["full"]["increase"][k] - ce["dset"]["increase"][k]
-                if abs(gap) < CLEAR_CE_GAP:
-                    verdict = f"no clear difference (|gap| {abs(gap):.3f} < {CLEAR_CE_GAP} nats)"
-                elif gap > 0:
-                    verdict = "the full-history AIP degrades more (consistent with spurious correlations)"
-                else:
-                    verdict = "the d-set AIP degrades more (not what the paper predicts)"
-                L.append(f"\n- off-policy data `{k}` ({d['off_policy_data'][k]['policy']}, options "
-                         f"{d['off_policy_data'][k]['gs_options']}): the full-observation AIP's CE changes by "
-                         f"{ce['full']['increase'][k]:+.3f}, the d-set AIP's by {ce['dset']['increase'][k]:+.3f} "
-                         f"-> {verdict}.")
-        L.append("")
+        L += _dset_table(f"### d-set ablation (paper §4.2): {d['env_id']} / {d['agent']} ({d['arch']} AIP, "
+                         f"trained on {d['train_steps']} steps from the {d['train_policy']} policy)", d)
+        if d.get("reverse"):
+            r = d["reverse"]
+            L += _dset_table(f"Reverse direction: trained on {r['train_steps']} steps from the "
+                             f"{r['train_policy']}, tested on the other policies' data", r)
     return L
 
 
