@@ -48,3 +48,24 @@ def test_single_history_cache_follows_new_weights():
     pred.sample(d, np.random.default_rng(0))
     other.sample(d, np.random.default_rng(0))
     np.testing.assert_array_equal(pred.h, other.h)
+
+
+@pytest.mark.parametrize("clone", ["deepcopy", "pickle"])
+def test_copied_predictor_continues_identically(clone):
+    """A copy taken mid-episode (e.g. by resolve_predictor or a subprocess env) has working
+    scratch buffers of its own and continues exactly like the original."""
+    import pickle
+
+    region = R.region_spec("robot_20")
+    pred = GRUPredictor(region, seed=2)
+    pred.reset(1)
+    pool = (np.random.default_rng(3).random((5, pred.dset_size)) < 0.3).astype(np.uint8)
+    rng = np.random.default_rng(0)
+    for t in range(5):
+        pred.sample(pool[t % 5][None], rng)
+    other = copy.deepcopy(pred) if clone == "deepcopy" else pickle.loads(pickle.dumps(pred))
+    r1, r2 = np.random.default_rng(9), np.random.default_rng(9)
+    for t in range(20):
+        d = pool[t % 5][None]
+        np.testing.assert_array_equal(pred.sample(d, r1), other.sample(d, r2))
+        np.testing.assert_array_equal(pred.h, other.h)

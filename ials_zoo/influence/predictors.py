@@ -53,6 +53,7 @@ FORMAT_VERSION = 1
 
 _max_reduce = np.maximum.reduce
 _add_accumulate = np.add.accumulate
+_add_reduce = np.add.reduce
 _HALF32 = np.array(0.5, dtype=np.float32)
 _ONE32 = np.array(1.0, dtype=np.float32)
 
@@ -103,6 +104,17 @@ class InfluencePredictor:
         self._same_k = bool((classes == classes[0]).all())
         self._sample_bufs = None
         self.n = 0
+
+    # Scratch state of the n=1 fast paths: buffers holding views of each other, which a copy
+    # or pickle would turn into unrelated arrays, and memo tables. Rebuilt on demand.
+    _SCRATCH = {"_sample_bufs": None, "_bufs1": None, "_h_spare": None, "_gi_cache": {}}
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        for k, v in self._SCRATCH.items():
+            if k in state:
+                state[k] = type(v)() if isinstance(v, dict) else v
+        return state
 
     # -- interface -------------------------------------------------------------------------
     def reset(self, n: int = 1) -> None:
@@ -172,22 +184,21 @@ class InfluencePredictor:
         and without numpy's Python-level wrappers (``max``, ``cumsum``, ``sum``)."""
         bufs = self._sample_bufs
         if bufs is None or bufs[0].dtype != logits.dtype:
-            shape = (1, self.n_sources, self.max_classes)
-            bufs = self._sample_bufs = (
-                np.empty(shape, logits.dtype),
-                np.empty((1, self.n_sources, 1), logits.dtype),
-                np.empty(shape, bool),
-            )
-        z, m, less = bufs
+            # 2-D [M, K] buffers: cheaper for numpy to iterate than [1, M, K] with broadcasting.
+            shape = (self.n_sources, self.max_classes)
+            z = np.empty(shape, logits.dtype)
+            bufs = self._sample_bufs = (z, np.empty((self.n_sources, 1), logits.dtype),
+                                        np.empty(shape, bool), z[:, -1:])
+        z, m, less, total = bufs
         x = logits.reshape(z.shape)
-        _max_reduce(x, -1, None, m, True)
+        _max_reduce(x, 1, None, m, True)
         np.subtract(x, m, z)
         np.exp(z, z)
-        _add_accumulate(z, -1, None, z)
-        r = rng.random((1, self.n_sources, 1), dtype=z.dtype)
-        np.multiply(r, z[:, :, -1:], r)
+        _add_accumulate(z, 1, None, z)
+        r = rng.random((self.n_sources, 1), dtype=z.dtype)  # same draws as shape (1, M, 1)
+        np.multiply(r, total, r)
         np.less(z, r, less)
-        return less.sum(-1)
+        return _add_reduce(less, 1, np.int64).reshape(1, self.n_sources)
 
     def _logits_to_padded(self, logits: np.ndarray) -> np.ndarray:
         z = logits[:, self._gather]
@@ -427,18 +438,11 @@ class GRUPredictor(InfluencePredictor):
             np.ascontiguousarray(a[k]) for k in shapes
         )
         self._gi_cache = {}
+        self._bufs1 = None
 
     def reset(self, n=1):
         super().reset(n)
         self.h = np.zeros((self.n, self.hidden), dtype=np.float32)
-        if self.n == 1 and getattr(self, "_bufs1", None) is None:
-            H = self.hidden
-            self._bufs1 = (
-                np.empty((1, 3 * H), np.float32),  # gh
-                np.empty((1, 2 * H), np.float32),  # r, z
-                np.empty((1, H), np.float32),  # n
-                np.empty((1, H), np.float32),  # spare hidden state (swapped with h)
-            )
 
     def probs_padded(self, dsets):
         return self._logits_to_padded(self._logits(dsets))
@@ -459,39 +463,54 @@ class GRUPredictor(InfluencePredictor):
         """:meth:`_logits` for one history: the same float operations in the same order
         (bitwise the same logits), with ``d @ w_ih + b_ih`` memoised per d-set and the
         intermediate arrays preallocated. Returns a buffer reused by the next call."""
-        H = self.hidden
         key = d.tobytes()
         gi = self._gi_cache.get(key)
         if gi is None:
-            gi = d.astype(np.float32) @ self.w_ih
-            gi += self.b_ih
-            gi.flags.writeable = False
+            H = self.hidden
+            g = d.astype(np.float32) @ self.w_ih
+            g += self.b_ih
+            g.flags.writeable = False
             if len(self._gi_cache) >= self._GI_CACHE_SIZE:
                 self._gi_cache.clear()
-            self._gi_cache[key] = gi
-        gh, rz, n, h = self._bufs1
+            gi = self._gi_cache[key] = (g[:, : 2 * H], g[:, 2 * H :])
+        gi_rz, gi_n = gi
+        if self._bufs1 is None:
+            self._make_bufs1()
+        gh, gh_rz, gh_n, rz, r, z, n, logits = self._bufs1
         add, mul = np.add, np.multiply
-        np.dot(self.h, self.w_hh, gh)
+        h_old, h = self.h, self._h_spare
+        np.dot(h_old, self.w_hh, gh)
         add(gh, self.b_hh, gh)
-        add(gi[:, : 2 * H], gh[:, : 2 * H], rz)
+        add(gi_rz, gh_rz, rz)
         # _sigmoid(rz, out=rz), with 0-d float32 constants (a Python float operand costs a
         # scalar conversion per call; the values are exact in float32, so same results).
         mul(rz, _HALF32, rz)
         np.tanh(rz, rz)
         add(rz, _ONE32, rz)
         mul(rz, _HALF32, rz)
-        mul(rz[:, :H], gh[:, 2 * H :], n)
-        add(n, gi[:, 2 * H :], n)
+        mul(r, gh_n, n)
+        add(n, gi_n, n)
         np.tanh(n, n)
         # h' = (1 - z) * n + z * h = n + z * (h - n)
-        np.subtract(self.h, n, h)
-        mul(h, rz[:, H:], h)
+        np.subtract(h_old, n, h)
+        mul(h, z, h)
         add(h, n, h)
-        self._bufs1 = (gh, rz, n, self.h)
-        self.h = h
-        logits = np.dot(h, self.w_out)
-        logits += self.b_out
+        self.h, self._h_spare = h, h_old
+        np.dot(h, self.w_out, logits)
+        add(logits, self.b_out, logits)
         return logits
+
+    def _make_bufs1(self):
+        H = self.hidden
+        gh = np.empty((1, 3 * H), np.float32)
+        rz = np.empty((1, 2 * H), np.float32)
+        # Buffers and their fixed views (slicing costs as much as a small ufunc call).
+        self._bufs1 = (
+            gh, gh[:, : 2 * H], gh[:, 2 * H :], rz, rz[:, :H], rz[:, H:],
+            np.empty((1, H), np.float32),  # n
+            np.empty((1, int(self._offsets[-1])), np.float32),  # logits
+        )
+        self._h_spare = np.empty((1, H), np.float32)  # swapped with h every step
 
     def _logits(self, dsets):
         d = self._check_dsets(dsets)
