@@ -9,7 +9,9 @@ from ials_zoo.influence.predictors import GRUPredictor, MLPPredictor
 from ials_zoo.warehouse import regions as R
 
 
-@pytest.mark.parametrize("cls,kind", [(GRUPredictor, "dset"), (GRUPredictor, "full"), (MLPPredictor, "dset")])
+@pytest.mark.parametrize(
+    "cls,kind", [(GRUPredictor, "dset"), (GRUPredictor, "full"), (MLPPredictor, "dset")]
+)
 def test_single_history_sampling_equals_general_path(cls, kind):
     """Same d-sets and rng stream: ``sample`` at n=1 (memoised input projection, buffers)
     gives the same draws, the same hidden state and the same probabilities as the general
