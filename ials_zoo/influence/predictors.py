@@ -23,7 +23,10 @@ Implementations:
 
 Inference is plain numpy (weights copied out of torch after training): a torch call at batch
 1 costs more than a whole local-simulator step. Torch is only needed to *train* (``train.py``)
-and to read/write predictor files.
+and to read/write predictor files. A single history (``reset(1)``, the :class:`IALSEnv` case)
+takes a dedicated path in :class:`GRUPredictor`/:class:`MLPPredictor` sampling: the same float
+operations in the same order as the batched code (bitwise the same draws), on preallocated
+buffers, with the GRU's input projection memoised per d-set.
 
 Files (:func:`save_predictor` / :func:`load_predictor`): one ``torch.save`` of a plain dict
 (readable with ``weights_only=True``)::
