@@ -19,8 +19,10 @@ _ALL_ITEMS = (1 << R.N_ITEMS) - 1
 _DRAW_STEPS = 64  # appearance draws fetched per rng call by the single-copy path
 
 # (position, item bitmask) -> read-only (obs float32 (37,), {"dset": (1, 24), "full": (1, 37)}).
-# Filled on demand by the single-copy path; at most 21 * 4096 entries (a few MB).
+# Filled on demand by the single-copy path; emptied when it reaches _VIEW_CACHE_SIZE entries
+# (~1 kB each) so that long runs visiting many item patterns stay bounded in memory.
 _VIEW_CACHE: dict = {}
+_VIEW_CACHE_SIZE = 16384
 
 
 def _single_views(key: int):
@@ -33,6 +35,8 @@ def _single_views(key: int):
         obs = full[0].astype(np.float32)
         for a in (full, dset, obs):
             a.flags.writeable = False
+        if len(_VIEW_CACHE) >= _VIEW_CACHE_SIZE:
+            _VIEW_CACHE.clear()
         views = _VIEW_CACHE[key] = (obs, {"dset": dset, "full": full})
     return views
 
