@@ -120,9 +120,12 @@ class TrafficLocalSimulator(LocalSimulator):
                 f"actions must be an int array of shape ({n},), got {actions!r} "
                 f"(dtype {actions.dtype})"
             )
-        # one shift instead of np.isin (a tenth of the step's Python time): only 0 and 1
-        # (and no negative number) shift to 0
-        if (actions >> 1).any():
+        if n == 1:  # scalar compares beat any numpy call here
+            if actions[0] != 0 and actions[0] != 1:
+                raise ValueError(f"actions must be 0 (keep) or 1 (switch), got {actions!r}")
+        elif (actions >> 1).any():
+            # one shift instead of np.isin (a tenth of the step's Python time): only 0 and 1
+            # (and no negative number) shift to 0
             raise ValueError(f"actions must be 0 (keep) or 1 (switch), got {actions!r}")
         influences = np.asarray(influences)
         if influences.shape != (n, 4) or influences.dtype.kind not in "iub":

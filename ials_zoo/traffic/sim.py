@@ -119,20 +119,24 @@ class _LaneReader:
         self.n = len(lanes)
         self.flat = [ln for g in lanes for ln in g]
         self.length = [x for g in lengths for x in g]
+        # the raw _libsumo functions skip a Python wrapper layer per call (and are looked up
+        # once here, not at every read). Lane mean speed x count equals the sum of the
+        # vehicles' speeds (checked against per-vehicle getSpeed in the tests) and saves one
+        # call per vehicle.
+        from libsumo import _libsumo as L
+
+        self._getters = (
+            L.lane_getLastStepVehicleIDs, L.vehicle_getLanePosition, L.lane_getLastStepMeanSpeed,
+        )  # fmt: skip
         # the vehicle ids on each lane at the previous read (tuples, as libsumo returns them)
         self.prev: list[tuple] = [()] * len(self.flat)
 
     def read(self, with_entries: bool = True):
         """Returns ``(occ [n, 36] uint8, entries [n, 4] uint8, reward [n] float32)``."""
-        # the raw _libsumo functions skip a Python wrapper layer per call; this loop is the
-        # whole per-step Python cost of the GS and the LS, so it is kept plain
-        from libsumo import _libsumo as L
-
-        # lane mean speed x count equals the sum of the vehicles' speeds (checked against
-        # per-vehicle getSpeed in the tests) and saves one call per vehicle
-        get_ids, get_pos, get_mean_speed = (
-            L.lane_getLastStepVehicleIDs, L.vehicle_getLanePosition, L.lane_getLastStepMeanSpeed,
-        )  # fmt: skip
+        # this loop is the whole per-step Python cost of the GS and the LS, so it is kept
+        # plain (numpy versions and subscriptions measured slower: libsumo's per-object
+        # conversions cost the same either way, numpy adds fixed costs)
+        get_ids, get_pos, get_mean_speed = self._getters
         n = self.n
         occ = bytearray(n * 4 * N_CELLS)
         entries = bytearray(n * 4)
