@@ -16,11 +16,10 @@ switch w.p. 0.1; LS influences: each bit 1 w.p. 0.1 (the untrained AIP).
 ``--breakdown`` instead splits the LS step (in-process) into its parts, in CPU ms per step
 and CPU us per copy-step: lights + ``vehicle.add``, SUMO's ``simulationStep``, the lane
 reads, the rest (the LS's checks, turn draws, observation). Measured here (quiet machine):
-SUMO's own step is ~45 % of the LS step at 1 copy and ~65 % at 64, and grows faster than the
-number of copies
-(~25 us per copy at 8 copies, ~40 at 64, ~50 at 128: memory, not Python); a ``vehicle.add``
-costs ~20 us inside SUMO (device set-up per car); the lane reads ~1 us per car seen (libsumo
-call cost; subscriptions and numpy versions measured no faster).
+SUMO's own step is ~45 % of the LS step at 1 copy and ~65 % at 64, and grows faster than
+the number of copies (~25 us per copy at 8 copies, ~40 at 64, ~50 at 128: memory, not
+Python); a ``vehicle.add`` costs ~20 us inside SUMO (device set-up per car); the lane reads
+~1 us per car seen (libsumo call cost; subscriptions and numpy versions measured no faster).
 """
 
 from __future__ import annotations
