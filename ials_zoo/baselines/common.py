@@ -77,6 +77,21 @@ def arg(default, help: str, **kw):
     return dataclasses.field(default=default, metadata={"help": help, **kw})
 
 
+@dataclasses.dataclass
+class PPOSettings:
+    """The PPO update settings every baseline shares (SPEC §3: the authors' values)."""
+
+    n_epochs: int = arg(3, "epochs per update")
+    learning_rate: float = arg(2.5e-4, "initial learning rate")
+    anneal_lr: bool = arg(True, "decay the learning rate linearly to 0")
+    clip_range: float = arg(0.1, "PPO clip range")
+    ent_coef: float = arg(0.01, "entropy coefficient")
+    vf_coef: float = arg(1.0, "value loss coefficient")
+    gamma: float = arg(0.99, "discount")
+    gae_lambda: float = arg(0.95, "GAE lambda")
+    max_grad_norm: float = arg(0.5, "gradient clipping")
+
+
 def parse_env_options(text: str | None) -> dict:
     """``--env-options`` (a JSON object of GS/LS options, e.g. ``{"item_lifetime": 8}``)."""
     if not text:

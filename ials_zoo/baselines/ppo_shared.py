@@ -40,6 +40,7 @@ import numpy as np
 
 from ials_zoo.baselines.common import (
     Evaluator,
+    PPOSettings,
     TrainingRun,
     arg,
     as_float_box,
@@ -119,7 +120,7 @@ def make_shared_vec_env(env_id: str, learners=None, n_copies: int = 1, seed: int
 
 
 @dataclass
-class Args:
+class Args(PPOSettings):
     """Arguments of :func:`main` (``python -m baselines.ppo_shared --help``)."""
 
     env_id: str = arg("warehouse_v0", "domain id", aliases=("--env",))
@@ -130,15 +131,6 @@ class Args:
     n_copies: int = arg(1, "GS copies (SUMO: one process each)")
     n_steps: int = arg(128, "rollout length per agent and update")
     batch_size: int = arg(1152, "minibatch size")
-    n_epochs: int = arg(3, "epochs per update")
-    learning_rate: float = arg(2.5e-4, "initial learning rate")
-    anneal_lr: bool = arg(True, "decay the learning rate linearly to 0")
-    clip_range: float = arg(0.1, "PPO clip range")
-    ent_coef: float = arg(0.01, "entropy coefficient")
-    vf_coef: float = arg(1.0, "value loss coefficient")
-    gamma: float = arg(0.99, "discount")
-    gae_lambda: float = arg(0.95, "GAE lambda")
-    max_grad_norm: float = arg(0.5, "gradient clipping")
     net_arch: str = arg("256,128", "hidden layer sizes, comma-separated")
     frame_stack: int | None = arg(None, "observations the policy reads (default: the domain's)")
     env_options: str = arg("", "GS options as a JSON object, e.g. '{\"item_lifetime\": 8}'")

@@ -46,6 +46,7 @@ from pathlib import Path
 
 from ials_zoo.baselines.common import (
     Evaluator,
+    PPOSettings,
     TrainingRun,
     arg,
     as_float_box,
@@ -58,7 +59,7 @@ from ials_zoo.baselines.common import (
 
 
 @dataclass
-class Args:
+class Args(PPOSettings):
     """Arguments of :func:`main` (``python -m baselines.ppo_single --help``)."""
 
     env_id: str = arg("warehouse_v0", "domain id", aliases=("--env",))
@@ -69,15 +70,6 @@ class Args:
     n_envs: int = arg(8, "parallel environments")
     n_steps: int = arg(128, "rollout length per environment and update")
     batch_size: int = arg(256, "minibatch size")
-    n_epochs: int = arg(3, "epochs per update")
-    learning_rate: float = arg(2.5e-4, "initial learning rate")
-    anneal_lr: bool = arg(True, "decay the learning rate linearly to 0")
-    clip_range: float = arg(0.1, "PPO clip range")
-    ent_coef: float = arg(0.01, "entropy coefficient")
-    vf_coef: float = arg(1.0, "value loss coefficient")
-    gamma: float = arg(0.99, "discount")
-    gae_lambda: float = arg(0.95, "GAE lambda")
-    max_grad_norm: float = arg(0.5, "gradient clipping")
     net_arch: str = arg("256,128", "hidden layer sizes, comma-separated (policy and value nets)")
     frame_stack: int | None = arg(None, "observations the policy reads (default: the domain's)")
     env_options: str = arg("", "GS/LS options as a JSON object, e.g. '{\"item_lifetime\": 8}' (memory variant)")
