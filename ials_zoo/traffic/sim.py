@@ -253,6 +253,17 @@ def _sumo_cmd(net, routes, additionals, seed, extra=()):
 # ----------------------------------------------------------------------------- cores
 
 
+def _close_any_simulation(core) -> None:
+    """Close the core's simulation before a fresh start, also one that a SUMO error left
+    half-closed (loaded but no longer marked running)."""
+    if core.running or core.ls.simulation.isLoaded():
+        core.running = False
+        try:
+            core.ls.close()
+        except Exception:
+            pass
+
+
 class GridCore:
     """The global grid simulation (runs where libsumo lives: this process or a worker).
 
@@ -280,13 +291,7 @@ class GridCore:
     def reset(self, seed: int, warmup_steps: int = 0):
         """Start a new simulation; returns ``(occ [L,36], phases [L])``."""
         ls = self.ls
-        if self.running or ls.simulation.isLoaded():
-            # also after a SUMO error that left the simulation half-closed
-            self.running = False
-            try:
-                ls.close()
-            except Exception:
-                pass
+        _close_any_simulation(self)
         net, routes, tls_add = self.files
         ls.start(_sumo_cmd(net, routes, [tls_add], seed))
         self.running = True
@@ -401,13 +406,7 @@ class LocalCore:
             except Exception:
                 soft = False
         if not soft:
-            if self.running or ls.simulation.isLoaded():
-                # also after a SUMO error that left the simulation half-closed
-                self.running = False
-                try:
-                    ls.close()
-                except Exception:
-                    pass
+            _close_any_simulation(self)
             # a car that cannot be inserted at once is dropped: in the GS it would simply
             # not have entered the lane at this step
             ls.start(_sumo_cmd(*self.files, [], seed, extra=("--max-depart-delay", "0")))
