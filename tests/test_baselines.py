@@ -65,8 +65,9 @@ def test_ppo_single_on_trained_ials_counts_aip_time(tmp_path, small_aip):
 
     out = tmp_path / "run"
     result = ppo_single.main(ppo_single.Args(simulator=small_aip, out_dir=str(out), **TINY))
-    data = _check_run(out, small_aip, result)
+    data = _check_run(out, "ials", result)  # a trained AIP file is labelled "ials"
     aip = data["training"]["aip"]
+    assert aip["file"] == small_aip and aip["sha256"]
     meta = load_predictor(small_aip).metadata
     assert aip["collection_seconds"] == meta["dataset"]["collect_seconds"] > 0
     assert aip["training_seconds"] == meta["train_seconds"] > 0

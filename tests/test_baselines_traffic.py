@@ -50,9 +50,10 @@ def traffic_aip(tmp_path_factory):
 
 def test_ppo_single_traffic_ials(tmp_path, traffic_aip):
     out = tmp_path / "ials"
-    data = _check(out, traffic_aip, ppo_single.main(
+    data = _check(out, "ials", ppo_single.main(
         ppo_single.Args(simulator=traffic_aip, out_dir=str(out), **TINY)))
     assert data["training"]["aip"]["collection_seconds"] > 0
+    assert data["training"]["aip"]["file"] == traffic_aip
     assert data["training"]["aip_seconds"] > 0
 
 

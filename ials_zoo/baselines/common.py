@@ -139,6 +139,20 @@ def predictor_for(simulator: str) -> str | None:
     )
 
 
+def simulator_label(simulator: str, aip: dict | None) -> str:
+    """The training-simulator name a result carries for a ``--simulator`` value.
+
+    Named simulators keep their name. A predictor file is named by what it holds: ``ials``
+    for a trained AIP, else its variant (e.g. ``marginal``); the file itself, with its
+    sha256, is recorded in ``training.aip``. So the leaderboard groups runs on freshly trained
+    AIPs with runs on the shipped one instead of listing them under file names.
+    """
+    if simulator == GS or simulator in IALS_SIMULATORS or simulator.startswith("fixed:"):
+        return simulator
+    variant = (aip or {}).get("variant")
+    return "ials" if variant in (None, "trained") else str(variant)
+
+
 def predictor_record(venv, simulator: str, env_id: str, agent: str) -> dict | None:
     """What the training record says about the AIP behind an IALS vec env (None on the GS).
 

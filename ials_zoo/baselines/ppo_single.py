@@ -55,6 +55,7 @@ from ials_zoo.baselines.common import (
     parse_env_options,
     predictor_for,
     predictor_record,
+    simulator_label,
 )
 
 
@@ -162,7 +163,7 @@ def main(args: Args | None = None) -> dict:
 
     model = make_ppo(venv, args, _hidden(args.net_arch))
     training = {
-        "simulator": args.simulator, "aip": aip, "seeds": [args.seed], "env_steps": 0,
+        "simulator": simulator_label(args.simulator, aip), "aip": aip, "seeds": [args.seed], "env_steps": 0,
         "wall_clock_seconds": 0.0, "aip_seconds": aip_seconds,
         "hyperparameters": dataclasses.asdict(args),
     }
