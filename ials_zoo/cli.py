@@ -1,4 +1,4 @@
-"""The ``ials-zoo`` command line.
+"""ials-zoo: global simulators, influence-augmented local simulators, baselines, leaderboard.
 
 Each subcommand lives in its own module under ``ials_zoo.commands`` and defines
 ``configure(parser)`` (add its arguments) and ``run(args) -> int`` (do the work). Modules are
