@@ -1,8 +1,9 @@
-"""Small shared helpers: atomic file writes."""
+"""Small shared helpers: atomic file writes, JSON option parsing."""
 
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import tempfile
 from pathlib import Path
@@ -43,3 +44,17 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
     """Write ``data`` to ``path`` atomically."""
     with atomic_path(path) as tmp:
         tmp.write_bytes(data)
+
+
+def parse_json_object(text: str | None, name: str) -> dict:
+    """Parse a command-line option holding a JSON object (empty -> ``{}``); a ValueError
+    naming the option otherwise."""
+    if not text:
+        return {}
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{name} must be a JSON object, got {text!r} ({exc})") from None
+    if not isinstance(value, dict):
+        raise ValueError(f"{name} must be a JSON object, got {text!r}")
+    return value

@@ -94,15 +94,9 @@ class PPOSettings:
 
 def parse_env_options(text: str | None) -> dict:
     """``--env-options`` (a JSON object of GS/LS options, e.g. ``{"item_lifetime": 8}``)."""
-    if not text:
-        return {}
-    try:
-        value = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"env_options {text!r} is not valid JSON: {exc}") from None
-    if not isinstance(value, dict):
-        raise ValueError(f"env_options must be a JSON object, got {text!r}")
-    return value
+    from ials_zoo.utils import parse_json_object
+
+    return parse_json_object(text, "env_options")
 
 
 # --------------------------------------------------------------------------------------------

@@ -11,17 +11,15 @@ output is an :class:`ials_zoo.influence.InfluenceDataset` ``.npz`` file (format 
 
 from __future__ import annotations
 
-import json
 
 
 def _json_dict(text: str) -> dict:
+    from ials_zoo.utils import parse_json_object
+
     try:
-        value = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise SystemExit(f"ials-zoo: --options must be a JSON object, got {text!r} ({exc})") from None
-    if not isinstance(value, dict):
-        raise SystemExit(f"ials-zoo: --options must be a JSON object, got {text!r}")
-    return value
+        return parse_json_object(text, "--options")
+    except ValueError as exc:
+        raise SystemExit(f"ials-zoo: {exc}") from None
 
 
 def add_collect_arguments(parser, required: bool = True) -> None:
