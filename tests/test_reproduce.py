@@ -273,6 +273,35 @@ def test_budget_option():
         Config(domain_budgets={"chess_v0": 5}).check()
 
 
+def test_memory_budget_is_separate_from_the_training_budget():
+    import argparse
+
+    from ials_zoo.commands.reproduce import config_from_args, configure
+    from ials_zoo.reproduce.plan import DEFAULT_BUDGETS, DEFAULT_MEMORY_BUDGET
+
+    parser = argparse.ArgumentParser()
+    configure(parser)
+
+    def memory_steps(argv):
+        cfg = config_from_args(parser.parse_args(argv))
+        steps = {j.params["total_timesteps"] for j in build_plan(cfg) if j.experiment == "memory" and j.kind == "ppo"}
+        (only,) = steps
+        return only, cfg
+
+    # defaults: the published study (2M warehouse training runs, 500k memory runs)
+    steps, cfg = memory_steps([])
+    assert steps == DEFAULT_MEMORY_BUDGET and cfg.budget_for("warehouse_v0") == DEFAULT_BUDGETS["warehouse_v0"]
+    assert memory_steps(["--memory-budget", "700"])[0] == 700
+    # a quick study with --budget shrinks the memory runs too, unless told otherwise
+    assert memory_steps(["--budget", "2000"])[0] == 2000
+    assert memory_steps(["--budget", "2000", "--memory-budget", "900"])[0] == 900
+    cfg = memory_steps(["--budget", "2000", "--memory-budget", "900"])[1]
+    mem = next(j for j in build_plan(cfg) if j.experiment == "memory" and j.kind == "ppo")
+    assert mem.params["eval_every"] == -(-900 // cfg.eval_points)
+    with pytest.raises(ValueError, match="memory_budget"):
+        Config(memory_budget=0).check()
+
+
 def test_resuming_with_other_settings_is_refused(tmp_path):
     cfg = Config(experiments=("training",), domains=("warehouse_v0",), simulators=("gs",), seeds=1,
                  budget=1000, out=str(tmp_path / "o"))

@@ -15,8 +15,9 @@ off-policy cross-entropy). Each run is a subprocess writing into its own folder 
 continued across invocations. Afterwards the finished training runs are submitted to the
 leaderboard and ``<leaderboard>/reproduction.md`` + curve PNGs are re-made.
 
-Default budget: 500,000 PPO steps per warehouse run, 300,000 per traffic run (paper: 2M);
-see the ``--budget`` help and ``ials_zoo.reproduce.plan.DEFAULT_BUDGETS`` for why.
+Default budget: 2,000,000 PPO steps per warehouse run (the paper's), 300,000 per traffic run
+(paper: 2M) and 500,000 per memory-experiment run; see the ``--budget`` help and
+``ials_zoo.reproduce.plan.DEFAULT_BUDGETS`` for why.
 """
 
 from __future__ import annotations
@@ -27,7 +28,8 @@ def _csv(text: str) -> tuple:
 
 
 def configure(parser):
-    from ials_zoo.reproduce.plan import DEFAULT_BUDGETS, DEFAULT_SIMULATORS, DOMAINS, EXPERIMENTS, Config
+    from ials_zoo.reproduce.plan import (DEFAULT_BUDGETS, DEFAULT_MEMORY_BUDGET, DEFAULT_SIMULATORS, DOMAINS,
+                                         EXPERIMENTS, Config)
 
     c = Config()
     parser.add_argument("--experiments", default=",".join(EXPERIMENTS),
@@ -40,8 +42,12 @@ def configure(parser):
     parser.add_argument("--budget", default=None,
                         help="PPO environment steps per run: N for every domain, and/or DOMAIN=N pairs, "
                              "e.g. 200000 or warehouse_v0=1000000,traffic_grid_v0=300000 (default "
-                             f"{c.budget} for the warehouse, {DEFAULT_BUDGETS['traffic_grid_v0']} for "
-                             "traffic, whose SUMO GS trains ~8x slower; the paper used 2M)")
+                             f"{DEFAULT_BUDGETS['warehouse_v0']} for the warehouse, as in the paper, "
+                             f"{DEFAULT_BUDGETS['traffic_grid_v0']} for traffic, whose SUMO GS trains ~5x "
+                             "slower and whose curves are flat from ~100k steps)")
+    parser.add_argument("--memory-budget", type=int, default=None,
+                        help="PPO environment steps per run of the memory experiment (12 warehouse runs; "
+                             f"default {DEFAULT_MEMORY_BUDGET}, or the warehouse's budget when --budget is given)")
     parser.add_argument("--seeds", type=int, default=c.seeds, help="training seeds per configuration")
     parser.add_argument("--jobs", type=int, default=c.jobs, help="runs at once (default 2 = cores)")
     parser.add_argument("--out", default=c.out, help="study folder")
@@ -89,12 +95,16 @@ def parse_budget(text, default: int, default_domains: dict) -> tuple[int, dict]:
 
 def config_from_args(args):
     """The :class:`~ials_zoo.reproduce.plan.Config` of parsed command-line ``args``."""
-    from ials_zoo.reproduce.plan import DEFAULT_BUDGETS, Config
+    from ials_zoo.reproduce.plan import DEFAULT_BUDGETS, DEFAULT_MEMORY_BUDGET, Config
 
     budget, per = parse_budget(args.budget, Config.budget, DEFAULT_BUDGETS)
+    memory_budget = args.memory_budget
+    if memory_budget is None and args.budget is None:
+        memory_budget = DEFAULT_MEMORY_BUDGET
     return Config(
         experiments=_csv(args.experiments), domains=_csv(args.domains), agents=_csv(args.agents),
-        simulators=_csv(args.simulators), budget=budget, domain_budgets=per, seeds=args.seeds, jobs=args.jobs,
+        simulators=_csv(args.simulators), budget=budget, domain_budgets=per, memory_budget=memory_budget,
+        seeds=args.seeds, jobs=args.jobs,
         out=args.out, leaderboard=args.leaderboard, net_arch=args.net_arch, n_envs=args.n_envs,
         eval_points=args.eval_points, eval_episodes=args.eval_episodes,
         final_eval_episodes=args.final_eval_episodes, aip_steps=args.aip_steps, aip_epochs=args.aip_epochs,
