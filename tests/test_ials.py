@@ -81,6 +81,25 @@ def test_collect_accepts_a_policy_and_rejects_bad_input():
         collect(ENV, AGENT, steps=10, policy=42, progress=False)
 
 
+def test_collect_in_several_processes_is_the_concatenation_of_its_shares():
+    from ials_zoo.influence.dataset import worker_seeds
+
+    both = collect(ENV, AGENT, steps=300, seed=4, progress=False, workers=2)
+    seeds = worker_seeds(4, 2)
+    assert worker_seeds(4, 1) == [4] and len(set(seeds)) == 2
+    parts = [collect(ENV, AGENT, steps=150, seed=s, progress=False) for s in seeds]
+    assert both.n_episodes == 4  # 150 steps per process, rounded up to 2 episodes of 100
+    np.testing.assert_array_equal(both.influences, np.concatenate([p.influences for p in parts]))
+    for kind in both.dsets:
+        np.testing.assert_array_equal(both.dsets[kind], np.concatenate([p.dsets[kind] for p in parts]))
+    assert both.metadata["workers"] == 2 and both.metadata["worker_seeds"] == seeds
+    assert both.metadata["steps"] == 400 and both.metadata["steps_requested"] == 300
+    with pytest.raises(ValueError, match="workers must be a positive int"):
+        collect(ENV, AGENT, steps=10, progress=False, workers=0)
+    with pytest.raises(ValueError, match="cannot be pickled"):
+        collect(ENV, AGENT, steps=10, progress=False, workers=2, policy=lambda obs: 0)
+
+
 def test_ials_env_api():
     from gymnasium.utils.env_checker import check_env
 

@@ -47,6 +47,9 @@ def test_dry_run_plans_the_right_runs(tmp_path):
     from ials_zoo.baselines.ppo_single import Args
 
     Args(**mem[0].params)  # ppo_single takes every planned parameter
+    # SUMO collects Algorithm 1's data in collect_workers processes; the numpy warehouse in one
+    workers = {j.params["agent"]: j.params.get("workers", 1) for j in jobs if j.kind == "aip" and j.experiment == "training"}
+    assert workers == {"robot_20": 1, "tls_12": cfg.collect_workers, "tls_18": cfg.collect_workers} and cfg.collect_workers == 2
     arch = {j.id: j.params.get("arch") for j in jobs if j.kind == "aip" and j.experiment == "memory"}
     assert sorted(arch.values()) == ["gru", "mlp"]
     assert len([j for j in jobs if j.kind == "lifetimes"]) == 1

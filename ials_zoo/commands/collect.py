@@ -33,6 +33,8 @@ def add_collect_arguments(parser, required: bool = True) -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--options", default="{}",
                         help='GS options as JSON, e.g. \'{"item_lifetime": 8}\'')
+    parser.add_argument("--workers", type=int, default=1,
+                        help="GS processes collecting at once (each records steps/workers; worth it for SUMO)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
@@ -45,8 +47,11 @@ def run(args) -> int:
     from ials_zoo.influence.dataset import collect
 
     options = _json_dict(args.options)
-    data = collect(args.env, args.agent, steps=args.steps, seed=args.seed, gs_options=options,
-                   progress=not args.no_progress)
+    try:
+        data = collect(args.env, args.agent, steps=args.steps, seed=args.seed, gs_options=options,
+                       progress=not args.no_progress, workers=args.workers)
+    except ValueError as exc:
+        raise SystemExit(f"ials-zoo collect: {exc}") from None
     data.save(args.out)
     m = data.metadata
     print(

@@ -60,6 +60,8 @@ def configure(parser):
                         help="GS episodes of each run's final score (result.json)")
     parser.add_argument("--aip-steps", type=int, default=c.aip_steps, help="Algorithm 1 steps per AIP")
     parser.add_argument("--aip-epochs", type=int, default=None, help="AIP epochs (default: the project's)")
+    parser.add_argument("--collect-workers", type=int, default=c.collect_workers,
+                        help="GS processes collecting each traffic AIP's data (Algorithm 1)")
     parser.add_argument("--dset-offpolicy-steps", type=int, default=c.dset_offpolicy_steps,
                         help="steps of each off-policy test set of the d-set ablation")
     parser.add_argument("--lifetime-episodes", type=int, default=c.lifetime_episodes,
@@ -108,6 +110,7 @@ def config_from_args(args):
         out=args.out, leaderboard=args.leaderboard, net_arch=args.net_arch, n_envs=args.n_envs,
         eval_points=args.eval_points, eval_episodes=args.eval_episodes,
         final_eval_episodes=args.final_eval_episodes, aip_steps=args.aip_steps, aip_epochs=args.aip_epochs,
+        collect_workers=args.collect_workers,
         dset_offpolicy_steps=args.dset_offpolicy_steps, lifetime_episodes=args.lifetime_episodes,
     ).check()
 

@@ -50,8 +50,11 @@ def run(args) -> int:
     else:
         if not (args.env and args.agent):
             raise SystemExit("ials-zoo train-aip: give --data FILE, or --env and --agent to collect data")
-        data = collect(args.env, args.agent, steps=args.steps, seed=args.seed,
-                       gs_options=_json_dict(args.options), progress=progress)
+        try:
+            data = collect(args.env, args.agent, steps=args.steps, seed=args.seed,
+                           gs_options=_json_dict(args.options), progress=progress, workers=args.workers)
+        except ValueError as exc:
+            raise SystemExit(f"ials-zoo train-aip: {exc}") from None
         if args.save_data:
             data.save(args.save_data)
     arch = args.arch or get_domain(data.region.domain).default_predictor

@@ -186,6 +186,7 @@ def collect(
     seed: int = 0,
     gs_options: dict | None = None,
     progress: bool = True,
+    workers: int = 1,
 ) -> InfluenceDataset:
     """Algorithm 1: record ``(d_t, u_t)`` of ``agent`` in the GS of ``env_id``.
 
@@ -198,12 +199,22 @@ def collect(
             GS's random stream, so the whole collection is reproducible).
         gs_options: keyword arguments for the domain's ``parallel_env``.
         progress: show a tqdm progress bar.
+        workers: GS processes collecting at once. With ``workers > 1`` each process records
+            ``ceil(steps / workers)`` steps (rounded up to whole episodes) from its own seed
+            (:func:`worker_seeds`) and the episodes are concatenated in worker order; the
+            policy must then be picklable (``None`` is). ``collect_seconds`` is the wall-clock
+            of the whole collection. Worth it for SUMO (one simulation per process), not for
+            the numpy warehouse, whose collection is shorter than starting a process.
     """
     from ials_zoo.core.domains import get_domain
 
     steps = int(steps)
     if steps < 1:
         raise ValueError(f"steps must be >= 1, got {steps}")
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ValueError(f"workers must be a positive int, got {workers!r}")
+    if workers > 1:
+        return _collect_in_processes(env_id, agent, steps, policy, seed, gs_options, progress, workers)
     domain = get_domain(env_id)
     gs_options = dict(gs_options or {})
     if "learners" in gs_options:
@@ -281,6 +292,63 @@ def collect(
         region,
         {k: np.stack(v) for k, v in episodes_d.items()},
         np.stack(episodes_u),
+        meta,
+    )
+
+
+def worker_seeds(seed: int, workers: int) -> list[int]:
+    """The seed of each collection process: ``seed`` itself for one process (so ``workers=1``
+    is plain :func:`collect`), independent streams spawned from ``seed`` otherwise."""
+    if workers == 1:
+        return [int(seed)]
+    return [int(s.generate_state(1)[0]) for s in np.random.SeedSequence(int(seed)).spawn(workers)]
+
+
+def _collect_share(kwargs: dict) -> "InfluenceDataset":
+    import torch
+
+    torch.set_num_threads(1)
+    return collect(**kwargs)
+
+
+def _collect_in_processes(env_id, agent, steps, policy, seed, gs_options, progress, workers):
+    import multiprocessing
+    import pickle
+    from concurrent.futures import ProcessPoolExecutor
+
+    try:
+        pickle.dumps(policy)
+    except Exception as exc:
+        raise ValueError(f"collect(workers={workers}) sends the policy to other processes, but it cannot be "
+                         f"pickled ({exc}); use workers=1 or a picklable policy") from None
+    t0 = time.perf_counter()
+    share = -(-steps // workers)
+    seeds = worker_seeds(seed, workers)
+    jobs = [dict(env_id=env_id, agent=agent, steps=share, policy=policy, seed=s, gs_options=gs_options,
+                 progress=False) for s in seeds]
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=workers, desc=f"collect {env_id}/{agent} ({workers} processes)", unit="share")
+    # spawn: a fresh interpreter per worker, so no libsumo simulation is inherited by fork.
+    with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+        futures = [pool.submit(_collect_share, j) for j in jobs]
+        parts = []
+        for f in futures:
+            parts.append(f.result())
+            if bar is not None:
+                bar.update(1)
+    if bar is not None:
+        bar.close()
+    seconds = time.perf_counter() - t0
+    first = parts[0]
+    meta = dict(first.metadata, steps=sum(p.n_steps for p in parts), steps_requested=steps, seed=int(seed),
+                workers=workers, worker_seeds=seeds, collect_seconds=round(seconds, 3))
+    return InfluenceDataset(
+        first.region,
+        {k: np.concatenate([p.dsets[k] for p in parts]) for k in first.dsets},
+        np.concatenate([p.influences for p in parts]),
         meta,
     )
 

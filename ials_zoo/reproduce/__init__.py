@@ -36,6 +36,7 @@ def settings(cfg: Config) -> dict:
     return {"budget": budgets, "memory_budget": cfg.memory_budget_steps(), "seeds": cfg.seeds, "jobs": cfg.jobs, "net_arch": cfg.net_arch,
             "n_envs": cfg.n_envs, "eval_points": cfg.eval_points, "eval_episodes": cfg.eval_episodes,
             "final_eval_episodes": cfg.final_eval_episodes, "aip_steps": cfg.aip_steps,
+            "collect_workers": cfg.collect_workers,
             "aip_epochs": cfg.aip_epochs if cfg.aip_epochs is not None else "default"}
 
 

@@ -32,9 +32,10 @@ def _write_json(path: Path, data) -> None:
 
 def train_aip(env_id: str, agent: str, out_dir, steps: int = 50_000, epochs: int | None = None,
               seed: int = 0, options: dict | None = None, arch: str | None = None,
-              dset_kind: str = "dset") -> dict:
-    """Collect ``steps`` steps (uniform random learner, scripted neighbours), train an AIP,
-    save ``aip.pt``, ``marginal.pt`` and ``report.json`` (written last: the done marker)."""
+              dset_kind: str = "dset", workers: int = 1) -> dict:
+    """Collect ``steps`` steps (uniform random learner, scripted neighbours) with ``workers``
+    GS processes, train an AIP, save ``aip.pt``, ``marginal.pt`` and ``report.json`` (written
+    last: the done marker)."""
     from ials_zoo.core.domains import get_domain
     from ials_zoo.influence.dataset import collect
     from ials_zoo.influence.predictors import MarginalPredictor, save_predictor
@@ -44,7 +45,8 @@ def train_aip(env_id: str, agent: str, out_dir, steps: int = 50_000, epochs: int
     out.mkdir(parents=True, exist_ok=True)
     arch = arch or get_domain(env_id).default_predictor
     t0 = time.perf_counter()
-    data = collect(env_id, agent, steps=steps, seed=seed, gs_options=dict(options or {}), progress=False)
+    data = collect(env_id, agent, steps=steps, seed=seed, gs_options=dict(options or {}), progress=False,
+                   workers=workers)
     collect_wall = time.perf_counter() - t0
     pred, report = train_predictor(data, arch=arch, dset_kind=dset_kind, epochs=epochs, seed=seed,
                                    progress=False)
@@ -55,7 +57,8 @@ def train_aip(env_id: str, agent: str, out_dir, steps: int = 50_000, epochs: int
     marg.metadata.update({"variant": "marginal", "dataset": {"collect_seconds": data.metadata["collect_seconds"]},
                           "train_seconds": 0.0})
     save_predictor(marg, out / "marginal.pt")
-    report = dict(report, collect_wall_seconds=round(collect_wall, 3), options=dict(options or {}))
+    report = dict(report, collect_wall_seconds=round(collect_wall, 3), collect_workers=workers,
+                  options=dict(options or {}))
     _write_json(out / "report.json", report)
     return report
 

@@ -64,6 +64,7 @@ class Config:
     final_eval_episodes: int = 20
     aip_steps: int = 50_000  # Algorithm 1 data per AIP (the paper's N)
     aip_epochs: int | None = None  # None: the project's default
+    collect_workers: int = 2  # GS processes of Algorithm 1 in SUMO domains (the cores here)
     dset_offpolicy_steps: int = 10_000
     lifetime_episodes: int = 20
 
@@ -84,7 +85,7 @@ class Config:
                 raise ValueError(f"unknown domain {env_id!r} in domain_budgets; expected one of {list(DOMAINS)}")
             if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
                 raise ValueError(f"budget of {env_id} must be a positive int, got {steps!r}")
-        for name in ("budget", "seeds", "jobs", "n_envs", "eval_points", "eval_episodes",
+        for name in ("budget", "seeds", "jobs", "collect_workers", "n_envs", "eval_points", "eval_episodes",
                      "final_eval_episodes", "aip_steps", "dset_offpolicy_steps", "lifetime_episodes"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
@@ -107,6 +108,14 @@ class Config:
     def budget_for(self, env_id: str) -> int:
         """PPO steps per run in ``env_id`` (a per-domain budget wins over ``budget``)."""
         return int(dict(self.domain_budgets).get(env_id, self.budget))
+
+    def collect_workers_for(self, env_id: str) -> int:
+        """GS processes collecting a training AIP's data: ``collect_workers`` where each GS
+        needs its own process anyway (SUMO), else 1 (the numpy warehouse collects 50k steps
+        in ~2 s, less than starting processes costs)."""
+        from ials_zoo.single_agent import needs_own_process
+
+        return self.collect_workers if needs_own_process(env_id) else 1
 
     def memory_budget_steps(self) -> int:
         """PPO steps per run of the memory experiment."""
@@ -215,10 +224,13 @@ def plan_training(cfg: Config) -> list[Job]:
         for agent in cfg.agents_of(env_id):
             base = root / f"{env_id}__{agent}"
             aip_dir = base / "aip"
+            params = {"env_id": env_id, "agent": agent, "steps": cfg.aip_steps,
+                      "epochs": cfg.aip_epochs, "seed": 0, "options": {}}
+            workers = cfg.collect_workers_for(env_id)
+            if workers > 1:
+                params["workers"] = workers
             aip = Job(id=f"training/{env_id}/{agent}/aip", kind="aip", dir=str(aip_dir),
-                      marker="report.json", experiment="training", label="aip",
-                      params={"env_id": env_id, "agent": agent, "steps": cfg.aip_steps,
-                              "epochs": cfg.aip_epochs, "seed": 0, "options": {}})
+                      marker="report.json", experiment="training", label="aip", params=params)
             jobs.append(aip)
             for sim in cfg.simulators:
                 deps = []

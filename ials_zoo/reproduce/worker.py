@@ -22,7 +22,8 @@ def run_job(job) -> None:
     p = dict(job.params)
     if job.kind == "aip":
         X.train_aip(p["env_id"], p["agent"], job.dir, steps=p["steps"], epochs=p.get("epochs"),
-                    seed=p.get("seed", 0), options=p.get("options"), arch=p.get("arch"))
+                    seed=p.get("seed", 0), options=p.get("options"), arch=p.get("arch"),
+                    workers=p.get("workers", 1))
     elif job.kind == "ppo":
         from ials_zoo.baselines.ppo_single import Args, main
 
