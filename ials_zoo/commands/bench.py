@@ -9,6 +9,10 @@ For each domain it prints, on this machine, in one process:
   batched AIP call per step;
 * the ratios IALS / GS.
 
+``--ppo`` instead times the ``ppo_single`` baseline itself (its settings, 8 envs) on the GS,
+the IALS and on no simulator at all (a vec env whose steps cost nothing): the last is PPO's
+own cost, the floor under any IALS-vs-GS wall-clock ratio.
+
 ``--scaling`` instead grows the system (traffic 3x3..10x10, warehouse 4x4..10x10 robots) and
 reports, per size, the GS time per step and per agent-step against the time per agent-step of
 one batched IALS per agent (all agents' regions, as in DIALS), with a PNG plot.
@@ -42,6 +46,9 @@ def configure(parser):
                         help="AIP used by the IALS (trained, untrained, fixed:P, marginal, path)")
     parser.add_argument("--scaling", action="store_true",
                         help="measure GS vs IALS cost as the system grows, and plot it")
+    parser.add_argument("--ppo", action="store_true",
+                        help="time PPO training on the GS, the IALS and no simulator (PPO's own cost)")
+    parser.add_argument("--ppo-steps", type=int, default=30_000, help="PPO steps per --ppo measurement")
     parser.add_argument("--out", default=None, help="write the figures as JSON here")
     parser.add_argument("--plot", default="bench_scaling.png",
                         help="PNG for --scaling (default: bench_scaling.png)")
@@ -203,13 +210,37 @@ def _plot_scaling(rows: list[dict], path: str) -> None:
     plt.close(fig)
 
 
+def bench_ppo(env_id: str, steps: int, predictor: str, seed: int) -> list[dict]:
+    """``ppo_single`` steps/s on the GS, the IALS and no simulator, with the time per step of
+    each relative to the GS (the last one is the floor no simulator can beat)."""
+    from ials_zoo.baselines.throughput import NO_SIMULATOR, ppo_bound, ppo_throughput
+
+    agent = get_domain(env_id).default_agents[0]
+    simulator = "ials" if predictor == "trained" else predictor
+    rows = [ppo_throughput(env_id, agent, sim, steps=steps, seed=seed) for sim in ("gs", simulator, NO_SIMULATOR)]
+    rel = ppo_bound(rows)["time_per_step_vs_gs"]
+    for r in rows:
+        r["time_per_step_vs_gs"] = rel[r["simulator"]]
+    return rows
+
+
 def run(args) -> int:
     if args.steps is not None and args.steps < 1:
         raise SystemExit(f"--steps must be >= 1, got {args.steps}")
     if args.batch < 1:
         raise SystemExit(f"--batch must be >= 1, got {args.batch}")
     env_ids = domain_ids() if args.domain == "all" else [args.domain]
-    if args.scaling:
+    if args.ppo:
+        if args.ppo_steps < 1:
+            raise SystemExit(f"--ppo-steps must be >= 1, got {args.ppo_steps}")
+        rows = [r for env_id in env_ids for r in bench_ppo(env_id, args.ppo_steps, args.predictor, args.seed)]
+        print(f"\nppo_single training throughput ({args.ppo_steps} steps each, 8 envs, evaluation excluded)")
+        print(f"{'domain':<16}{'simulator':<12}{'PPO steps/s':>12}{'time/step vs GS':>17}")
+        for r in rows:
+            print(f"{r['domain']:<16}{r['simulator']:<12}{r['steps_per_s']:>12,.0f}{r['time_per_step_vs_gs']:>17.2f}")
+        print("'none' is PPO alone (a simulator that costs nothing): no IALS can train in less than that "
+              "share of the GS's wall-clock.")
+    elif args.scaling:
         rows = [r for env_id in env_ids for r in bench_scaling(env_id, args.steps, args.seed)]
         print(f"\n{'domain':<16}{'size':>9}{'agents':>8}{'GS steps/s':>12}"
               f"{'GS µs/step':>12}{'IALS single µs':>16}{'IALS batched µs/agent':>23}")
