@@ -459,8 +459,10 @@ Protocol: `ials_zoo/evaluation.py`; result format: [SCHEMA.md](SCHEMA.md).
 
 Submit a result: `ials-zoo leaderboard submit result.json`; re-score it:
 `ials-zoo leaderboard verify leaderboard/results/<file>.json`; regenerate this page:
-`ials-zoo leaderboard render`. This file is generated: do not edit it by hand.
+`ials-zoo leaderboard render`. This file is generated: do not edit it by hand (its write-up
+section is copied from [writeup.md](writeup.md)).
 """
+WRITEUP = "writeup.md"
 
 
 def _plot(directory: Path, env_id: str, agent: str, rows: list[dict]) -> str | None:
@@ -472,19 +474,29 @@ def _plot(directory: Path, env_id: str, agent: str, rows: list[dict]) -> str | N
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(6, 4))
+    fig, ax = plt.subplots(figsize=(7, 4.5))
     longest = max(p["wall_clock_seconds"] for d in curves for c in d["learning_curves"] for p in c["points"])
     unit, scale = ("hours", 3600.0) if longest >= 7200 else ("minutes", 60.0)
+    # One colour per (algorithm, simulator, budget); its seeds share it (a study submits one
+    # result per seed), with one legend entry that counts them.
+    kinds = {}
     for d in curves:
-        for c in d["learning_curves"]:
-            # curve wall-clock already includes the AIP's collection + training time
-            xs = [p["wall_clock_seconds"] / scale for p in c["points"]]
-            ys = [p["mean"] for p in c["points"]]
-            lo = [p["ci_low"] for p in c["points"]]
-            hi = [p["ci_high"] for p in c["points"]]
-            label = f"{d['algorithm']} on {_training_label(d)}" + (f" (seed {c['seed']})" if c["seed"] is not None else "")
-            line, = ax.plot(xs, ys, marker="o", ms=3, label=label)
-            ax.fill_between(xs, lo, hi, alpha=0.2, color=line.get_color())
+        key = (d["algorithm"], _training_label(d), d["training"]["env_steps"])
+        kinds.setdefault(key, []).append(d)
+    for i, ((algo, sim, steps), ds) in enumerate(kinds.items()):
+        color = f"C{i % 10}"
+        n = sum(len(d["learning_curves"]) for d in ds)
+        label = f"{algo} on {sim}, {steps:,} steps" + (f" ({n} seeds)" if n > 1 else "")
+        for d in ds:
+            for c in d["learning_curves"]:
+                # curve wall-clock already includes the AIP's collection + training time
+                xs = [p["wall_clock_seconds"] / scale for p in c["points"]]
+                ys = [p["mean"] for p in c["points"]]
+                ax.plot(xs, ys, marker="o", ms=2, lw=1, color=color, label=label)
+                if n == 1:
+                    ax.fill_between(xs, [p["ci_low"] for p in c["points"]], [p["ci_high"] for p in c["points"]],
+                                    alpha=0.2, color=color)
+                label = None
     for d in rows:
         if d["training"] is None:
             ax.axhline(d["score"]["mean"], ls="--", lw=1, color="grey")
@@ -506,6 +518,9 @@ def render(directory: str | os.PathLike = "leaderboard") -> Path:
     (GS score vs wall-clock for entries with learning curves)."""
     directory = Path(directory)
     parts = [_README_HEAD]
+    writeup = directory / WRITEUP
+    if writeup.is_file():
+        parts.append("\n" + writeup.read_text().strip() + "\n")
     groups = table_rows(load_entries(directory))
     if not groups:
         parts.append("\n(no results yet)\n")

@@ -382,3 +382,36 @@ def test_second_invocation_on_the_same_study_is_refused(tmp_path):
     with study_lock(tmp_path / "o"):
         with pytest.raises(RuntimeError, match="another ials-zoo reproduce"):
             run_jobs(build_plan(cfg), progress=False, lock_dir=cfg.out)
+
+
+def test_submit_merges_the_seeds_of_a_finished_configuration_only(tmp_path):
+    from ials_zoo import leaderboard as lb
+    from ials_zoo.evaluation import CallablePolicy, evaluate
+    from ials_zoo.reproduce.report import submit_results
+
+    base = tmp_path / "out" / "training" / "warehouse_v0__robot_20"
+
+    def run(label, seed, action=None):
+        d = base / f"{label}__s{seed}"
+        d.mkdir(parents=True)
+        params = {"env_id": "warehouse_v0", "agent": "robot_20", "seed": seed, "total_timesteps": 1000}
+        (d / "job.json").write_text(json.dumps({"kind": "ppo", "label": label, "params": params}))
+        if action is not None:  # a finished run: a real GS score of a fixed-action policy
+            ev = evaluate("warehouse_v0", "robot_20", CallablePolicy(lambda obs: action, f"a{action}"), episodes=2)
+            result = lb.make_result([ev], algorithm="ppo_single", training_seeds=[seed], training={
+                "simulator": label, "aip": None, "seeds": [seed], "env_steps": 1000,
+                "wall_clock_seconds": 10.0 + seed, "aip_seconds": 0.0, "hyperparameters": {}})
+            (d / "result.json").write_text(json.dumps(result))
+
+    run("gs", 0, action=0)
+    run("gs", 1, action=3)
+    run("ials", 0, action=1)
+    run("ials", 1)  # still running
+    board = tmp_path / "lb"
+    first = submit_results(tmp_path / "out", board)
+    assert first["incomplete"] == ["training/warehouse_v0/robot_20/ials/1000"] and first["rejected"] == []
+    (entry,) = [json.loads(p.read_text()) for p in (board / "results").glob("*.json")]
+    assert [s["seed"] for s in entry["scores"]] == [0, 1] and entry["training"]["seeds"] == [0, 1]
+    assert entry["training"]["wall_clock_seconds"] == pytest.approx(10.5)
+    again = submit_results(tmp_path / "out", board)
+    assert again["submitted"] == [] and again["already"] == ["training/warehouse_v0/robot_20/gs/1000"]

@@ -141,7 +141,7 @@ def run(args) -> int:
     if not args.no_submit:
         sub = submit_results(cfg.out, cfg.leaderboard)
         print(f"leaderboard: {len(sub['submitted'])} submitted, {len(sub['already'])} already there, "
-              f"{len(sub['rejected'])} rejected")
+              f"{len(sub['rejected'])} rejected, {len(sub['incomplete'])} waiting for seeds still to run")
         for r in sub["rejected"]:
             print(f"  rejected: {r}")
     # --report-only: the settings of this command line need not be those of the runs.

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ials_zoo.evaluation import mean_ci
+from ials_zoo.reproduce.plan import label_of
 from ials_zoo.utils import atomic_path, atomic_write_text
 
 # SPEC §4 (authors' plotting notebooks).
@@ -458,25 +459,50 @@ def write_report(out, leaderboard, cfg_note: dict | None = None) -> Path:
 
 
 def submit_results(out, leaderboard, experiments=("training",)) -> dict:
-    """Submit every finished run's result.json to the leaderboard with the project's own
-    :func:`ials_zoo.leaderboard.submit`; results already on the board are skipped."""
-    from ials_zoo.leaderboard import ResultError, content_hash, load_entries, submit
+    """Submit the study's finished configurations to the leaderboard with the project's own
+    :func:`ials_zoo.leaderboard.submit`: one entry per (domain, agent, simulator, budget),
+    its seeds merged (:func:`ials_zoo.leaderboard.merge_results`: a score per seed and the
+    95% CI over seeds). A configuration with a seed still running is left for later, so the
+    board never holds a partial merge; results already on the board are skipped.
+
+    Returns ``{"submitted": [...], "already": [...], "rejected": [...], "incomplete": [...]}``."""
+    from ials_zoo.leaderboard import ResultError, content_hash, load_entries, merge_results, submit
+    from ials_zoo.utils import atomic_write_text
 
     have = {content_hash(d) for _, d in load_entries(leaderboard)}
-    done = {"submitted": [], "already": [], "rejected": []}
+    done = {"submitted": [], "already": [], "rejected": [], "incomplete": []}
     for exp in experiments:
-        for r in load_runs(out, exp):
-            path = r["dir"] / "result.json"
-            if r["result"] is None:
+        runs = load_runs(out, exp)
+        configs = group(runs, lambda r: (r["job"]["params"]["env_id"], r["job"]["params"]["agent"],
+                                         r["job"]["label"], r["job"]["params"]["total_timesteps"]))
+        for (env_id, agent, label, steps), rs in sorted(configs.items()):
+            name = f"{exp}/{env_id}/{agent}/{label_of(label)}/{steps}"
+            if any(r["result"] is None for r in rs):
+                done["incomplete"].append(name)
                 continue
-            if content_hash(r["result"]) in have:
-                done["already"].append(str(path))
+            rs = sorted(rs, key=lambda r: r["job"]["params"]["seed"])
+            try:
+                result = (rs[0]["result"] if len(rs) == 1 else
+                          merge_results([r["result"] for r in rs],
+                                        notes=f"ials-zoo reproduce ({exp}, {label}, {steps:,} steps), "
+                                              f"{len(rs)} training seeds merged"))
+            except ResultError as exc:
+                done["rejected"].append(f"{name}: {exc}")
                 continue
+            if content_hash(result) in have:
+                done["already"].append(name)
+                continue
+            # submit() reads a file: the merged result is written next to the runs first
+            path = Path(out) / exp / f"{env_id}__{agent}" / f"{label_of(label)}__{steps}__merged.json"
+            if len(rs) == 1:
+                path = rs[0]["dir"] / "result.json"
+            else:
+                atomic_write_text(path, json.dumps(result, indent=2) + "\n")
             try:
                 dest = submit(path, leaderboard)
             except ResultError as exc:
-                done["rejected"].append(f"{path}: {exc}")
+                done["rejected"].append(f"{name}: {exc}")
                 continue
-            have.add(content_hash(r["result"]))
+            have.add(content_hash(result))
             done["submitted"].append(str(dest))
     return done
