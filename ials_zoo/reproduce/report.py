@@ -332,7 +332,7 @@ def training_section(key, summary, aip_report, refs, png_name, budget_note) -> l
     return L
 
 
-def memory_section(out) -> list[str]:
+def memory_section(out, leaderboard=None) -> list[str]:
     L = []
     runs = load_runs(out, "memory")
     for (env_id, agent), rs in sorted(group(runs, lambda r: (r["job"]["params"]["env_id"],
@@ -353,9 +353,16 @@ def memory_section(out) -> list[str]:
         d = _load(lf)
         if not d:
             continue
-        rel = lf.parent / "lifetimes.png"
+        png = lf.parent / "lifetimes.png"
+        figure = f"`{png}`"
+        if leaderboard is not None and png.is_file():
+            # the figure travels with reproduction.md (the run folders stay outside the repository)
+            name = f"reproduction_lifetimes_{d['env_id']}__{d['agent']}.png"
+            with atomic_path(Path(leaderboard) / name, suffix=".png") as tmp:
+                Path(tmp).write_bytes(png.read_bytes())
+            figure = f"![item lifetimes]({name})"
         L += [f"Item lifetimes in {d['agent']}'s region ({d['episodes']} episodes per simulator, uniform random "
-              f"robot; histogram: `{rel}`):", "", "| simulator | items | mean lifetime | share living exactly 8 steps |",
+              f"robot):", "", figure, "", "| simulator | items | mean lifetime | share living exactly 8 steps |",
               "|---|---|---|---|"]
         for k, s in d["summary"].items():
             L.append(f"| {k} | {s['items']} | {_f(s['mean'], 2)} | {_f(s['share_at_lifetime'], 2)} |")
@@ -449,7 +456,7 @@ def write_report(out, leaderboard, cfg_note: dict | None = None) -> Path:
             plot_training(s, refs, lb / png, f"{env_id} / {agent}: GS score vs wall-clock")
         aip = _load(out / "training" / f"{env_id}__{agent}" / "aip" / "report.json")
         L += training_section(key, s, aip, refs, png, budget_note(env_id))
-    L += memory_section(out) + dset_section(out)
+    L += memory_section(out, lb) + dset_section(out)
     path = lb / "reproduction.md"
     atomic_write_text(path, "\n".join(L) + "\n")
     summary_json = {f"{k[0]}/{k[1]}": {lab: {kk: vv for kk, vv in v.items() if kk != "curve"}
