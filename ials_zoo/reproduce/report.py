@@ -337,6 +337,7 @@ def memory_section(out, leaderboard=None) -> list[str]:
     runs = load_runs(out, "memory")
     for (env_id, agent), rs in sorted(group(runs, lambda r: (r["job"]["params"]["env_id"],
                                                             r["job"]["params"]["agent"])).items()):
+        stats = {}
         L += [f"### Memory (paper §5.4): {env_id} / {agent}, item_lifetime=8", "",
               "| AIP | agent frame stack | runs done | final GS score (item_lifetime=8) |", "|---|---|---|---|"]
         for label, srs in sorted(group(rs, lambda r: r["job"]["label"]).items()):
@@ -348,6 +349,24 @@ def memory_section(out, leaderboard=None) -> list[str]:
             else:
                 score = "-"
             L.append(f"| {name} | {fs[2:]} | {len(finals)}/{len(srs)} | {score} |")
+            if len(finals) > 1:
+                stats[(name, fs)] = mean_ci(finals)
+        L.append("")
+        budgets = sorted({r["job"]["params"]["total_timesteps"] for r in rs})
+        L.append(f"PPO budget {', '.join(f'{b:,}' for b in budgets)} steps per run. The paper's claim: an agent "
+                 "with memory (frame stack 8) needs the AIP with memory (M-IALS beats NM-IALS); an agent "
+                 "without memory (frame stack 1) does as well on either. Computed from the table "
+                 "(95% CIs over seeds):")
+        L.append("")
+        for fs, what in (("fs8", "agent with memory"), ("fs1", "agent without memory")):
+            m, nm = stats.get(("M-IALS", fs)), stats.get(("NM-IALS", fs))
+            if not (m and nm):
+                L.append(f"- {what}: not measured (needs >= 2 seeds on both simulators).")
+                continue
+            disjoint = m[1] > nm[2] or nm[1] > m[2]
+            L.append(f"- {what}: M-IALS {m[0]:.3f} vs NM-IALS {nm[0]:.3f} -> "
+                     + ("CIs disjoint: " + ("M-IALS better" if m[0] > nm[0] else "NM-IALS better")
+                        if disjoint else "CIs overlap: no clear difference") + ".")
         L.append("")
     for lf in sorted(Path(out, "memory").glob("*/lifetimes/lifetimes.json")):
         d = _load(lf)
