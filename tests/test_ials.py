@@ -286,3 +286,16 @@ def test_trained_architecture_choice_uses_the_cache(tmp_path, monkeypatch):
     np.testing.assert_array_equal(env.predictor.w1, mlp.w1)
     with pytest.raises(ValueError, match="trained:gru"):
         make_ials(ENV, AGENT, predictor="trained:lstm")
+
+
+def test_influence_rates_tell_a_fixed_probability_apart_from_none():
+    from ials_zoo.influence.rates import influence_rates
+
+    # traffic: one entry bit per incoming lane, so the mean is the entry rate
+    none = influence_rates("traffic_grid_v0", "tls_12", "fixed:0.0", episodes=1)
+    some = influence_rates("traffic_grid_v0", "tls_12", "fixed:0.5", episodes=1)
+    assert none["steps"] == some["steps"] == 300
+    assert none["influence_mean"] == 0.0 and 0.4 < some["influence_mean"] < 0.6
+    assert some["observation_mean"] > none["observation_mean"]
+    with pytest.raises(ValueError, match="episodes"):
+        influence_rates("traffic_grid_v0", "tls_12", "fixed:0.5", episodes=0)
