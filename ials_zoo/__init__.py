@@ -5,17 +5,24 @@ Global simulators (PettingZoo ``ParallelEnv``)::
     from ials_zoo import warehouse_v0, traffic_grid_v0
     env = warehouse_v0.parallel_env(learners=["robot_20"])
 
-Influence-augmented local simulators (Gymnasium ``Env``)::
+Influence-augmented local simulators: one agent (Gymnasium ``Env``), or every agent at once
+(PettingZoo ``ParallelEnv``, the multi-agent IALS of DIALS)::
 
     import ials_zoo
     env = ials_zoo.make_ials("warehouse_v0", "robot_20")
+    env = ials_zoo.make_ials_parallel_env("traffic_grid_v0")
 
 or, through Gymnasium (registered on ``import ials_zoo``)::
 
     env = gymnasium.make("ials_zoo/IALS-warehouse_v0", agent="robot_20")
+
+Your own domain: build an :class:`ials_zoo.core.Domain` and :func:`register_domain` it (or
+declare it in the ``ials_zoo.domains`` entry point group).
 """
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
+
+from ials_zoo.core.domains import Domain, domain_ids, get_domain, register_domain  # noqa: E402
 
 
 def make_ials(*args, **kwargs):
@@ -25,22 +32,27 @@ def make_ials(*args, **kwargs):
     return _make_ials(*args, **kwargs)
 
 
+def make_ials_parallel_env(*args, **kwargs):
+    """Build the multi-agent IALS, a PettingZoo ``ParallelEnv`` (see ``ials_zoo.influence.multi``)."""
+    from ials_zoo.influence.multi import make_ials_parallel_env as _make
+
+    return _make(*args, **kwargs)
+
+
 def _register_gymnasium() -> None:
-    """Register ``ials_zoo/IALS-<env_id>`` for every domain (cheap: nothing is imported)."""
-    import gymnasium
+    from ials_zoo.influence.gym_registration import register_all
 
-    from ials_zoo.core.domains import domain_ids
-
-    for env_id in domain_ids():
-        gym_id = f"ials_zoo/IALS-{env_id}"
-        if gym_id not in gymnasium.registry:
-            gymnasium.register(
-                id=gym_id,
-                entry_point="ials_zoo.influence.ials:gymnasium_entry_point",
-                kwargs={"env_id": env_id},
-            )
+    register_all()
 
 
 _register_gymnasium()
 
-__all__ = ["__version__", "make_ials"]
+__all__ = [
+    "Domain",
+    "__version__",
+    "domain_ids",
+    "get_domain",
+    "make_ials",
+    "make_ials_parallel_env",
+    "register_domain",
+]

@@ -1,40 +1,61 @@
-"""ials-zoo: global simulators, influence-augmented local simulators, baselines, leaderboard.
+"""ials-zoo: benchmark global simulators and influence-augmented local simulators (IALS),
+train baselines on either, score them on the GS, and keep a leaderboard.
 
 Each subcommand lives in its own module under ``ials_zoo.commands`` and defines
 ``configure(parser)`` (add its arguments) and ``run(args) -> int`` (do the work). Modules are
 imported only when their subcommand runs, so ``ials-zoo --help`` stays fast.
+
+Errors: bad input is reported as ``ials-zoo <command>: <what is wrong>``, exit status 2, no
+traceback (``IALS_ZOO_DEBUG=1`` shows it); Ctrl-C ends a command with exit status 130.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import importlib.util
+import os
 import sys
 
 SUBCOMMANDS = {
     # name: (module, one-line help)
-    "bench": ("ials_zoo.commands.bench", "measure GS and IALS steps/s"),
-    "demo": ("ials_zoo.commands.demo", "run a short episode and print what happened"),
+    "bench": ("ials_zoo.commands.bench", "measure GS and IALS speed (steps/s, cost per agent-step)"),
+    "demo": ("ials_zoo.commands.demo", "run one episode of a GS and print what happened"),
     "collect": ("ials_zoo.commands.collect", "collect (d_t, u_t) data from a GS (Algorithm 1)"),
     "train-aip": ("ials_zoo.commands.train_aip", "train an approximate influence predictor"),
-    "train": ("ials_zoo.commands.train", "train a PPO baseline on a GS or an IALS"),
+    "train": ("ials_zoo.commands.train", "train a baseline: PPO for one agent, IPPO or DIALS for all"),
     "evaluate": ("ials_zoo.commands.evaluate", "score a policy on the GS"),
     "leaderboard": ("ials_zoo.commands.leaderboard", "submit, show, render, verify results"),
     "reproduce": ("ials_zoo.commands.reproduce", "reproduce the paper's experiments"),
+    "rates": ("ials_zoo.commands.rates", "how much influence an IALS injects, per predictor"),
 }
 
 
 def _available() -> dict:
+    """The subcommands: the generic ones, then each domain's own tools (``Domain.tools``)."""
+    from ials_zoo.core.domains import domain_ids, get_domain
+
     found = {}
     for name, (module, help_text) in SUBCOMMANDS.items():
         if importlib.util.find_spec(module) is not None:
             found[name] = (module, help_text)
+    for env_id in domain_ids():
+        for name, (module, help_text) in get_domain(env_id).tools.items():
+            found.setdefault(name, (module, f"{help_text} ({env_id})"))
     return found
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with the zoo's error line: ``ials-zoo <command>: <message>``, exit 2."""
+
+    def error(self, message):
+        self.print_usage(sys.stderr)
+        self.exit(2, f"{self.prog}: {message}\n")
+
+
 def build_parser(load: str | None = None) -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="ials-zoo", description=__doc__.splitlines()[0])
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    parser = _Parser(prog="ials-zoo", description=__doc__.split("\n\n")[0].replace("\n", " "))
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     for name, (module, help_text) in _available().items():
         p = sub.add_parser(name, help=help_text, description=help_text)
         if name == load:
@@ -43,9 +64,11 @@ def build_parser(load: str | None = None) -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from ials_zoo.commands import CommandError
+
     argv = sys.argv[1:] if argv is None else argv
     command = next((a for a in argv if not a.startswith("-")), None)
-    parser = build_parser(load=command if command in SUBCOMMANDS else None)
+    parser = build_parser(load=command)
     args = parser.parse_args(argv)
     if args.command is None:
         parser.print_help()
@@ -54,8 +77,13 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(module.run(args) or 0)
     except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
+        print(f"ials-zoo {args.command}: interrupted", file=sys.stderr)
         return 130
+    except (CommandError, ValueError, TypeError, FileNotFoundError, PermissionError, IsADirectoryError) as exc:
+        if os.environ.get("IALS_ZOO_DEBUG"):
+            raise
+        print(f"ials-zoo {args.command}: {exc}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

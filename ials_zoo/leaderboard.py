@@ -25,9 +25,9 @@ import math
 import os
 import platform
 import re
+from collections.abc import Iterable, Sequence
 from importlib import resources
 from pathlib import Path
-from typing import Iterable, Sequence
 
 from ials_zoo.utils import atomic_path, atomic_write_text
 

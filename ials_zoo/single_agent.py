@@ -15,7 +15,7 @@ the same space, so a policy trained on either runs on the other.
 
 libsumo holds one simulation per process: for the traffic GS, vectorised training must put each
 ``SingleAgentGS`` in its own process (:func:`make_gs_vec_env` does that by default for domains
-marked so in :func:`needs_own_process`).
+marked ``Domain.one_simulation_per_process``).
 """
 
 from __future__ import annotations
@@ -29,15 +29,10 @@ from gymnasium import spaces
 
 from ials_zoo.core.domains import get_domain
 
-# Domains whose GS holds a process-wide resource (libsumo: one simulation per process), so
-# that two instances must never live in the same process.
-_ONE_PER_PROCESS = {"traffic_grid_v0"}
-
-
 def needs_own_process(env_id: str) -> bool:
-    """True when each GS of ``env_id`` must live in its own process (SUMO via libsumo)."""
-    dom = get_domain(env_id)
-    return env_id in _ONE_PER_PROCESS or bool(dom.extra.get("one_per_process", False))
+    """True when each GS of ``env_id`` must live in its own process (SUMO via libsumo):
+    ``Domain.one_simulation_per_process``."""
+    return get_domain(env_id).one_simulation_per_process
 
 
 def box_space(space: spaces.Space) -> spaces.Box:
@@ -55,19 +50,9 @@ def box_space(space: spaces.Space) -> spaces.Box:
 
 
 def check_agent(env_id: str, agent: str, **options) -> str:
-    """Raise a ValueError naming the domain's agents when ``agent`` is not one of them."""
-    import inspect
-
-    possible = get_domain(env_id).possible_agents
-    # possible_agents takes only the options that shape the agent set (e.g. robots=(R, C)).
-    params = inspect.signature(possible).parameters
-    if not any(p.kind is p.VAR_KEYWORD for p in params.values()):
-        options = {k: v for k, v in options.items() if k in params}
-    agents = list(possible(**options))
-    if agent not in agents:
-        shown = ", ".join(agents[:6]) + (", ..." if len(agents) > 6 else "")
-        raise ValueError(f"unknown agent {agent!r} for {env_id}; expected one of: {shown}")
-    return agent
+    """Raise a ValueError naming the domain's agents when ``agent`` is not one of them
+    (:meth:`ials_zoo.core.Domain.check_agent`)."""
+    return get_domain(env_id).check_agent(agent, **options)
 
 
 class SingleAgentGS(gymnasium.Env):
@@ -75,7 +60,7 @@ class SingleAgentGS(gymnasium.Env):
 
     Args:
         env_id: versioned domain id (``"warehouse_v0"``, ``"traffic_grid_v0"``).
-        agent: the learning agent (e.g. ``"robot_20"``, ``"intersection_12"``).
+        agent: the learning agent (e.g. ``"robot_20"``, ``"tls_12"``).
         scripted_learner: drive ``agent`` by its scripted controller too (actions passed to
             ``step`` are ignored); used to score the domain's scripted reference policy.
         **options: passed to the domain's ``parallel_env``.
@@ -129,11 +114,65 @@ class SingleAgentGS(gymnasium.Env):
 
 
 def _make_single_agent_gs(env_id: str, agent: str, options: dict) -> SingleAgentGS:
-    # Module-level (picklable) factory for SubprocVecEnv workers.
+    # Module-level (picklable) factory, run in each SubprocVecEnv worker: the worker dies
+    # with the training process and leaves Ctrl-C to it.
     import torch
 
+    from ials_zoo.processes import die_with_parent
+
+    die_with_parent(ignore_sigint=True)
     torch.set_num_threads(1)
     return SingleAgentGS(env_id, agent, **options)
+
+
+def _safe_subproc_vec_env_class():
+    from stable_baselines3.common.vec_env import SubprocVecEnv
+    from stable_baselines3.common.vec_env.subproc_vec_env import _stack_obs
+
+    from ials_zoo.processes import recv_from
+
+    class SafeSubprocVecEnv(SubprocVecEnv):
+        """SB3's ``SubprocVecEnv`` that never waits forever on a worker: a dead, stopped or
+        hung worker raises :class:`ials_zoo.processes.WorkerError` within seconds, and
+        ``close()`` kills workers that do not exit promptly."""
+
+        def _recv_all(self):
+            return [recv_from(r, p, "SubprocVecEnv worker") for r, p in zip(self.remotes, self.processes)]
+
+        def step_wait(self):
+            results = self._recv_all()
+            self.waiting = False
+            obs, rews, dones, infos, self.reset_infos = zip(*results)
+            return _stack_obs(obs, self.observation_space), np.stack(rews), np.stack(dones), infos
+
+        def reset(self):
+            for i, remote in enumerate(self.remotes):
+                remote.send(("reset", (self._seeds[i], self._options[i])))
+            obs, self.reset_infos = zip(*self._recv_all())
+            self._reset_seeds()
+            self._reset_options()
+            return _stack_obs(obs, self.observation_space)
+
+        def close(self):
+            if self.closed:
+                return
+            self.closed = True
+            for remote, proc in zip(self.remotes, self.processes):
+                try:
+                    if self.waiting:
+                        recv_from(remote, proc, "SubprocVecEnv worker", timeout=5.0)
+                    remote.send(("close", None))
+                except Exception:
+                    pass
+            for proc in self.processes:
+                proc.join(timeout=5)
+                if proc.is_alive():
+                    proc.kill()
+                    proc.join(timeout=5)
+            for remote in self.remotes:
+                remote.close()
+
+    return SafeSubprocVecEnv
 
 
 def make_gs_vec_env(
@@ -141,7 +180,7 @@ def make_gs_vec_env(
     agent: str,
     n_envs: int = 8,
     vec_env: str = "auto",
-    start_method: str = "forkserver",
+    start_method: str = "spawn",
     **options,
 ):
     """``n_envs`` copies of :class:`SingleAgentGS` as an SB3 ``VecEnv``.
@@ -150,10 +189,10 @@ def make_gs_vec_env(
         vec_env: ``"dummy"`` (all copies in this process), ``"subproc"`` (one process per
             copy) or ``"auto"``: subproc for domains that need their own process (SUMO),
             dummy otherwise.
-        start_method: multiprocessing start method of the subprocesses (``forkserver`` or
-            ``spawn``: a forked child would inherit this process's simulator state).
+        start_method: multiprocessing start method of the subprocesses (``spawn``: a fresh
+            interpreter; a forked child would inherit this process's simulator state).
     """
-    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+    from stable_baselines3.common.vec_env import DummyVecEnv
 
     if n_envs < 1:
         raise ValueError(f"n_envs must be >= 1, got {n_envs}")
@@ -167,5 +206,5 @@ def make_gs_vec_env(
         )
     fns = [functools.partial(_make_single_agent_gs, env_id, agent, options) for _ in range(n_envs)]
     if vec_env == "subproc" or (vec_env == "auto" and own):
-        return SubprocVecEnv(fns, start_method=start_method)
+        return _safe_subproc_vec_env_class()(fns, start_method=start_method)
     return DummyVecEnv(fns)

@@ -1,4 +1,4 @@
-"""Small shared helpers: atomic file writes, JSON option parsing."""
+"""Small shared helpers: atomic file writes, JSON option parsing, seed checks."""
 
 from __future__ import annotations
 
@@ -8,8 +8,15 @@ import os
 import tempfile
 from pathlib import Path
 
+import numpy as np
+
 _UMASK = os.umask(0)
 os.umask(_UMASK)
+
+
+TEMP_PREFIX = ".~"
+"""Temporary files of :func:`atomic_path` are called ``.~<name>.<random><suffix>``: hidden
+(no ``*.json`` glob lists them) and recognisable (:func:`remove_stale_temporaries`)."""
 
 
 @contextlib.contextmanager
@@ -21,7 +28,7 @@ def atomic_path(path: str | os.PathLike, suffix: str = ""):
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix or ".tmp", dir=path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=f"{TEMP_PREFIX}{path.name}.", suffix=suffix or ".tmp", dir=path.parent)
     os.close(fd)
     # mkstemp creates the file 0600; give the result the permissions a plain open() would.
     os.chmod(tmp, 0o666 & ~_UMASK)
@@ -40,12 +47,6 @@ def atomic_write_text(path: str | os.PathLike, text: str) -> None:
         tmp.write_text(text)
 
 
-def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
-    """Write ``data`` to ``path`` atomically."""
-    with atomic_path(path) as tmp:
-        tmp.write_bytes(data)
-
-
 def parse_json_object(text: str | None, name: str) -> dict:
     """Parse a command-line option holding a JSON object (empty -> ``{}``); a ValueError
     naming the option otherwise."""
@@ -58,3 +59,55 @@ def parse_json_object(text: str | None, name: str) -> dict:
     if not isinstance(value, dict):
         raise ValueError(f"{name} must be a JSON object, got {text!r}")
     return value
+
+
+SEED_MAX = 2**63 - 1
+
+
+def check_seed(seed, name: str = "seed", upper: int = SEED_MAX, allow_none: bool = True):
+    """``seed`` as an int in ``[0, upper]`` (or None when allowed); a TypeError/ValueError
+    naming ``name`` otherwise (numpy's own message does not say which argument was bad)."""
+    if seed is None and allow_none:
+        return None
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+        raise TypeError(f"{name} must be an int in [0, {upper}], got {seed!r}")
+    if not 0 <= int(seed) <= upper:
+        raise ValueError(f"{name} must be an int in [0, {upper}], got {seed!r}")
+    return int(seed)
+
+
+def check_output_file(path, option: str = "--out") -> Path:
+    """Check, before any long work, that a file can be written at ``path``: not a folder, and
+    its folder exists (or can be made) and is writable. A ValueError naming ``option``."""
+    path = Path(path)
+    if path.is_dir():
+        raise ValueError(f"{option} {str(path)!r} is a folder; give a file name")
+    parent = path.parent if str(path.parent) else Path(".")
+    existing = parent
+    while not existing.exists():
+        existing = existing.parent
+    if not existing.is_dir():
+        raise ValueError(f"{option} {str(path)!r}: {str(existing)!r} is not a folder")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise ValueError(f"{option} {str(path)!r}: cannot write in {str(existing)!r}")
+    if path.exists() and not os.access(path, os.W_OK):
+        raise ValueError(f"{option} {str(path)!r} exists and is not writable")
+    return path
+
+
+def remove_stale_temporaries(folder, max_age_seconds: float = 3600.0) -> int:
+    """Remove the temporary files :func:`atomic_path` leaves behind when a process is killed
+    mid-write (``.<name>.<random>.tmp`` and the like) older than ``max_age_seconds`` in
+    ``folder``; returns how many. Younger ones may belong to a write still under way."""
+    import time
+
+    folder = Path(folder)
+    if not folder.is_dir():
+        return 0
+    now, removed = time.time(), 0
+    for p in folder.glob(f"{TEMP_PREFIX}*"):
+        with contextlib.suppress(OSError):
+            if p.is_file() and now - p.stat().st_mtime > max_age_seconds:
+                p.unlink()
+                removed += 1
+    return removed

@@ -178,21 +178,25 @@ def test_vec_env_trains_with_sb3():
     venv.close()
 
 
-def test_fixed_predictor_uses_the_domains_null_class(monkeypatch):
-    from ials_zoo.core.domains import get_domain
+def test_fixed_predictor_uses_the_domains_null_class():
+    import dataclasses
 
-    # Convention without a declaration: the last class of a categorical source is "none",
-    # which is the warehouse's encoding (class 3: the neighbour is on no shared cell).
-    extra = get_domain(ENV).extra
-    monkeypatch.delitem(extra, "null_influence", raising=False)
+    from ials_zoo.core.domains import get_domain, register_domain, unregister_domain
+
+    # The warehouse's "no influence" class is 3: the neighbour is on no shared cell.
     env = make_ials(ENV, AGENT, predictor="fixed:0.3")
     assert isinstance(env.predictor, FixedPredictor) and env.predictor.p == 0.3
     # P(neighbour elsewhere) = 0.7, each shared cell 0.1.
     np.testing.assert_allclose(env.predictor.table[:, R.NONE], 0.7)
     np.testing.assert_allclose(env.predictor.table[:, :3], 0.1)
-    monkeypatch.setitem(extra, "null_influence", 0)  # a domain's declaration wins
-    env = make_ials(ENV, AGENT, predictor="fixed:0.3")
-    np.testing.assert_allclose(env.predictor.table[:, 0], 0.7)
+    # The domain's declaration is what counts.
+    register_domain(dataclasses.replace(get_domain(ENV), null_influence=0), replace=True)
+    try:
+        env = make_ials(ENV, AGENT, predictor="fixed:0.3")
+        np.testing.assert_allclose(env.predictor.table[:, 0], 0.7)
+    finally:
+        unregister_domain(ENV)
+    assert get_domain(ENV).null_influence == R.NONE
 
 
 def test_predictor_names_and_errors(tmp_path):
@@ -269,10 +273,13 @@ def test_collect_and_train_aip_commands(tmp_path, capsys):
     rep = json.loads(report.read_text())
     assert rep["dataset"]["steps"] == 300 and rep["hyperparameters"]["epochs"] == 2
     assert pred.metadata["cross_entropy"]["trained"]["test"] == rep["cross_entropy"]["trained"]["test"]
-    with pytest.raises(SystemExit):
-        main(["train-aip", "--out", str(out), "--no-progress"])  # neither --data nor --env/--agent
-    with pytest.raises(ValueError, match="not an ials_zoo influence data set"):
-        main(["train-aip", "--data", str(report), "--out", str(out), "--no-progress"])
+    capsys.readouterr()
+    # neither --data nor --env/--agent; then a file that is not a data set: one line, exit 2
+    assert main(["train-aip", "--out", str(out), "--no-progress"]) == 2
+    assert capsys.readouterr().err.startswith("ials-zoo train-aip: give --data")
+    assert main(["train-aip", "--data", str(report), "--out", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("ials-zoo train-aip: not an ials_zoo influence data set") and "Traceback" not in err
 
 
 def test_trained_architecture_choice_uses_the_cache(tmp_path, monkeypatch):

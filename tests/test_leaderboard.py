@@ -190,7 +190,6 @@ def _trained(ev, seed, wall):
 
 def test_merge_seeds_into_one_result(tmp_path):
     from ials_zoo.cli import main
-
     from ials_zoo.evaluation import CallablePolicy
 
     # two "seeds" of one experiment: two fixed-action policies scored on the same episodes

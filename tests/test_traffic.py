@@ -10,7 +10,8 @@ from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test
 
 from ials_zoo.core.domains import get_domain
 from ials_zoo.traffic import network
-from ials_zoo.traffic.env import TrafficGridEnv, env as aec_env, parallel_env
+from ials_zoo.traffic.env import TrafficGridEnv, parallel_env
+from ials_zoo.traffic.env import env as aec_env
 from ials_zoo.traffic.sim import SimulationBusyError, SimulationError, WorkerDiedError
 
 
@@ -188,8 +189,8 @@ def test_yellow_interval_ignores_actions(gs):
     e = gs()
     obs, _ = e.reset(seed=0)
     a = "tls_4"
-    light = lambda o: int(np.argmax(o[a][36:]))  # noqa: E731
-    state = lambda: e.sumo_query("trafficlight", "getRedYellowGreenState", a)  # noqa: E731
+    light = lambda o: int(np.argmax(o[a][36:]))
+    state = lambda: e.sumo_query("trafficlight", "getRedYellowGreenState", a)
     ns_green, ns_yellow, ew_green, _ = e.files.meta["states"][a]
     assert light(obs) == 0 and state() == ns_green
     seen = []
@@ -373,7 +374,7 @@ def test_sumo_errors_become_clear_exceptions(gs, backend):
         ({"warmup_steps": -1}, ValueError, "warmup_steps"),
         ({"inflow_probability": 1.5}, ValueError, "inflow_probability"),
         ({"backend": "gpu"}, ValueError, "backend"),
-        ({"render_mode": "human"}, ValueError, "render_mode"),
+        ({"render_mode": "window"}, ValueError, "render_mode"),
         ({"speed": 3}, TypeError, "speed"),
         ({"internal_links": "no"}, TypeError, "internal_links"),
         ({"scripted_learners": 1}, TypeError, "scripted_learners"),

@@ -14,7 +14,7 @@ def make_ls():
     made = []
 
     def make(**kw):
-        kw.setdefault("agent", "tls_12")
+        kw.setdefault("agents", "tls_12")
         made.append(TrafficLocalSimulator(**kw))
         return made[-1]
 
@@ -160,8 +160,8 @@ def test_domain_factory_and_bad_input(make_ls):
         with pytest.raises(ValueError, match=match):
             ls.step(acts, infl)
     for kw, exc in [
-        ({"agent": "tls_25"}, ValueError),
-        ({"agent": "x"}, ValueError),
+        ({"agents": "tls_25"}, ValueError),
+        ({"agents": "x"}, ValueError),
         ({"n_envs": 0}, ValueError),
         ({"n_envs": 1.5}, TypeError),
         ({"turn_probabilities": [[1, 0, 0]]}, ValueError),

@@ -98,7 +98,7 @@ def test_render_modes():
 
 
 def test_save_gif(tmp_path):
-    from ials_zoo.warehouse.render import record_episode, save_gif
+    from ials_zoo.viewer import record_episode, save_gif
 
     gs = parallel_env(robots=(2, 2), max_cycles=5, render_mode="rgb_array")
     frames = record_episode(gs, seed=0)
@@ -352,7 +352,7 @@ def test_scripted_learners_ignore_actions():
         ({"max_cycles": 0}, ValueError, "max_cycles"),
         ({"max_cycles": 10.0}, TypeError, "max_cycles"),
         ({"item_lifetime": 0}, ValueError, "item_lifetime"),
-        ({"render_mode": "human"}, ValueError, "render_mode"),
+        ({"render_mode": "window"}, ValueError, "render_mode"),
         ({"scripted_learners": "yes"}, TypeError, "scripted_learners"),
         ({"colour": "red"}, TypeError, "colour"),
     ],

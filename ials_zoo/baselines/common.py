@@ -103,48 +103,25 @@ def parse_env_options(text: str | None) -> dict:
 # Training simulators
 
 GS = "gs"
-# --simulator values that name an IALS, and the predictor they give make_ials_vec_env.
-IALS_SIMULATORS = {"ials": "trained", "untrained-ials": "untrained", "marginal": "marginal"}
 
 
 def predictor_for(simulator: str) -> str | None:
     """The ``predictor`` argument of the IALS factory for a ``--simulator`` value, or None for
-    the GS. Accepted: ``gs``, ``ials``, ``untrained-ials``, ``marginal``, ``fixed:P`` and a
-    path to a saved predictor (``.pt``)."""
-    if simulator == GS:
-        return None
-    if simulator in IALS_SIMULATORS:
-        return IALS_SIMULATORS[simulator]
-    if simulator.startswith("fixed:"):
-        try:
-            p = float(simulator.split(":", 1)[1])
-        except ValueError:
-            p = -1.0
-        if not 0.0 <= p <= 1.0:
-            raise ValueError(f"simulator {simulator!r}: expected fixed:P with P in [0, 1]")
-        return simulator
-    if simulator.endswith(".pt") or os.path.exists(simulator):
-        if not os.path.exists(simulator):
-            raise ValueError(f"simulator {simulator!r}: predictor file not found")
-        return simulator
-    raise ValueError(
-        f"unknown simulator {simulator!r}; expected gs, ials, untrained-ials, fixed:P, "
-        "marginal or a path to a predictor .pt file"
-    )
+    the GS (the vocabulary of :mod:`ials_zoo.influence.specs`; a ValueError naming it for
+    anything else)."""
+    from ials_zoo.influence.specs import parse_simulator
+
+    spec = parse_simulator(simulator)
+    return None if spec is None else str(spec)
 
 
 def simulator_label(simulator: str, aip: dict | None) -> str:
-    """The training-simulator name a result carries for a ``--simulator`` value.
+    """The training-simulator name a result carries for a ``--simulator`` value (a predictor
+    file is named by what it holds: ``ials`` for a trained AIP; the file itself, with its
+    sha256, is recorded in ``training.aip``)."""
+    from ials_zoo.influence.specs import simulator_label as label
 
-    Named simulators keep their name. A predictor file is named by what it holds: ``ials``
-    for a trained AIP, else its variant (e.g. ``marginal``); the file itself, with its
-    sha256, is recorded in ``training.aip``. So the leaderboard groups runs on freshly trained
-    AIPs with runs on the shipped one instead of listing them under file names.
-    """
-    if simulator == GS or simulator in IALS_SIMULATORS or simulator.startswith("fixed:"):
-        return simulator
-    variant = (aip or {}).get("variant")
-    return "ials" if variant in (None, "trained") else str(variant)
+    return label(simulator, (aip or {}).get("variant"))
 
 
 def predictor_record(venv, simulator: str, env_id: str, agent: str) -> dict | None:
@@ -164,7 +141,7 @@ def predictor_record(venv, simulator: str, env_id: str, agent: str) -> dict | No
     file = None
     if os.path.exists(simulator):
         file = simulator
-    elif simulator in ("ials", "marginal"):
+    elif predictor_for(simulator) in ("trained", "marginal"):
         from ials_zoo.influence.ials import pretrained_path
 
         shipped = pretrained_path(env_id, agent)
@@ -250,14 +227,12 @@ class Evaluator:
     """
 
     def __init__(self, env_id: str, agent: str, frame_stack: int, episodes: int,
-                 deterministic: bool, in_subprocess: bool, start_method: str = "forkserver",
-                 options: dict | None = None):
+                 deterministic: bool, in_subprocess: bool, options: dict | None = None):
         self.env_id, self.agent, self.frame_stack = env_id, agent, frame_stack
         self.options = dict(options or {})
         self.episodes, self.deterministic = episodes, deterministic
         self.in_subprocess = in_subprocess
         self._pool = None
-        self._start_method = start_method
 
     def __call__(self, model, checkpoint: Path | None, episodes: int | None = None):
         from ials_zoo.evaluation import SB3Policy, evaluate
@@ -266,27 +241,30 @@ class Evaluator:
         if self.in_subprocess:
             if checkpoint is None:
                 raise ValueError("subprocess evaluation needs a saved checkpoint")
-            if self._pool is None:
-                import concurrent.futures
-                import multiprocessing
-
-                ctx = multiprocessing.get_context(self._start_method)
-                self._pool = concurrent.futures.ProcessPoolExecutor(max_workers=1, mp_context=ctx)
             from ials_zoo.evaluation import _evaluate_worker
+            from ials_zoo.processes import shutdown_pool, spawn_pool
 
-            return self._pool.submit(
-                _evaluate_worker, self.env_id, self.agent, str(checkpoint),
-                {"episodes": n, "deterministic": self.deterministic, **self.options},
-            ).result()
+            if self._pool is None:
+                self._pool = spawn_pool(1)
+            try:
+                return self._pool.submit(
+                    _evaluate_worker, self.env_id, self.agent, str(checkpoint),
+                    {"episodes": n, "deterministic": self.deterministic, **self.options},
+                ).result()
+            except BaseException:
+                shutdown_pool(self._pool, kill=True)
+                self._pool = None
+                raise
         policy = SB3Policy(model, frame_stack=self.frame_stack, deterministic=self.deterministic,
                            name=Path(checkpoint).name if checkpoint else "model",
                            file=str(checkpoint) if checkpoint else None)
         return evaluate(self.env_id, self.agent, policy, episodes=n, **self.options)
 
-    def close(self):
-        if self._pool is not None:
-            self._pool.shutdown()
-            self._pool = None
+    def close(self, kill: bool = False):
+        from ials_zoo.processes import shutdown_pool
+
+        shutdown_pool(self._pool, kill=kill)
+        self._pool = None
 
 
 def curve_point(steps: int, seconds: float, ev) -> dict:

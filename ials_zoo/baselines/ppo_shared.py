@@ -45,8 +45,8 @@ from ials_zoo.baselines.common import (
     arg,
     as_float_box,
     make_ppo,
-    run_cli,
     parse_env_options,
+    run_cli,
 )
 from ials_zoo.baselines.ppo_single import _hidden
 

@@ -51,10 +51,10 @@ from ials_zoo.baselines.common import (
     arg,
     as_float_box,
     make_ppo,
-    run_cli,
     parse_env_options,
     predictor_for,
     predictor_record,
+    run_cli,
     simulator_label,
 )
 

@@ -1,25 +1,26 @@
-"""``ials-zoo collect``: record ``(d_t, u_t)`` data of one agent from its GS (Algorithm 1).
+"""``ials-zoo collect``: record ``(d_t, u_t)`` data from a GS (Algorithm 1).
 
-Example::
+Examples::
 
     ials-zoo collect --env warehouse_v0 --agent robot_20 --steps 50000 --out wh.npz
+    ials-zoo collect --env traffic_grid_v0 --agent all --steps 10000 --out-dir data/
 
-The learning agent follows a uniformly random policy, every other agent is scripted. The
-output is an :class:`ials_zoo.influence.InfluenceDataset` ``.npz`` file (format documented in
-``ials_zoo.influence.dataset``).
+With one ``--agent`` the learner follows a uniformly random policy and every other agent is
+scripted; the output is an :class:`ials_zoo.influence.InfluenceDataset` ``.npz`` file (format
+documented in ``ials_zoo.influence.dataset``). With several agents (or ``all``) one GS run
+records every listed region at once (all of them acting randomly) into
+``--out-dir/<agent>.npz``.
 """
 
 from __future__ import annotations
 
+from ials_zoo.commands import CommandError
 
 
 def _json_dict(text: str) -> dict:
     from ials_zoo.utils import parse_json_object
 
-    try:
-        return parse_json_object(text, "--options")
-    except ValueError as exc:
-        raise SystemExit(f"ials-zoo: {exc}") from None
+    return parse_json_object(text, "--options")
 
 
 def add_collect_arguments(parser, required: bool = True) -> None:
@@ -38,25 +39,69 @@ def add_collect_arguments(parser, required: bool = True) -> None:
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
+def check_collect_arguments(args) -> dict:
+    """Clear errors for the shared arguments before anything runs; returns the GS options."""
+    from ials_zoo.core.domains import get_domain
+    from ials_zoo.utils import check_seed
+
+    if args.steps < 1:
+        raise CommandError(f"--steps must be >= 1, got {args.steps}")
+    if args.workers < 1:
+        raise CommandError(f"--workers must be >= 1, got {args.workers}")
+    check_seed(args.seed, "--seed")
+    options = _json_dict(args.options)
+    if args.env is not None:
+        domain = get_domain(args.env)
+        if args.agent is not None and args.agent != "all":
+            for a in args.agent.split(","):
+                domain.check_agent(a.strip(), **options)
+        probe = domain.agents(**options)[0]
+        domain.region_spec(probe, **options)  # option values
+        env = domain.parallel_env(learners=[probe], **options)  # unknown options
+        env.close()
+    return options
+
+
 def configure(parser):
     add_collect_arguments(parser)
-    parser.add_argument("--out", required=True, help="output .npz file")
+    parser.add_argument("--out", default=None, help="output .npz file (one agent)")
+    parser.add_argument("--out-dir", default=None, help="output folder, one <agent>.npz per agent")
 
 
 def run(args) -> int:
-    from ials_zoo.influence.dataset import collect
+    from pathlib import Path
 
-    options = _json_dict(args.options)
-    try:
-        data = collect(args.env, args.agent, steps=args.steps, seed=args.seed, gs_options=options,
+    from ials_zoo.influence.dataset import collect_all
+    from ials_zoo.utils import check_output_file, remove_stale_temporaries
+
+    options = check_collect_arguments(args)
+    agents = None if args.agent == "all" else [a.strip() for a in args.agent.split(",") if a.strip()]
+    several = agents is None or len(agents) > 1
+    if several and not args.out_dir:
+        raise CommandError("several agents: give --out-dir (one <agent>.npz each)")
+    if not several and not (args.out or args.out_dir):
+        raise CommandError("give --out FILE.npz (or --out-dir)")
+    if args.out:
+        if several:
+            raise CommandError("--out takes one agent's data; use --out-dir for several agents")
+        targets = {agents[0]: check_output_file(args.out, "--out")}
+    else:
+        from ials_zoo.core.domains import get_domain
+
+        names = get_domain(args.env).check_agents(agents, **options)
+        targets = {a: check_output_file(Path(args.out_dir) / f"{a}.npz", "--out-dir") for a in names}
+    for path in targets.values():
+        remove_stale_temporaries(path.parent)
+    data = collect_all(args.env, list(targets), steps=args.steps, seed=args.seed, gs_options=options,
                        progress=not args.no_progress, workers=args.workers)
-    except ValueError as exc:
-        raise SystemExit(f"ials-zoo collect: {exc}") from None
-    data.save(args.out)
-    m = data.metadata
+    for a, path in targets.items():
+        data[a].save(path)
+    first = next(iter(data.values()))
+    m = first.metadata
+    what = next(iter(targets.values())) if len(targets) == 1 else f"{len(targets)} files in {args.out_dir}"
     print(
-        f"wrote {args.out}: {data.n_episodes} episodes x {data.episode_length} steps of "
-        f"{args.env}/{args.agent} ({m['collect_seconds']:.1f} s, "
-        f"{data.n_steps / max(m['collect_seconds'], 1e-9):,.0f} steps/s)"
+        f"wrote {what}: {first.n_episodes} episodes x {first.episode_length} steps of "
+        f"{args.env} ({len(targets)} region{'s' if len(targets) > 1 else ''}; {m['collect_seconds']:.1f} s, "
+        f"{first.n_steps / max(m['collect_seconds'], 1e-9):,.0f} GS steps/s)"
     )
     return 0

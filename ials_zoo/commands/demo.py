@@ -1,97 +1,94 @@
-"""``ials-zoo demo``: run one short episode of a domain's global simulator and summarise it.
+"""``ials-zoo demo``: run one episode of a domain's global simulator and summarise it.
 
-The domain's first default agent (``robot_20`` in the warehouse) acts uniformly at random;
-every other agent follows the domain's scripted controller. Prints what happened (items
-collected, the random agent's return, the scripted agents' mean return) and the speed;
-``--gif`` also saves the episode as an animated GIF.
+One agent (default: the domain's first paper agent) acts uniformly at random; every other
+agent follows the domain's scripted controller. Prints what happened (the random agent's
+return and the domain's own figures, e.g. items collected or vehicles in the network) and the
+speed; ``--gif`` also saves the episode as an animated GIF with the step, the agent's reward
+and return, and a colour legend on every frame.
 """
 
 from __future__ import annotations
 
-import sys
 import time
 
 import numpy as np
 
-from ials_zoo.core.domains import domain_ids, get_domain
+from ials_zoo.commands import CommandError
+from ials_zoo.core.domains import default_domain, domain_ids, get_domain
 
 
 def configure(parser):
-    parser.add_argument("--domain", default="warehouse_v0", choices=domain_ids(),
-                        help="which domain (default: warehouse_v0)")
-    parser.add_argument("--steps", type=int, default=100,
-                        help="episode length in steps (default: 100)")
+    parser.add_argument("--domain", default=None, choices=domain_ids(),
+                        help=f"which domain (default: {default_domain()})")
+    parser.add_argument("--steps", type=int, default=None,
+                        help="episode length in steps (default: the domain's episode length)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
     parser.add_argument("--agent", default=None,
-                        help="the randomly acting agent (default: the domain's first default agent)")
+                        help="the randomly acting agent (default: the domain's first paper agent)")
     parser.add_argument("--gif", default=None, metavar="PATH",
                         help="save the episode as an animated GIF here")
 
 
 def run(args) -> int:
-    if args.steps < 1:
-        print(f"ials-zoo demo: --steps must be >= 1, got {args.steps}", file=sys.stderr)
-        return 2
-    try:
-        domain = get_domain(args.domain)
-    except ImportError as exc:
-        print(f"ials-zoo demo: domain {args.domain!r} is not available here: {exc}", file=sys.stderr)
-        return 1
+    from ials_zoo.utils import check_output_file
+
+    domain = get_domain(args.domain or default_domain())
+    steps = domain.episode_length if args.steps is None else args.steps
+    if steps < 1:
+        raise CommandError(f"--steps must be >= 1, got {steps}")
+    if args.seed < 0:
+        raise CommandError(f"--seed must be >= 0, got {args.seed}")
     agent = args.agent or domain.default_agents[0]
-    if agent not in domain.possible_agents():
-        print(f"ials-zoo demo: unknown agent {agent!r} for {args.domain}", file=sys.stderr)
-        return 2
-    options = {"learners": [agent], "max_cycles": args.steps}
+    try:
+        domain.check_agent(agent)
+    except ValueError as exc:
+        raise CommandError(str(exc)) from None
+    if args.gif:
+        check_output_file(args.gif, "--gif")
+    options = {"learners": [agent], "max_cycles": steps}
     if args.gif:
         options["render_mode"] = "rgb_array"
-    try:
-        env = domain.parallel_env(**options)
-    except (ImportError, RuntimeError, OSError) as exc:
-        print(f"ials-zoo demo: cannot start {args.domain}: {exc}", file=sys.stderr)
-        return 1
+    env = domain.parallel_env(**options)
 
     frames = []
     rng = np.random.default_rng(args.seed)
-    learner_return, steps = 0.0, 0
+    total, t = 0.0, 0
     try:
         env.reset(seed=args.seed)
-        env.action_space(agent).seed(int(rng.integers(2**31)))
+        space = env.action_space(agent)
+        space.seed(int(rng.integers(2**31)))
+        legend = domain.legend
         if args.gif:
-            frames.append(env.render())
+            from ials_zoo.viewer import annotate
+
+            frames.append(annotate(env.render(), f"{domain.env_id}  step 0/{steps}", legend))
         t0 = time.perf_counter()
         render_time = 0.0
         while env.agents:
-            _, rewards, _, _, _ = env.step({agent: env.action_space(agent).sample()})
-            learner_return += float(rewards[agent])
-            steps += 1
+            _, rewards, _, _, _ = env.step({agent: space.sample()})
+            reward = float(rewards[agent])
+            total += reward
+            t += 1
             if args.gif:
                 t1 = time.perf_counter()
-                frames.append(env.render())
+                caption = f"{domain.env_id}  step {t}/{steps}  {agent} reward {reward:.2f}, return {total:.2f}"
+                frames.append(annotate(env.render(), caption, legend))
                 render_time += time.perf_counter() - t1
         elapsed = time.perf_counter() - t0 - render_time
-        summary = _summary(env, agent, learner_return, steps, elapsed)
+        summary = {f"return of {agent} (random)": f"{total:.3f}"}
+        if domain.episode_summary is not None:
+            summary.update(domain.episode_summary(env))
+        summary["GS steps/s"] = f"{t / max(elapsed, 1e-9):,.0f}"
     finally:
         env.close()
 
-    print(f"{args.domain}: {steps} steps, seed {args.seed}, {agent} random, others scripted")
-    for key, value in summary:
-        print(f"  {key:<28} {value}")
+    print(f"{domain.env_id}: {t} steps, seed {args.seed}, {agent} random, others scripted")
+    for key, value in summary.items():
+        print(f"  {key:<30} {value}")
     if args.gif:
-        from ials_zoo.warehouse.render import save_gif
+        from ials_zoo.viewer import save_gif
 
-        save_gif(frames, args.gif)
-        print(f"  {'gif':<28} {args.gif} ({len(frames)} frames)")
+        fps = float(env.metadata.get("render_fps", 5))
+        save_gif(frames, args.gif, fps=fps)
+        print(f"  {'gif':<30} {args.gif} ({len(frames)} frames, {fps:g} per second)")
     return 0
-
-
-def _summary(env, agent, learner_return, steps, elapsed):
-    rows = []
-    if hasattr(env, "items_collected"):
-        rows.append(("items collected (all robots)", env.items_collected))
-    rows.append((f"return of {agent} (random)", f"{learner_return:.3f}"))
-    returns = getattr(env, "episode_returns", None)
-    if returns is not None and len(returns) > 1:
-        scripted = np.delete(np.asarray(returns, dtype=float), env._learner_idx)
-        rows.append(("mean return, scripted", f"{scripted.mean():.3f} (n={len(scripted)})"))
-    rows.append(("GS steps/s", f"{steps / max(elapsed, 1e-9):,.0f}"))
-    return rows

@@ -28,8 +28,14 @@ def _csv(text: str) -> tuple:
 
 
 def configure(parser):
-    from ials_zoo.reproduce.plan import (DEFAULT_BUDGETS, DEFAULT_MEMORY_BUDGET, DEFAULT_SIMULATORS, DOMAINS,
-                                         EXPERIMENTS, Config)
+    from ials_zoo.reproduce.plan import (
+        DEFAULT_BUDGETS,
+        DEFAULT_MEMORY_BUDGET,
+        DEFAULT_SIMULATORS,
+        DOMAINS,
+        EXPERIMENTS,
+        Config,
+    )
 
     c = Config()
     parser.add_argument("--experiments", default=",".join(EXPERIMENTS),

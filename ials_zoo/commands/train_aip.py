@@ -3,7 +3,7 @@
 Examples::
 
     ials-zoo train-aip --data wh.npz --arch gru --out robot_20.pt
-    ials-zoo train-aip --env traffic_grid_v0 --agent 12 --steps 50000 --arch mlp --out i12.pt
+    ials-zoo train-aip --env traffic_grid_v0 --agent tls_12 --steps 50000 --arch mlp --out t12.pt
 
 Without ``--data`` it first collects ``--steps`` steps (Algorithm 1). Prints the train/test
 cross-entropy (nats, mean over influence sources) of the trained AIP against the untrained
@@ -14,8 +14,10 @@ collection/training wall-clock times. ``--report`` also writes them as JSON.
 from __future__ import annotations
 
 import json
+import math
 
-from ials_zoo.commands.collect import _json_dict, add_collect_arguments
+from ials_zoo.commands import CommandError
+from ials_zoo.commands.collect import add_collect_arguments, check_collect_arguments
 
 
 def configure(parser):
@@ -27,11 +29,24 @@ def configure(parser):
                         help="d-set the AIP reads: the paper's minimal d-set or the full observation")
     parser.add_argument("--epochs", type=int, default=None)
     parser.add_argument("--lr", type=float, default=None)
+    parser.add_argument("--hidden", type=int, default=None, help="hidden units of the AIP network")
     parser.add_argument("--batch-size", type=int, default=None,
                         help="episodes per batch (gru) or steps per batch (mlp)")
     parser.add_argument("--save-data", default=None, help="also save the collected data here")
     parser.add_argument("--report", default=None, help="write the training report as JSON here")
     parser.add_argument("--out", required=True, help="output predictor file (.pt)")
+
+
+def check_training_arguments(args) -> None:
+    if args.epochs is not None and args.epochs < 1:
+        raise CommandError(f"--epochs must be >= 1 (0 epochs would label an untrained network 'trained'), "
+                           f"got {args.epochs}")
+    if args.lr is not None and not (math.isfinite(args.lr) and args.lr > 0):
+        raise CommandError(f"--lr must be a finite number > 0, got {args.lr}")
+    if args.batch_size is not None and args.batch_size < 1:
+        raise CommandError(f"--batch-size must be >= 1, got {args.batch_size}")
+    if args.hidden is not None and args.hidden < 1:
+        raise CommandError(f"--hidden must be >= 1, got {args.hidden}")
 
 
 def run(args) -> int:
@@ -41,25 +56,28 @@ def run(args) -> int:
     from ials_zoo.influence.dataset import InfluenceDataset, collect
     from ials_zoo.influence.predictors import save_predictor
     from ials_zoo.influence.train import format_report, train_predictor
-    from ials_zoo.utils import atomic_write_text
+    from ials_zoo.utils import atomic_write_text, check_output_file
 
+    check_training_arguments(args)
+    check_output_file(args.out, "--out")
+    for path, option in ((args.report, "--report"), (args.save_data, "--save-data")):
+        if path:
+            check_output_file(path, option)
     torch.set_num_threads(1)
     progress = not args.no_progress
     if args.data:
         data = InfluenceDataset.load(args.data, env_id=args.env, agent=args.agent)
     else:
         if not (args.env and args.agent):
-            raise SystemExit("ials-zoo train-aip: give --data FILE, or --env and --agent to collect data")
-        try:
-            data = collect(args.env, args.agent, steps=args.steps, seed=args.seed,
-                           gs_options=_json_dict(args.options), progress=progress, workers=args.workers)
-        except ValueError as exc:
-            raise SystemExit(f"ials-zoo train-aip: {exc}") from None
+            raise CommandError("give --data FILE, or --env and --agent to collect data")
+        options = check_collect_arguments(args)
+        data = collect(args.env, args.agent, steps=args.steps, seed=args.seed, gs_options=options,
+                       progress=progress, workers=args.workers)
         if args.save_data:
             data.save(args.save_data)
     arch = args.arch or get_domain(data.region.domain).default_predictor
     pred, report = train_predictor(data, arch=arch, dset_kind=args.dset_kind, epochs=args.epochs,
-                                   seed=args.seed, progress=progress, lr=args.lr,
+                                   seed=args.seed, progress=progress, lr=args.lr, hidden=args.hidden,
                                    batch_size=args.batch_size)
     save_predictor(pred, args.out)
     if args.report:

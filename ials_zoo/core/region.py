@@ -105,7 +105,7 @@ class RegionSpec:
         }
 
     @classmethod
-    def from_dict(cls, data: dict) -> "RegionSpec":
+    def from_dict(cls, data: dict) -> RegionSpec:
         return cls(
             domain=data["domain"],
             agent=data["agent"],

@@ -23,17 +23,18 @@ collection wall-clock seconds, creation time).
 
 from __future__ import annotations
 
+import copy
 import json
 import time
 import zipfile
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
 from ials_zoo.core.region import DSET_KINDS, INFLUENCE_KEY, RegionSpec, dset_key
-from ials_zoo.influence.predictors import _readable
+from ials_zoo.utils import check_seed
 
 FORMAT = "ials_zoo.influence_dataset"
 FORMAT_VERSION = 1
@@ -79,7 +80,7 @@ class InfluenceDataset:
     def n_steps(self) -> int:
         return self.n_episodes * self.episode_length
 
-    def subset(self, episodes) -> "InfluenceDataset":
+    def subset(self, episodes) -> InfluenceDataset:
         """The episodes ``episodes`` (index array or slice) as a new data set."""
         return InfluenceDataset(
             self.region,
@@ -126,11 +127,10 @@ class InfluenceDataset:
                     influences=self.influences,
                     metadata=np.array(json.dumps(meta, sort_keys=True)),
                 )
-            _readable(tmp)
         return path
 
     @classmethod
-    def load(cls, path, env_id: str | None = None, agent: str | None = None) -> "InfluenceDataset":
+    def load(cls, path, env_id: str | None = None, agent: str | None = None) -> InfluenceDataset:
         """Read a data set written by :meth:`save`; ``env_id``/``agent`` are checked if given."""
         path = Path(path)
         if not path.is_file():
@@ -168,7 +168,7 @@ def as_policy(policy, action_space, seed: int) -> tuple[Callable, str]:
     an SB3-style ``predict(obs)`` is sampled stochastically; any other callable is used as is.
     """
     if policy is None:
-        space = action_space
+        space = copy.deepcopy(action_space)
         space.seed(seed)
         return (lambda obs: space.sample()), "uniform_random"
     if callable(policy):
@@ -176,6 +176,38 @@ def as_policy(policy, action_space, seed: int) -> tuple[Callable, str]:
     if callable(getattr(policy, "predict", None)):
         return (lambda obs: policy.predict(obs, deterministic=False)[0]), type(policy).__name__
     raise TypeError(f"policy must be None, a callable obs -> action, or have predict(); got {policy!r}")
+
+
+class _JointActor:
+    """``observations -> actions`` of the collected agents, from any accepted policy form."""
+
+    def __init__(self, policy, agents, action_space_of, seed):
+        self.joint = policy if callable(getattr(policy, "joint_act", None)) else None
+        if self.joint is not None:
+            self.name = getattr(policy, "name", type(policy).__name__)
+            return
+        if isinstance(policy, dict):
+            missing = [a for a in agents if a not in policy]
+            if missing:
+                raise ValueError(f"the policy dict has no entry for {missing}")
+            per = {a: policy[a] for a in agents}
+        else:
+            per = dict.fromkeys(agents, policy)
+        seeds = np.random.SeedSequence(int(seed)).generate_state(len(agents)) if len(agents) > 1 else [seed]
+        self.acts, names = {}, set()
+        for a, s in zip(agents, seeds):
+            self.acts[a], name = as_policy(per[a], action_space_of(a), int(s))
+            names.add(name)
+        self.name = names.pop() if len(names) == 1 else "mixed"
+
+    def reset(self):
+        if self.joint is not None and callable(getattr(self.joint, "reset", None)):
+            self.joint.reset()
+
+    def __call__(self, obs: dict) -> dict:
+        if self.joint is not None:
+            return self.joint.joint_act(obs)
+        return {a: act(obs[a]) for a, act in self.acts.items()}
 
 
 def collect(
@@ -188,14 +220,34 @@ def collect(
     progress: bool = True,
     workers: int = 1,
 ) -> InfluenceDataset:
-    """Algorithm 1: record ``(d_t, u_t)`` of ``agent`` in the GS of ``env_id``.
+    """Algorithm 1: record ``(d_t, u_t)`` of ``agent`` in the GS of ``env_id``, every other
+    agent scripted. See :func:`collect_all` for the arguments."""
+    return collect_all(env_id, [agent], steps, policy, seed, gs_options, progress, workers)[agent]
+
+
+def collect_all(
+    env_id: str,
+    agents=None,
+    steps: int = 50_000,
+    policy=None,
+    seed: int = 0,
+    gs_options: dict | None = None,
+    progress: bool = True,
+    workers: int = 1,
+) -> dict[str, InfluenceDataset]:
+    """Algorithm 1 for several regions at once: one GS run in which ``agents`` learn (are
+    driven by ``policy``) and every other agent is scripted; the ``(d_t, u_t)`` of every
+    learner's region is recorded at every step.
 
     Args:
         env_id: a domain id (``ials_zoo.core.domain_ids()``).
-        agent: the learning agent whose region is recorded; every other agent is scripted.
-        steps: number of steps, rounded up to whole episodes.
-        policy: ``obs -> action`` for ``agent`` (``None``: uniform random).
-        seed: seeds the first ``reset`` and the random policy (later episodes continue the
+        agents: the learning agents whose regions are recorded (None: every agent).
+        steps: GS steps, rounded up to whole episodes (each step gives one pair per agent).
+        policy: ``None`` (uniform random actions), a callable ``obs -> action`` or an object
+            with SB3's ``predict`` (for every agent), a dict ``{agent: one of those}``, or a
+            joint policy: an object with ``joint_act(observations) -> actions`` (dicts by
+            agent) and optionally ``reset()``, called at every episode start.
+        seed: seeds the first ``reset`` and the random policies (later episodes continue the
             GS's random stream, so the whole collection is reproducible).
         gs_options: keyword arguments for the domain's ``parallel_env``.
         progress: show a tqdm progress bar.
@@ -205,6 +257,9 @@ def collect(
             policy must then be picklable (``None`` is). ``collect_seconds`` is the wall-clock
             of the whole collection. Worth it for SUMO (one simulation per process), not for
             the numpy warehouse, whose collection is shorter than starting a process.
+
+    Returns:
+        ``{agent: InfluenceDataset}``.
     """
     from ials_zoo.core.domains import get_domain
 
@@ -213,87 +268,89 @@ def collect(
         raise ValueError(f"steps must be >= 1, got {steps}")
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise ValueError(f"workers must be a positive int, got {workers!r}")
-    if workers > 1:
-        return _collect_in_processes(env_id, agent, steps, policy, seed, gs_options, progress, workers)
+    check_seed(seed)
     domain = get_domain(env_id)
     gs_options = dict(gs_options or {})
     if "learners" in gs_options:
-        raise ValueError("gs_options must not set 'learners': the collected agent is the learner")
-    agents = domain.possible_agents(**_region_options(domain, gs_options))
-    if agent not in agents:
-        raise ValueError(f"unknown agent {agent!r} for {env_id}; expected one of {_short(agents)}")
+        raise ValueError("gs_options must not set 'learners': the collected agents are the learners")
+    agents = domain.check_agents(agents, **gs_options)
+    if workers > 1:
+        return _collect_in_processes(env_id, agents, steps, policy, seed, gs_options, progress, workers)
 
     t0 = time.perf_counter()
-    env = domain.parallel_env(learners=[agent], **gs_options)
+    env = domain.parallel_env(learners=agents, **gs_options)
     try:
-        act, policy_name = as_policy(policy, env.action_space(agent), seed)
-        region = env.region_spec(agent) if hasattr(env, "region_spec") else domain.region_spec(agent)
+        actor = _JointActor(policy, agents, env.action_space, seed)
         keys = {kind: dset_key(kind) for kind in DSET_KINDS}
-        episodes_d = {k: [] for k in DSET_KINDS}
-        episodes_u = []
+        data_d = {a: {k: [] for k in DSET_KINDS} for a in agents}
+        data_u = {a: [] for a in agents}
         T = None
         bar = None
         if progress:
             from tqdm.auto import tqdm
 
-            bar = tqdm(total=steps, desc=f"collect {env_id}/{agent}", unit="step")
+            what = agents[0] if len(agents) == 1 else f"{len(agents)} agents"
+            bar = tqdm(total=steps, desc=f"collect {env_id}/{what}", unit="step")
         total = 0
         ep = 0
         while total < steps:
             obs, infos = env.reset(seed=seed if ep == 0 else None)
-            ep_d = {k: [np.asarray(infos[agent][keys[k]], dtype=np.uint8)] for k in DSET_KINDS}
-            ep_u = []
+            actor.reset()
+            ep_d = {a: {k: [np.asarray(infos[a][keys[k]], dtype=np.uint8)] for k in DSET_KINDS} for a in agents}
+            ep_u = {a: [] for a in agents}
+            length = 0
             while True:
-                actions = {a: (act(obs[a]) if a == agent else None) for a in env.agents}
-                actions = {a: v for a, v in actions.items() if v is not None}
-                obs, _, terms, truncs, infos = env.step(actions)
-                info = infos[agent]
-                ep_u.append(np.asarray(info[INFLUENCE_KEY], dtype=np.int64))
-                done = terms.get(agent, False) or truncs.get(agent, False) or agent not in env.agents
-                if done:
+                obs, _, terms, truncs, infos = env.step(actor(obs))
+                length += 1
+                for a in agents:
+                    ep_u[a].append(np.asarray(infos[a][INFLUENCE_KEY], dtype=np.int64))
+                if any(terms.values()):
+                    raise RuntimeError(f"{env_id}: an episode terminated; the zoo's episodes only truncate")
+                if all(truncs.values()) or not env.agents:
                     break
-                for k in DSET_KINDS:
-                    ep_d[k].append(np.asarray(info[keys[k]], dtype=np.uint8))
-                if T is not None and len(ep_u) > T:
+                for a in agents:
+                    for k in DSET_KINDS:
+                        ep_d[a][k].append(np.asarray(infos[a][keys[k]], dtype=np.uint8))
+                if T is not None and length > T:
                     raise RuntimeError(f"{env_id}: episode {ep} is longer than the first ({T} steps)")
-            if any(terms.get(a, False) for a in terms):
-                raise RuntimeError(f"{env_id}: an episode terminated; the zoo's episodes only truncate")
             if T is None:
-                T = len(ep_u)
-            elif len(ep_u) != T:
-                raise RuntimeError(f"{env_id}: episode {ep} has {len(ep_u)} steps, the first had {T}")
-            for k in DSET_KINDS:
-                episodes_d[k].append(np.stack(ep_d[k]))
-            episodes_u.append(np.stack(ep_u))
+                T = length
+            elif length != T:
+                raise RuntimeError(f"{env_id}: episode {ep} has {length} steps, the first had {T}")
+            for a in agents:
+                for k in DSET_KINDS:
+                    data_d[a][k].append(np.stack(ep_d[a][k]))
+                data_u[a].append(np.stack(ep_u[a]))
             total += T
             ep += 1
             if bar is not None:
                 bar.update(T)
         if bar is not None:
             bar.close()
+        regions = {a: env.region_spec(a) for a in agents}
     finally:
         env.close()
     seconds = time.perf_counter() - t0
     from ials_zoo import __version__
 
-    meta = {
-        "env_id": env_id,
-        "agent": agent,
-        "gs_options": gs_options,
-        "steps": total,
-        "steps_requested": steps,
-        "seed": int(seed),
-        "policy": policy_name,
-        "package_version": __version__,
-        "collect_seconds": round(seconds, 3),
-        "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-    }
-    return InfluenceDataset(
-        region,
-        {k: np.stack(v) for k, v in episodes_d.items()},
-        np.stack(episodes_u),
-        meta,
-    )
+    out = {}
+    for a in agents:
+        meta = {
+            "env_id": env_id,
+            "agent": a,
+            "agents": list(agents),
+            "gs_options": gs_options,
+            "steps": total,
+            "steps_requested": steps,
+            "seed": int(seed),
+            "policy": actor.name,
+            "package_version": __version__,
+            "collect_seconds": round(seconds, 3),
+            "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        }
+        out[a] = InfluenceDataset(regions[a], {k: np.stack(v) for k, v in data_d[a].items()},
+                                  np.stack(data_u[a]), meta)
+    return out
 
 
 def worker_seeds(seed: int, workers: int) -> list[int]:
@@ -301,20 +358,21 @@ def worker_seeds(seed: int, workers: int) -> list[int]:
     is plain :func:`collect`), independent streams spawned from ``seed`` otherwise."""
     if workers == 1:
         return [int(seed)]
-    return [int(s.generate_state(1)[0]) for s in np.random.SeedSequence(int(seed)).spawn(workers)]
+    # below 2**31 - 1: a seed every domain takes as it is (SUMO's range)
+    return [int(s.generate_state(1)[0]) % (2**31 - 1) for s in np.random.SeedSequence(int(seed)).spawn(workers)]
 
 
-def _collect_share(kwargs: dict) -> "InfluenceDataset":
+def _collect_share(kwargs: dict) -> dict[str, InfluenceDataset]:
     import torch
 
     torch.set_num_threads(1)
-    return collect(**kwargs)
+    return collect_all(**kwargs)
 
 
-def _collect_in_processes(env_id, agent, steps, policy, seed, gs_options, progress, workers):
-    import multiprocessing
+def _collect_in_processes(env_id, agents, steps, policy, seed, gs_options, progress, workers):
     import pickle
-    from concurrent.futures import ProcessPoolExecutor
+
+    from ials_zoo.processes import shutdown_pool, spawn_pool
 
     try:
         pickle.dumps(policy)
@@ -324,52 +382,43 @@ def _collect_in_processes(env_id, agent, steps, policy, seed, gs_options, progre
     t0 = time.perf_counter()
     share = -(-steps // workers)
     seeds = worker_seeds(seed, workers)
-    jobs = [dict(env_id=env_id, agent=agent, steps=share, policy=policy, seed=s, gs_options=gs_options,
+    jobs = [dict(env_id=env_id, agents=agents, steps=share, policy=policy, seed=s, gs_options=gs_options,
                  progress=False) for s in seeds]
     bar = None
     if progress:
         from tqdm.auto import tqdm
 
-        bar = tqdm(total=workers, desc=f"collect {env_id}/{agent} ({workers} processes)", unit="share")
-    # spawn: a fresh interpreter per worker, so no libsumo simulation is inherited by fork.
-    with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+        what = agents[0] if len(agents) == 1 else f"{len(agents)} agents"
+        bar = tqdm(total=workers, desc=f"collect {env_id}/{what} ({workers} processes)", unit="share")
+    # spawn: a fresh interpreter per worker, so no libsumo simulation is inherited by fork;
+    # the workers die with this process however it ends.
+    pool = spawn_pool(workers)
+    ok = False
+    try:
         futures = [pool.submit(_collect_share, j) for j in jobs]
         parts = []
         for f in futures:
             parts.append(f.result())
             if bar is not None:
                 bar.update(1)
-    if bar is not None:
-        bar.close()
+        ok = True
+    finally:
+        shutdown_pool(pool, kill=not ok)
+        if bar is not None:
+            bar.close()
     seconds = time.perf_counter() - t0
-    first = parts[0]
-    meta = dict(first.metadata, steps=sum(p.n_steps for p in parts), steps_requested=steps, seed=int(seed),
-                workers=workers, worker_seeds=seeds, collect_seconds=round(seconds, 3))
-    return InfluenceDataset(
-        first.region,
-        {k: np.concatenate([p.dsets[k] for p in parts]) for k in first.dsets},
-        np.concatenate([p.influences for p in parts]),
-        meta,
-    )
+    out = {}
+    for a in agents:
+        first = parts[0][a]
+        meta = dict(first.metadata, steps=sum(p[a].n_steps for p in parts), steps_requested=steps,
+                    seed=int(seed), workers=workers, worker_seeds=seeds, collect_seconds=round(seconds, 3))
+        out[a] = InfluenceDataset(
+            first.region,
+            {k: np.concatenate([p[a].dsets[k] for p in parts]) for k in first.dsets},
+            np.concatenate([p[a].influences for p in parts]),
+            meta,
+        )
+    return out
 
 
-def _region_options(domain, options: dict) -> dict:
-    """The options ``possible_agents`` accepts (it may not take every GS option)."""
-    import inspect
-
-    try:
-        sig = inspect.signature(domain.possible_agents)
-    except (TypeError, ValueError):
-        return {}
-    if any(p.kind is p.VAR_KEYWORD for p in sig.parameters.values()):
-        return dict(options)
-    return {k: v for k, v in options.items() if k in sig.parameters}
-
-
-def _short(items, n=8):
-    items = list(items)
-    s = ", ".join(map(str, items[:n]))
-    return s + (f", ... ({len(items)} in all)" if len(items) > n else "")
-
-
-__all__ = ["InfluenceDataset", "collect"]
+__all__ = ["InfluenceDataset", "collect", "collect_all"]

@@ -8,26 +8,12 @@ advances with ``(action, u_t)``.
 * :class:`IALSVecEnv` -- ``n_envs`` IALS copies as a stable-baselines3 ``VecEnv`` that advances
   every copy with one batched LS step and one batched AIP call;
 * :func:`make_ials` / :func:`make_ials_vec_env` -- build them from ``(env_id, agent)`` and a
-  predictor *spec*:
-
-  - an :class:`InfluencePredictor` object, or a path to a predictor file;
-  - ``"trained"``: the AIP shipped with the package for the paper's agents
-    (``ials_zoo/influence/pretrained/<env_id>__<agent>.pt``), else one cached under
-    ``$IALS_ZOO_CACHE/aip/`` (default ``~/.cache/ials_zoo/aip/``), else collected and trained
-    on demand (Algorithm 1, 50,000 steps, with progress bars) and cached;
-  - ``"trained:gru"`` / ``"trained:mlp"``: the same with a given architecture (memory /
-    no-memory AIP, paper §5.4); the shipped file is used only if it has that architecture;
-  - ``"untrained"`` (alias ``"random-init"``): the domain's AIP network at a random
-    initialisation (seeded) -- the paper's untrained-IALS (its cross-entropy, 1.46 in the
-    warehouse, is the paper's "untrained" bar);
-  - ``"uniform"``: fixed per-class probabilities, the domain's
-    ``Domain.extra["uniform_influence"]`` (SPEC §3: 0.25 per class in the warehouse, 0.1 per
-    lane in traffic -- in traffic that equals ``"fixed:0.1"``), or uniform over classes when
-    the domain sets none;
-  - ``"fixed:P"``: F-IALS, each source "active" with probability ``P`` (see
-    :class:`FixedPredictor`; the inactive class is ``Domain.extra["null_influence"]``,
-    by default 0 for bits and the last class for categorical sources);
-  - ``"marginal"``: F-IALS with the empirical marginal of the trained AIP's data.
+  predictor: an :class:`InfluencePredictor` object, or a predictor spec
+  (:mod:`ials_zoo.influence.specs`: ``trained``, ``trained:gru|mlp``, ``untrained``,
+  ``uniform``, ``fixed:P``, ``marginal`` or a ``.pt`` file). ``trained`` is the AIP shipped
+  with the package for the paper's agents (``ials_zoo/influence/pretrained/``), else one
+  cached under ``$IALS_ZOO_CACHE/aip/`` (default ``~/.cache/ials_zoo/aip/``), else collected
+  and trained on demand (Algorithm 1, 50,000 steps, with progress bars) and cached.
 
 Episodes end only by truncation after the LS's ``max_cycles`` steps.
 """
@@ -54,6 +40,8 @@ from ials_zoo.influence.predictors import (
     random_init_predictor,
     save_predictor,
 )
+from ials_zoo.influence.specs import parse_predictor
+from ials_zoo.utils import check_seed
 
 PRETRAINED_DIR = Path(__file__).resolve().parent / "pretrained"
 DEFAULT_COLLECT_STEPS = 50_000
@@ -79,8 +67,8 @@ class IALSEnv(gym.Env):
     metadata = {"render_modes": []}
 
     def __init__(self, local_simulator, predictor: InfluencePredictor, seed: int | None = None):
-        if getattr(local_simulator, "n_envs", 1) != 1:
-            raise ValueError(f"IALSEnv needs a local simulator with n_envs=1, got {local_simulator.n_envs}")
+        if local_simulator.n_copies != 1:
+            raise ValueError(f"IALSEnv needs a local simulator with one copy, got {local_simulator.n_copies}")
         _check_compatible(local_simulator, predictor)
         self.ls = local_simulator
         self.predictor = predictor
@@ -90,21 +78,25 @@ class IALSEnv(gym.Env):
         self.region = local_simulator.region
         self.render_mode = None
         self._kind = predictor.dset_kind
-        self._seed = seed
+        self._seed = check_seed(seed)
         self._t = 0
         self._d = None
         self._actions = np.zeros(1, dtype=np.int64)
-        # A local simulator with a scalar single-copy path (WarehouseLocalSimulator) is
-        # stepped through it: same results, without building batched arrays per step.
-        self._fast = bool(getattr(local_simulator, "supports_step_single", False))
+        # A local simulator with a single-copy fast path is stepped through it: same
+        # results, without building batched arrays per step.
+        self._fast = bool(local_simulator.supports_step_single)
         if self._fast:
             self._step_single = local_simulator.step_single
             self._observe_single = local_simulator.observe_single
             self._n_actions = int(self.action_space.n)
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        if seed is None and self._seed is not None:
-            seed, self._seed = self._seed, None
+        # Gymnasium's semantics: the constructor's seed stands for the first reset's; any
+        # reset consumes it, so an explicit reset(seed=s) is never followed by a replay of it.
+        seed = check_seed(seed)
+        if seed is None:
+            seed = self._seed
+        self._seed = None
         super().reset(seed=seed)
         # Separate streams for the LS and the AIP, both determined by ``seed``.
         ls_seed = None if seed is None else int(np.random.SeedSequence(seed).generate_state(1)[0])
@@ -205,10 +197,10 @@ class IALSVecEnv(_VecEnvBase):
         self.region = local_simulator.region
         self.max_cycles = int(local_simulator.max_cycles)
         self.render_mode = None
-        n = int(local_simulator.n_envs)
+        n = int(local_simulator.n_copies)
         super().__init__(n, local_simulator.observation_space, local_simulator.action_space)
         self._kind = predictor.dset_kind
-        self._rng = np.random.default_rng(seed)
+        self._rng = np.random.default_rng(check_seed(seed))
         self._next_seed = seed
         self._t = 0
         self._d = None
@@ -372,7 +364,8 @@ def resolve_predictor(
     seed: int | None = None,
     options: dict | None = None,
 ) -> InfluencePredictor:
-    """Turn a predictor spec (object, path or name, see the module docstring) into a predictor."""
+    """Turn a predictor (object, path or spec, see :mod:`ials_zoo.influence.specs`) into a
+    predictor for ``agent``."""
     from ials_zoo.core.domains import get_domain
 
     domain = get_domain(env_id)
@@ -380,50 +373,31 @@ def resolve_predictor(
     if isinstance(predictor, InfluencePredictor):
         # A private copy: the recurrent state must not be shared between envs.
         pred = copy.deepcopy(predictor)
-    elif isinstance(predictor, (os.PathLike,)) or (
-        isinstance(predictor, str) and (predictor.endswith(".pt") or os.sep in predictor)
-    ):
-        pred = load_predictor(predictor, env_id=env_id, agent=agent)
-    elif isinstance(predictor, str):
+    elif isinstance(predictor, (str, os.PathLike)):
+        spec = parse_predictor(predictor)
         kind = check_dset_kind(dset_kind or "dset")
-        region = domain.region_spec(agent, **options)
-        name = predictor.strip().lower()
-        if name == "trained" or name.startswith("trained:"):
-            arch = name.split(":", 1)[1] if ":" in name else None
-            if arch is not None and arch not in ("gru", "mlp"):
-                raise ValueError(f"bad predictor {predictor!r}; expected 'trained:gru' or 'trained:mlp'")
-            pred = trained_predictor(env_id, agent, kind, arch=arch, options=options)
-        elif name == "uniform":
-            probs = domain.extra.get("uniform_influence")
-            pred = UniformPredictor(region, dset_kind=kind, probs=probs)
-        elif name in ("untrained", "random-init", "random_init"):
-            pred = random_init_predictor(
-                region, arch=domain.default_predictor, dset_kind=kind, seed=0 if seed is None else seed
-            )
-        elif name.startswith("fixed:"):
-            try:
-                p = float(name.split(":", 1)[1])
-            except ValueError:
-                raise ValueError(f"bad fixed predictor {predictor!r}; expected 'fixed:P' with P a number in [0, 1]") from None
-            if not 0.0 <= p <= 1.0:
-                raise ValueError(f"bad fixed predictor {predictor!r}: P must be in [0, 1]")
-            pred = FixedPredictor(region, p, dset_kind=kind, null_class=_null_class(domain, region))
-        elif name == "marginal":
-            trained = trained_predictor(env_id, agent, kind, options=options)
-            marg = trained.metadata.get("marginal")
-            if marg is None:
-                raise ValueError(
-                    f"the trained AIP of {env_id}/{agent} carries no data marginal; build a "
-                    "MarginalPredictor.fit(dataset) from collected data instead"
-                )
-            pred = MarginalPredictor(region, marg, dset_kind=kind, metadata={"from": "trained AIP data"})
+        if spec.kind == "file":
+            pred = load_predictor(spec.path, env_id=env_id, agent=agent)
         else:
-            raise ValueError(
-                f"unknown influence predictor {predictor!r}; expected 'trained', 'trained:gru', "
-                "'trained:mlp', 'untrained', "
-                "'uniform', 'random-init', 'fixed:P', 'marginal', a path to a .pt file, or an "
-                "InfluencePredictor"
-            )
+            region = domain.region_spec(agent, **options)
+            if spec.kind == "trained":
+                pred = trained_predictor(env_id, agent, kind, arch=spec.arch, options=options)
+            elif spec.kind == "uniform":
+                pred = UniformPredictor(region, dset_kind=kind, probs=domain.untrained_probs)
+            elif spec.kind == "untrained":
+                pred = random_init_predictor(region, arch=domain.default_predictor, dset_kind=kind,
+                                             seed=0 if seed is None else seed)
+            elif spec.kind == "fixed":
+                pred = FixedPredictor(region, spec.p, dset_kind=kind, null_class=domain.null_influence)
+            else:  # marginal
+                trained = trained_predictor(env_id, agent, kind, options=options)
+                marg = trained.metadata.get("marginal")
+                if marg is None:
+                    raise ValueError(
+                        f"the trained AIP of {env_id}/{agent} carries no data marginal; build a "
+                        "MarginalPredictor.fit(dataset) from collected data instead"
+                    )
+                pred = MarginalPredictor(region, marg, dset_kind=kind, metadata={"from": "trained AIP data"})
     else:
         raise TypeError(
             f"predictor must be a name, a path or an InfluencePredictor, got {type(predictor).__name__}"
@@ -436,33 +410,6 @@ def resolve_predictor(
     if dset_kind is not None and pred.dset_kind != check_dset_kind(dset_kind):
         raise ValueError(f"the influence predictor reads the {pred.dset_kind!r} d-set, not {dset_kind!r}")
     return pred
-
-
-def _null_class(domain, region) -> int:
-    """The "no influence" class of the domain's sources: ``Domain.extra["null_influence"]``,
-    else the zoo's convention -- class 0 for bits (1 = something comes in), the last class
-    for categorical sources (classes 0..K-2 say where the influence acts, K-1 = nowhere;
-    the warehouse's "neighbour on none of the shared cells" is class 3)."""
-    null = domain.extra.get("null_influence")
-    if null is not None:
-        return int(null)
-    ks = set(region.influence_classes)
-    if ks == {2}:
-        return 0
-    if len(ks) == 1:
-        return ks.pop() - 1
-    raise ValueError(
-        f"'fixed:P' needs the 'no influence' class of the sources of {region.domain} (classes "
-        f"{region.influence_classes}); declare it in Domain.extra['null_influence']"
-    )
-
-
-def _check_agent(domain, agent, options):
-    from ials_zoo.influence.dataset import _region_options, _short
-
-    agents = domain.possible_agents(**_region_options(domain, options))
-    if agent not in agents:
-        raise ValueError(f"unknown agent {agent!r} for {domain.env_id}; expected one of {_short(agents)}")
 
 
 def make_ials(
@@ -490,7 +437,7 @@ def make_ials(
     if render_mode is not None:
         raise ValueError(f"IALS envs do not render; got render_mode={render_mode!r}")
     domain = get_domain(env_id)
-    _check_agent(domain, agent, options)
+    domain.check_agent(agent, **options)
     pred = resolve_predictor(predictor, env_id, agent, dset_kind, seed, options)
     ls = domain.local_simulator(agent, n_envs=1, **options)
     try:
@@ -529,7 +476,7 @@ def make_ials_vec_env(
     if isinstance(n_envs, bool) or not isinstance(n_envs, (int, np.integer)) or n_envs < 1:
         raise ValueError(f"n_envs must be a positive int, got {n_envs!r}")
     domain = get_domain(env_id)
-    _check_agent(domain, agent, options)
+    domain.check_agent(agent, **options)
     pred = resolve_predictor(predictor, env_id, agent, dset_kind, seed, options)
     ls = domain.local_simulator(agent, n_envs=int(n_envs), **options)
     try:

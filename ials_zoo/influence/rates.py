@@ -1,14 +1,8 @@
 """How much influence an IALS injects: mean influence value per source and step, and the mean
 observation, under a uniform random policy (what ``leaderboard/writeup.md`` quotes for the
-untrained vs trained traffic AIPs).
-
-    python -m ials_zoo.influence.rates --env traffic_grid_v0 --agent tls_12 \\
-        --predictors untrained,fixed:0.1,trained --episodes 3
-"""
+untrained vs trained traffic AIPs); ``ials-zoo rates``."""
 
 from __future__ import annotations
-
-import argparse
 
 import numpy as np
 
@@ -36,21 +30,3 @@ def influence_rates(env_id: str, agent: str, predictor, episodes: int = 3, seed:
         env.close()
     return {"predictor": str(predictor), "influence_mean": float(np.mean(influence)),
             "observation_mean": float(np.mean(obs_mean)), "steps": len(influence)}
-
-
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--env", default="traffic_grid_v0")
-    parser.add_argument("--agent", default="tls_12")
-    parser.add_argument("--predictors", default="untrained,fixed:0.1,trained")
-    parser.add_argument("--episodes", type=int, default=3)
-    args = parser.parse_args(argv)
-    for pred in [p.strip() for p in args.predictors.split(",") if p.strip()]:
-        r = influence_rates(args.env, args.agent, pred, args.episodes)
-        print(f"{pred:<24} influence per source and step {r['influence_mean']:.3f}   "
-              f"observation mean {r['observation_mean']:.3f}   ({r['steps']} steps)")
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -57,7 +57,7 @@ def _torch_modules():
                 self.out.bias.copy_(torch.from_numpy(a["b_out"]))
 
         def to_numpy(self):
-            g = lambda t: t.detach().cpu().numpy().astype(np.float32)  # noqa: E731
+            g = lambda t: t.detach().cpu().numpy().astype(np.float32)
             return {
                 "w1": g(self.lin1.weight).T.copy(),
                 "b1": g(self.lin1.bias),
@@ -85,7 +85,7 @@ def _torch_modules():
                 self.out.bias.copy_(torch.from_numpy(a["b_out"]))
 
         def to_numpy(self):
-            g = lambda t: t.detach().cpu().numpy().astype(np.float32)  # noqa: E731
+            g = lambda t: t.detach().cpu().numpy().astype(np.float32)
             return {
                 "w_ih": g(self.gru.weight_ih_l0).T.copy(),
                 "w_hh": g(self.gru.weight_hh_l0).T.copy(),
@@ -132,7 +132,7 @@ def train_predictor(
         * ``untrained`` -- the same network at its random initialisation (seed ``seed``):
           the paper's untrained AIP,
         * ``uniform`` -- the domain's fixed class probabilities
-          (``Domain.extra["uniform_influence"]``, else uniform over classes),
+          (``Domain.untrained_probs``, else uniform over classes),
         * ``marginal`` -- the empirical marginal ``P(u)`` of the training split;
 
         plus per-source test cross-entropies of the trained predictor.
@@ -261,13 +261,13 @@ def _train(dataset, arch, dset_kind, epochs, seed, progress, lr, hidden, batch_s
 
 
 def untrained_probs(region):
-    """The class probabilities of the domain's untrained AIP (``Domain.extra["uniform_influence"]``),
+    """The class probabilities of the domain's ``uniform`` AIP (``Domain.untrained_probs``),
     or ``None`` (uniform over classes) for a domain that sets none or is not registered."""
     from ials_zoo.core.domains import get_domain
 
     try:
-        return get_domain(region.domain).extra.get("uniform_influence")
-    except (ValueError, ImportError):
+        return get_domain(region.domain).untrained_probs
+    except ValueError:
         return None
 
 

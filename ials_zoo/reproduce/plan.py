@@ -68,7 +68,7 @@ class Config:
     dset_offpolicy_steps: int = 10_000
     lifetime_episodes: int = 20
 
-    def check(self) -> "Config":
+    def check(self) -> Config:
         """Clear errors for bad settings; returns self."""
         for name, allowed in (("experiments", EXPERIMENTS), ("domains", DOMAINS),
                               ("simulators", KNOWN_SIMULATORS)):
@@ -186,7 +186,7 @@ class Job:
         return (1, 0.0)
 
     @classmethod
-    def from_dict(cls, d: dict) -> "Job":
+    def from_dict(cls, d: dict) -> Job:
         return cls(**d)
 
     def write(self) -> Path:

@@ -2,8 +2,8 @@
 
 Usage::
 
-    python -m ials_zoo.traffic.benchmark [--episodes 3] [--repeats 3]
-    python -m ials_zoo.traffic.benchmark --breakdown
+    ials-zoo sumo-bench [--episodes 3] [--repeats 3]
+    ials-zoo sumo-bench --breakdown
 
 Prints the best of ``repeats`` runs (the machine is shared; the best run is the least
 disturbed one), as wall-clock steps/s and as steps per CPU-second of this process (less
@@ -24,7 +24,6 @@ Python); a ``vehicle.add`` costs ~20 us inside SUMO (device set-up per car); the
 
 from __future__ import annotations
 
-import argparse
 import time
 
 import numpy as np
@@ -89,7 +88,7 @@ def breakdown(sizes=(1, 8, 64), steps: int = 300, seed: int = 0, verbose: bool =
         try:
             ls = TrafficLocalSimulator("tls_12", n_envs=n, backend="inprocess")
         except SimulationBusyError as e:
-            raise SystemExit(f"--breakdown needs this process's libsumo: {e}")
+            raise SystemExit(f"--breakdown needs this process's libsumo: {e}") from None
         core_parts = {"lights+add": 0.0, "SUMO step": 0.0, "reads": 0.0}
         try:
             ls.reset(seed=seed)
@@ -163,18 +162,18 @@ def benchmark(episodes: int = 3, repeats: int = 3, verbose: bool = True) -> dict
     return out
 
 
-def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--episodes", type=int, default=3)
-    p.add_argument("--repeats", type=int, default=3)
-    p.add_argument("--breakdown", action="store_true", help="split the LS step into its parts")
-    a = p.parse_args(argv)
-    if a.breakdown:
+def configure(parser) -> None:
+    """``ials-zoo sumo-bench``'s options."""
+    parser.add_argument("--episodes", type=int, default=3)
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--breakdown", action="store_true", help="split the LS step into its parts")
+
+
+def run(args) -> int:
+    if args.episodes < 1 or args.repeats < 1:
+        raise ValueError("--episodes and --repeats must be >= 1")
+    if args.breakdown:
         breakdown()
     else:
-        benchmark(a.episodes, a.repeats)
+        benchmark(args.episodes, args.repeats)
     return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -9,12 +9,11 @@ reward (sum over the first ``max_cycles`` steps) at the observed intersections.
 
 Usage::
 
-    python -m ials_zoo.traffic.calibrate [--episodes 5] [--steps 600] [--grid 5 5]
+    ials-zoo calibrate [--episodes 5] [--steps 600] [--grid 5 5]
 """
 
 from __future__ import annotations
 
-import argparse
 import time
 
 import numpy as np
@@ -107,17 +106,17 @@ def format_report(out: dict) -> str:
     return "\n".join(lines)
 
 
-def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--episodes", type=int, default=5)
-    p.add_argument("--steps", type=int, default=600)
-    p.add_argument("--grid", type=int, nargs=2, default=(5, 5))
-    p.add_argument("--agents", nargs="+", default=["tls_12", "tls_18"])
-    p.add_argument("--seed", type=int, default=0)
-    args = p.parse_args(argv)
+def configure(parser) -> None:
+    """``ials-zoo calibrate``'s options."""
+    parser.add_argument("--episodes", type=int, default=5)
+    parser.add_argument("--steps", type=int, default=600, help="steps per episode (>= 300)")
+    parser.add_argument("--grid", type=int, nargs=2, default=(5, 5), metavar=("ROWS", "COLS"))
+    parser.add_argument("--agents", nargs="+", default=["tls_12", "tls_18"])
+    parser.add_argument("--seed", type=int, default=0)
+
+
+def run(args) -> int:
+    if args.episodes < 1:
+        raise ValueError(f"--episodes must be >= 1, got {args.episodes}")
     calibrate(args.episodes, args.steps, args.agents, tuple(args.grid), seed=args.seed)
     return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -5,12 +5,17 @@ from __future__ import annotations
 import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
-from pettingzoo.utils.conversions import parallel_to_aec
+from pettingzoo.utils.conversions import parallel_to_aec, parallel_to_aec_wrapper
 
 from ials_zoo.core.region import INFLUENCE_KEY, RegionSpec
 from ials_zoo.traffic import network
+from ials_zoo.traffic.cores import PHASE_NAMES, observation
+from ials_zoo.traffic.lease import SimHandle
 from ials_zoo.traffic.network import APPROACHES, N_CELLS
-from ials_zoo.traffic.sim import PHASE_NAMES, SimHandle, observation
+from ials_zoo.utils import check_seed
+
+SUMO_SEED_MAX = 2**31 - 2
+"""The largest seed SUMO takes as it is (it reduces seeds modulo 2**31 - 1)."""
 
 ENV_ID = "traffic_grid_v0"
 OBS_SIZE = 4 * N_CELLS + 4
@@ -125,11 +130,16 @@ class TrafficGridEnv(ParallelEnv):
     **Episode end**: truncation after ``max_cycles`` steps (default 300); no termination.
     Episodes start from an empty network, or after ``warmup_steps`` all-actuated steps.
 
-    **Region data** (``ials_zoo.core.region``), per learner: ``infos[a]["influence"]`` = 4
-    bits (N, E, S, W): a car entered that incoming lane from outside the region during the
-    step (measured exactly: a vehicle id on the lane that was not on it at the previous step;
-    fringe lanes include departures); ``infos[a]["dset"]`` = the 36 occupancy bits,
+    **Region data** (``ials_zoo.core.region``), per learner, the same keys, shapes and dtypes
+    at reset and after every step: ``infos[a]["influence"]`` = 4 bits (N, E, S, W): a car
+    entered that incoming lane from outside the region during the step (measured exactly: a
+    vehicle id on the lane that was not on it at the previous step; fringe lanes include
+    departures; all 0 at reset); ``infos[a]["dset"]`` = the 36 occupancy bits,
     ``infos[a]["dset_full"]`` = the 40-bit observation.
+
+    **State** (``state()``, ``state_space``, for centralised critics): ``Box(0, 1, float32)``
+    of ``40 * rows * cols`` entries: the 40-bit observation of every intersection, learners
+    or not, in index order.
 
     **Options**: ``learners`` (agent names or indices), ``grid`` (2..10 per side),
     ``max_cycles``, ``inflow_probability``, ``warmup_steps``, ``backend``,
@@ -140,11 +150,15 @@ class TrafficGridEnv(ParallelEnv):
     SUMO but changes the junction dynamics -- the calibration below is for True).
 
     **Rendering**: ``"rgb_array"`` draws a top view with numpy (grey roads, per intersection
-    a north-south and an east-west mark coloured by its light, blue dots for cars);
-    ``"ansi"`` prints one line per grid row with, per learner, its light (``|`` NS green,
-    ``-`` EW green, ``y`` yellow) and its number of occupied cells (``.``: not a learner).
+    a north-south and an east-west mark coloured by its light, a magenta frame around each
+    learner, blue dots for cars); ``"ansi"`` prints one line per grid row with, per learner,
+    its light (``|`` NS green, ``-`` EW green, ``y`` yellow) and its number of occupied cells
+    (``.``: not a learner); ``"human"`` prints the ``"ansi"`` view at every ``render()`` and
+    returns None.
 
-    **Seeding**: ``reset(seed=s)`` starts SUMO with ``--seed s``: the same seed and actions
+    **Seeding**: ``reset(seed=s)`` starts SUMO with ``--seed s``, for ``s`` in
+    ``[0, 2**31 - 2]`` (SUMO's own range: it would reduce larger seeds modulo ``2**31 - 1``,
+    so two seeds would give one episode; they are refused instead). The same seed and actions
     give the same trajectory. ``reset()`` without a seed draws one from the generator of the
     last explicit seed.
 
@@ -156,7 +170,7 @@ class TrafficGridEnv(ParallelEnv):
     next ``reset()`` starts a new one; SUMO errors raise ``SimulationError``. ``close()``
     frees the simulation.
 
-    **Calibration** (``python -m ials_zoo.traffic.calibrate --episodes 10 --steps 600``:
+    **Calibration** (``ials-zoo calibrate --episodes 10 --steps 600``:
     5 x 5, every light actuated, from an empty network): about 100 / 176 / 254 / 288 cars
     at 50 / 100 / 200 / 300 s, an insertion backlog of about 1 car on average (at most 5)
     up to 300 s that grows after about 350 s (10 on average, up to 34, at 600 s), no
@@ -168,7 +182,7 @@ class TrafficGridEnv(ParallelEnv):
 
     metadata = {
         "name": ENV_ID,
-        "render_modes": ["rgb_array", "ansi"],
+        "render_modes": ["rgb_array", "ansi", "human"],
         "is_parallelizable": True,
         "render_fps": 10,
     }
@@ -222,6 +236,7 @@ class TrafficGridEnv(ParallelEnv):
         self._act_space = spaces.Discrete(2)
         self.observation_spaces = {a: self._obs_space for a in self.possible_agents}
         self.action_spaces = {a: self._act_space for a in self.possible_agents}
+        self.state_space = spaces.Box(0.0, 1.0, (OBS_SIZE * len(all_agents),), np.float32)
         self.internal_links = network.check_bool("internal_links", internal_links)
         self.files = network.build_grid(self.grid, self.inflow_probability, self.internal_links)
         config = {
@@ -232,11 +247,15 @@ class TrafficGridEnv(ParallelEnv):
             "lanes": [[e + "_0" for e in network.incoming_edges(self.grid, i)] for i in idx],
             "controlled": not self.scripted_learners,
             "states": self.files.meta["states"],
+            "all_tls": all_agents,
+            "all_lanes": [[e + "_0" for e in network.incoming_edges(self.grid, i)]
+                          for i in range(len(all_agents))],
         }
         self._sim = SimHandle("GridCore", config, backend)
         self.backend = self._sim.mode
         self._seed_rng = np.random.default_rng()
         self._t = 0
+        self._started = False
         self._phases = np.zeros(len(idx), np.int64)
         self._occ = np.zeros((len(idx), 4 * N_CELLS), np.uint8)
 
@@ -260,14 +279,14 @@ class TrafficGridEnv(ParallelEnv):
     # -- episode
     def reset(self, seed=None, options=None):
         """Start an episode (``options`` is accepted for the PettingZoo API and unused)."""
+        seed = check_seed(seed, upper=SUMO_SEED_MAX)
         if seed is not None:
-            if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
-                raise TypeError(f"seed must be an int, got {seed!r}")
-            self._seed_rng = np.random.default_rng(int(seed))
-            sumo_seed = int(seed) % (2**31 - 1)
+            self._seed_rng = np.random.default_rng(seed)
+            sumo_seed = seed
         else:
-            sumo_seed = int(self._seed_rng.integers(2**31 - 1))
+            sumo_seed = int(self._seed_rng.integers(SUMO_SEED_MAX + 1))
         occ, phases = self._sim.call("reset", sumo_seed, self.warmup_steps)
+        self._started = True
         self._t = 0
         self.agents = list(self.possible_agents)
         self._occ, self._phases = occ, phases
@@ -275,7 +294,8 @@ class TrafficGridEnv(ParallelEnv):
         observations, infos = {}, {}
         for k, a in enumerate(self.agents):
             observations[a] = obs[k]
-            infos[a] = {"dset": occ[k].copy(), "dset_full": obs[k].astype(np.uint8)}
+            infos[a] = {INFLUENCE_KEY: np.zeros(4, np.int64), "dset": occ[k].copy(),
+                        "dset_full": obs[k].astype(np.uint8)}
         return observations, infos
 
     def step(self, actions):
@@ -314,6 +334,12 @@ class TrafficGridEnv(ParallelEnv):
         return observations, rewards, terms, truncs, infos
 
     # -- extras
+    def state(self) -> np.ndarray:
+        """The global state (see the class docstring), float32."""
+        if not self._started:
+            raise RuntimeError("state() before reset()")
+        return self._sim.call("state")
+
     def simulation_stats(self) -> dict:
         """Vehicles in the network, pending insertions, loaded/departed, teleports, time."""
         return self._sim.call("stats")
@@ -327,9 +353,12 @@ class TrafficGridEnv(ParallelEnv):
             return None
         if self.render_mode == "ansi":
             return self._render_ansi()
+        if self.render_mode == "human":
+            print(self._render_ansi(), flush=True)
+            return None
         from ials_zoo.traffic.render import render_grid
 
-        return render_grid(self.grid, self._sim.call("render_data"))
+        return render_grid(self.grid, self._sim.call("render_data"), learners=self.learner_index)
 
     def _render_ansi(self) -> str:
         rows, cols = self.grid
@@ -360,9 +389,9 @@ class TrafficGridEnv(ParallelEnv):
             pass
 
 
-def raw_env(**options) -> TrafficGridEnv:
-    """The parallel env (same as :func:`parallel_env`)."""
-    return TrafficGridEnv(**options)
+def raw_env(**options):
+    """The AEC version of the GS without wrappers (PettingZoo's ``raw_env`` convention)."""
+    return parallel_to_aec_wrapper(TrafficGridEnv(**options))
 
 
 def parallel_env(**options) -> TrafficGridEnv:

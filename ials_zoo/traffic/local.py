@@ -5,47 +5,50 @@ from __future__ import annotations
 import numpy as np
 from gymnasium import spaces
 
-from ials_zoo.core.local import LocalSimulator
+from ials_zoo.core.local import LocalSimulator, agent_list, check_n_envs
 from ials_zoo.traffic import network
+from ials_zoo.traffic.cores import observation
 from ials_zoo.traffic.env import OBS_SIZE, agent_index, region_spec
-from ials_zoo.traffic.sim import SimHandle, observation
+from ials_zoo.traffic.lease import SimHandle
 
 
 class TrafficLocalSimulator(LocalSimulator):
-    """``n_envs`` copies of one intersection with its 4 incoming and 4 outgoing 100 m edges.
+    """``n_envs`` copies of each of ``agents``' intersections, with their 4 incoming and 4
+    outgoing 100 m edges, in ONE SUMO network: one ``simulationStep()`` advances them all.
 
     Same geometry, vehicle model, light control (keep/switch with 3 s yellow), observation,
     reward and d-sets as :class:`~ials_zoo.traffic.env.TrafficGridEnv` -- the observation code
-    is shared (:class:`ials_zoo.traffic.sim._LaneReader`). The copies are disjoint
-    intersections of ONE SUMO network, so one ``simulationStep()`` advances all of them.
+    is shared (:class:`ials_zoo.traffic.cores._LaneReader`). The copies are disjoint
+    intersections; they differ by the turning flows of their intersection.
 
     Each step, for every copy and incoming lane (N, E, S, W) whose influence bit is 1, a car
     is inserted at the start of that lane (``departSpeed=10``; dropped if it cannot be
     inserted at once, as the GS car would not have entered then). Its turn (right, straight,
-    left) is drawn from the GS's expected turning statistics at this intersection
+    left) is drawn from the GS's expected turning statistics at the copy's intersection
     (:func:`ials_zoo.traffic.network.turn_probabilities`: exact under the grid's route
-    distributions, ignoring congestion), or from ``turn_probabilities`` (a ``[4, 3]`` array)
-    if given. Cars leave at the end of the outgoing edges, so spill-back from downstream
-    intersections is not modelled (it is not an influence source in SPEC §2).
+    distributions, ignoring congestion), or from ``turn_probabilities`` (a ``[4, 3]`` array
+    for every agent, or ``[len(agents), 4, 3]``) if given. Cars leave at the end of the
+    outgoing edges, so spill-back from downstream intersections is not modelled (it is not an
+    influence source in SPEC §2).
 
     Args:
-        agent: the GS agent whose region this is, e.g. ``"tls_12"``.
-        n_envs: number of copies.
+        agents: the GS agent(s) whose regions these are, e.g. ``"tls_12"`` or a list.
+        n_envs: copies per agent.
         grid, inflow_probability, internal_links: the GS setting (for the turning
             statistics, the junction model and the region's parameters).
         max_cycles: episode length (the caller truncates).
         backend: ``"auto"`` / ``"inprocess"`` / ``"worker"`` (see
             :mod:`ials_zoo.traffic.sim`).
-        turn_probabilities: optional ``[4, 3]`` override of the turning probabilities.
+        turn_probabilities: optional override of the turning probabilities.
 
     Attributes:
-        last_entries: ``[n_envs, 4]`` uint8, the cars that actually entered each incoming
+        last_entries: ``[n_copies, 4]`` uint8, the cars that actually entered each incoming
             lane during the last step (measured like the GS's influence bits).
     """
 
     def __init__(
         self,
-        agent="tls_12",
+        agents="tls_12",
         n_envs: int = 1,
         grid=(5, 5),
         inflow_probability: float = 0.1,
@@ -58,37 +61,47 @@ class TrafficLocalSimulator(LocalSimulator):
         if unknown:
             raise TypeError(
                 f"unknown option(s) {sorted(unknown)} for the traffic local simulator; valid: "
-                "agent, n_envs, grid, inflow_probability, max_cycles, backend, "
+                "agents, n_envs, grid, inflow_probability, max_cycles, backend, "
                 "turn_probabilities, internal_links"
             )
         self.grid = network.check_grid(grid)
-        self.index = agent_index(agent, self.grid)
-        self.region = region_spec(self.index, self.grid, inflow_probability, internal_links)
-        self.agent = self.region.agent
+        self.n_envs = check_n_envs(n_envs)
+        agents = agent_list([agents] if isinstance(agents, (int, np.integer)) else agents)
+        self.indices = [agent_index(a, self.grid) for a in agents]
+        self.regions = tuple(region_spec(i, self.grid, inflow_probability, internal_links)
+                             for i in self.indices)
+        self.agents = tuple(r.agent for r in self.regions)
+        if len(set(self.agents)) != len(self.agents):
+            raise ValueError(f"agents repeat: {list(agents)}")
         if isinstance(max_cycles, bool) or not isinstance(max_cycles, (int, np.integer)):
             raise TypeError(f"max_cycles must be an int, got {max_cycles!r}")
         if max_cycles < 1:
             raise ValueError(f"max_cycles must be >= 1, got {max_cycles}")
         self.max_cycles = int(max_cycles)
-        self.files = network.build_local(n_envs, internal_links)
-        self.n_envs = int(n_envs)
+        n = self.n_copies
+        self.files = network.build_local(n, internal_links)
         self.observation_space = spaces.Box(0.0, 1.0, (OBS_SIZE,), np.float32)
         self.action_space = spaces.Discrete(2)
         if turn_probabilities is None:
-            probs = network.turn_probabilities(self.grid, self.index, inflow_probability)
+            probs = np.stack([network.turn_probabilities(self.grid, i, inflow_probability)
+                              for i in self.indices])
         else:
             probs = np.asarray(turn_probabilities, dtype=np.float64)
-            if probs.shape != (4, 3) or (probs < 0).any() or not np.allclose(probs.sum(1), 1):
+            if probs.shape == (4, 3):
+                probs = np.broadcast_to(probs, (len(self.agents), 4, 3))
+            if (probs.shape != (len(self.agents), 4, 3) or (probs < 0).any()
+                    or not np.allclose(probs.sum(-1), 1)):
                 raise ValueError(
-                    "turn_probabilities must be a [4, 3] array of rows (right, straight, "
-                    f"left) summing to 1, got {turn_probabilities!r}"
+                    "turn_probabilities must be a [4, 3] (or [agents, 4, 3]) array of rows "
+                    f"(right, straight, left) summing to 1, got {turn_probabilities!r}"
                 )
         self.turn_probabilities = probs
-        self._cum = np.cumsum(probs, axis=1)[:, :2]
+        # per copy (agent-major), the cumulative probabilities of 'right' and 'straight'
+        self._cum = np.repeat(np.cumsum(probs, axis=-1)[:, :, :2], self.n_envs, axis=0)
         config = {
             "net": self.files.net,
             "routes": self.files.routes,
-            "n": self.n_envs,
+            "n": n,
             "states": self.files.meta["states"],
             "route_ids": self.files.meta["routes"],
         }
@@ -96,7 +109,17 @@ class TrafficLocalSimulator(LocalSimulator):
         self.backend = self._sim.mode
         self._rng = np.random.default_rng()
         self._started = False
-        self.last_entries = np.zeros((self.n_envs, 4), np.uint8)
+        self.last_entries = np.zeros((n, 4), np.uint8)
+
+    @property
+    def agent(self) -> str:
+        """The agent of a single-agent local simulator."""
+        return self.region.agent
+
+    @property
+    def index(self) -> int:
+        """The intersection index of a single-agent local simulator."""
+        return agent_index(self.agent, self.grid)
 
     def reset(self, seed: int | None = None):
         if seed is not None:
@@ -107,13 +130,13 @@ class TrafficLocalSimulator(LocalSimulator):
         occ, phases = self._sim.call("reset", sumo_seed)
         self._started = True
         obs = observation(occ, phases)
-        self.last_entries = np.zeros((self.n_envs, 4), np.uint8)
+        self.last_entries = np.zeros((self.n_copies, 4), np.uint8)
         return obs, {"dset": occ, "full": obs.astype(np.uint8)}
 
     def step(self, actions, influences):
         if not self._started:
             raise RuntimeError("step() before reset()")
-        n = self.n_envs
+        n = self.n_copies
         actions = np.asarray(actions)
         if actions.shape != (n,) or actions.dtype.kind not in "iu":
             raise ValueError(
@@ -138,7 +161,7 @@ class TrafficLocalSimulator(LocalSimulator):
             if len(ks) != influences.sum():
                 raise ValueError(f"influence bits must be 0 or 1, got {influences!r}")
             u = self._rng.random(len(ks))
-            turns = (u[:, None] >= self._cum[lanes]).sum(axis=1)
+            turns = (u[:, None] >= self._cum[ks, lanes]).sum(axis=1)
             inserts = list(zip(ks.tolist(), lanes.tolist(), turns.tolist()))
         else:
             inserts = []
@@ -163,9 +186,10 @@ class TrafficLocalSimulator(LocalSimulator):
             pass
 
 
-def local_simulator(agent, n_envs: int = 1, **options) -> TrafficLocalSimulator:
-    """The domain registry's LS factory. Accepts the GS options ``grid`` and
-    ``inflow_probability`` (other GS-only options like ``learners`` are ignored)."""
+def local_simulator(agents, n_envs: int = 1, **options) -> TrafficLocalSimulator:
+    """The domain registry's LS factory. Accepts the GS options ``grid``,
+    ``inflow_probability``, ``internal_links``, ``max_cycles`` and ``backend`` (other GS-only
+    options like ``learners`` are ignored)."""
     for gs_only in ("learners", "warmup_steps", "render_mode", "scripted_learners"):
         options.pop(gs_only, None)
-    return TrafficLocalSimulator(agent, n_envs=n_envs, **options)
+    return TrafficLocalSimulator(agents, n_envs=n_envs, **options)

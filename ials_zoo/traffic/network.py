@@ -168,7 +168,7 @@ def _fringe(rows: int, cols: int) -> list[tuple[int, int, str]]:
 
 def _min_turn_paths(rows: int, cols: int, src: tuple[int, int], dst: tuple[int, int]):
     """Shortest node paths src -> dst through the grid interior with the fewest turns."""
-    inside = lambda r, c: 0 <= r < rows and 0 <= c < cols  # noqa: E731
+    inside = lambda r, c: 0 <= r < rows and 0 <= c < cols
 
     def nbrs(r, c):
         for dr, dc in ((1, 0), (-1, 0), (0, 1), (0, -1)):
@@ -373,10 +373,10 @@ def _tls_additional(states: dict[str, list[str]], tls_ids) -> str:
             f'  <tlLogic id="{tl}" type="actuated" programID="actuated" offset="0">',
             f'    <param key="max-gap" value="{MAX_GAP}"/>',
             f'    <param key="detector-gap" value="{DETECTOR_GAP}"/>',
-            f'    <phase duration="{GREEN_DUR}" minDur="{GREEN_MIN}" maxDur="{GREEN_MAX}" state="{g1}"/>',  # noqa: E501
-            f'    <phase duration="{YELLOW_DUR}" minDur="{YELLOW_MIN}" maxDur="{YELLOW_MAX}" state="{y1}"/>',  # noqa: E501
-            f'    <phase duration="{GREEN_DUR}" minDur="{GREEN_MIN}" maxDur="{GREEN_MAX}" state="{g2}"/>',  # noqa: E501
-            f'    <phase duration="{YELLOW_DUR}" minDur="{YELLOW_MIN}" maxDur="{YELLOW_MAX}" state="{y2}"/>',  # noqa: E501
+            f'    <phase duration="{GREEN_DUR}" minDur="{GREEN_MIN}" maxDur="{GREEN_MAX}" state="{g1}"/>',
+            f'    <phase duration="{YELLOW_DUR}" minDur="{YELLOW_MIN}" maxDur="{YELLOW_MAX}" state="{y1}"/>',
+            f'    <phase duration="{GREEN_DUR}" minDur="{GREEN_MIN}" maxDur="{GREEN_MAX}" state="{g2}"/>',
+            f'    <phase duration="{YELLOW_DUR}" minDur="{YELLOW_MIN}" maxDur="{YELLOW_MAX}" state="{y2}"/>',
             "  </tlLogic>",
         ]
     lines.append("</additional>")
@@ -446,7 +446,7 @@ def build_grid(
     def builder(tmp: Path) -> dict:
         nodes, edges = [], []
         height = (rows + 1) * EDGE_LENGTH
-        pos = lambda r, c: ((c + 1) * EDGE_LENGTH, height - (r + 1) * EDGE_LENGTH)  # noqa: E731
+        pos = lambda r, c: ((c + 1) * EDGE_LENGTH, height - (r + 1) * EDGE_LENGTH)
         for r in range(rows):
             for c in range(cols):
                 nodes.append((tls_id(r * cols + c), *pos(r, c), "traffic_light"))

@@ -8,15 +8,20 @@ from ials_zoo.traffic.network import EDGE_LENGTH
 
 SCALE = 0.5  # pixels per metre
 _ROAD, _BG, _CAR = (90, 90, 90), (235, 235, 225), (30, 60, 200)
+_LEARNER = (200, 0, 200)
 _COLOR = {"G": (0, 170, 0), "g": (0, 170, 0), "y": (230, 190, 0), "r": (200, 0, 0)}
+LEGEND = (("road", _ROAD), ("car", _CAR), ("green", _COLOR["G"]), ("yellow", _COLOR["y"]),
+          ("red", _COLOR["r"]), ("learner", _LEARNER))
+"""The colours of :func:`render_grid`, for legends."""
 
 
-def render_grid(grid, data: dict) -> np.ndarray:
+def render_grid(grid, data: dict, learners=()) -> np.ndarray:
     """Draw the grid from ``data = {"xy": [V, 2] vehicle positions, "tls": {id: state}}``.
 
     Roads are grey lines, each intersection shows two marks (north of it: the north-south
-    light, east of it: the east-west light) coloured by the first link of that approach, and
-    each vehicle is a blue 3 x 3 dot. Returns ``uint8 [H, W, 3]``.
+    light, east of it: the east-west light) coloured by the first link of that approach, a
+    magenta frame marks the ``learners`` (intersection indices), and each vehicle is a blue
+    3 x 3 dot. Returns ``uint8 [H, W, 3]``.
     """
     rows, cols = grid
     width_m, height_m = (cols + 1) * EDGE_LENGTH, (rows + 1) * EDGE_LENGTH
@@ -33,6 +38,16 @@ def render_grid(grid, data: dict) -> np.ndarray:
     for c in range(cols):
         pxx, _ = px((c + 1) * EDGE_LENGTH, 0)
         img[:, max(pxx - 1, 0) : pxx + 2] = _ROAD
+    learners = set(int(i) for i in learners)
+    if len(learners) < rows * cols:  # framing every intersection would say nothing
+        for i in learners:
+            r, c = divmod(i, cols)
+            x, y = px((c + 1) * EDGE_LENGTH, height_m - (r + 1) * EDGE_LENGTH)
+            half = 12
+            for dy in (-half, half):
+                img[max(y + dy - 1, 0) : y + dy + 1, max(x - half, 0) : x + half + 1] = _LEARNER
+            for dx in (-half, half):
+                img[max(y - half, 0) : y + half + 1, max(x + dx - 1, 0) : x + dx + 1] = _LEARNER
     for r in range(rows):
         for c in range(cols):
             state = data["tls"].get(f"tls_{r * cols + c}")

@@ -6,8 +6,10 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 from pettingzoo.utils import parallel_to_aec
+from pettingzoo.utils.conversions import parallel_to_aec_wrapper
 
-from ials_zoo.core.region import RegionSpec
+from ials_zoo.core.region import INFLUENCE_KEY, RegionSpec
+from ials_zoo.utils import check_seed
 from ials_zoo.warehouse import regions as R
 
 # Flat copies of the region tables: 1-d fancy indexing is cheaper than 2-d in the hot loop.
@@ -58,15 +60,25 @@ class WarehouseEnv(ParallelEnv):
     Episode end: after ``max_cycles`` (100) steps every agent is truncated
     (``truncations`` True, ``terminations`` False) and ``agents`` becomes empty.
 
-    Infos (for every learner, see :mod:`ials_zoo.core.region`): ``"dset"`` (24 uint8: the 12
-    item bits and 12 "robot is on item cell b" bits) and ``"dset_full"`` (37 uint8, the
-    observation) at reset and after every step, and after every step ``"influence"`` (int64,
-    shape (4,)): for each neighbour (right, below, left, above), which of the 3 shelf cells
-    shared with it the neighbour stands on after the move (0..2), or 3 = none.
+    Infos (for every learner, see :mod:`ials_zoo.core.region`), the same keys, shapes and
+    dtypes at reset and after every step: ``"dset"`` (24 uint8: the 12 item bits and 12 "robot
+    is on item cell b" bits), ``"dset_full"`` (37 uint8, the observation) and ``"influence"``
+    (int64, shape (4,)): for each neighbour (right, below, left, above), which of the 3 shelf
+    cells shared with it the neighbour stands on after the move (0..2), or 3 = none (at reset,
+    before any move: all 3).
+
+    State (``state()``, ``state_space``, for centralised critics): ``Box(0, 1, float32)`` of
+    ``25 * n_robots + n_shelf_cells`` entries (1,152 for 6 x 6 robots): every robot's 25-bit
+    local-position one-hot (robot order), then every shelf cell's item age divided by
+    ``max_cycles`` (0 = no item; shelf cells in row-major floor order).
 
     Render modes: ``"rgb_array"`` (an image of the floor: region borders on the shelf lines,
     items shaded from yellow (new) to dark orange (old), scripted robots blue, learners
-    magenta inside a red region outline) and ``"ansi"`` (text).
+    magenta inside a red region outline), ``"ansi"`` (text) and ``"human"`` (the text view,
+    printed to the terminal at every ``render()``; returns None).
+
+    Seeding: ``reset(seed=s)`` (``s`` an int >= 0) makes the episode and the following
+    unseeded resets reproducible; ``reset()`` continues the current random stream.
 
     Options: ``learners``, ``item_probability=0.02``, ``max_cycles=100``,
     ``item_lifetime=None``, ``robots=(6, 6)``, ``render_mode=None``,
@@ -77,7 +89,7 @@ class WarehouseEnv(ParallelEnv):
 
     metadata = {
         "name": "warehouse_v0",
-        "render_modes": ["rgb_array", "ansi"],
+        "render_modes": ["rgb_array", "ansi", "human"],
         "render_fps": 5,
         "is_parallelizable": True,
     }
@@ -126,6 +138,7 @@ class WarehouseEnv(ParallelEnv):
         self._n_learners = len(learner_idx)
 
         self._obs_space = spaces.Box(0.0, 1.0, (R.OBS_SIZE,), np.float32)
+        self.state_space = spaces.Box(0.0, 1.0, (R.N_CELLS * n + self._n_shelf(),), np.float32)
         self._act_space = spaces.Discrete(4)
         self.observation_spaces = {a: self._obs_space for a in self.possible_agents}
         self.action_spaces = {a: spaces.Discrete(4) for a in self.possible_agents}
@@ -139,6 +152,11 @@ class WarehouseEnv(ParallelEnv):
         self.items_collected = 0
 
     # ------------------------------------------------------------------ geometry
+
+    def _n_shelf(self) -> int:
+        rows, cols = self.robots
+        h, w = 4 * rows + 1, 4 * cols + 1
+        return h * w - ((h + 3) // 4) * ((w + 3) // 4) - ((h - 1) * 3 // 4) * ((w - 1) * 3 // 4)
 
     def _build_geometry(self) -> None:
         rows, cols = self.robots
@@ -202,8 +220,20 @@ class WarehouseEnv(ParallelEnv):
             max_cycles=self.max_cycles,
         )
 
+    @property
+    def learner_indices(self) -> np.ndarray:
+        """Robot index (row-major) of each agent, in ``possible_agents`` order."""
+        return self._learner_idx.copy()
+
+    def state(self) -> np.ndarray:
+        """The global state (see the class docstring), float32."""
+        pos = R.POS_ONEHOT[self._pos].ravel()
+        ages = np.minimum(self._ages[:-1] / self.max_cycles, 1.0)
+        return np.concatenate([pos, ages]).astype(np.float32)
+
     def reset(self, seed: int | None = None, options: dict | None = None):
         """Start an episode. ``seed`` makes it reproducible; ``options`` is ignored."""
+        seed = check_seed(seed)
         if seed is not None or self._rng is None:
             self._rng = np.random.default_rng(seed)
         self._pos = np.full(self.n_robots, R.CENTRE, dtype=np.int64)
@@ -214,8 +244,10 @@ class WarehouseEnv(ParallelEnv):
         self.items_collected = 0
         self.agents = list(self.possible_agents)
         obs, dset, full = self._learner_views()
+        none = np.full(R.N_SOURCES, R.NONE, dtype=np.int64)
         infos = {
-            a: {"dset": dset[i], "dset_full": full[i]} for i, a in enumerate(self.agents)
+            a: {INFLUENCE_KEY: none.copy(), "dset": dset[i], "dset_full": full[i]}
+            for i, a in enumerate(self.agents)
         }
         return dict(zip(self.agents, obs)), infos
 
@@ -258,7 +290,7 @@ class WarehouseEnv(ParallelEnv):
         terminations = dict.fromkeys(agents, False)
         truncations = dict.fromkeys(agents, done)
         infos = {
-            a: {"influence": influence[i], "dset": dset[i], "dset_full": full[i]}
+            a: {INFLUENCE_KEY: influence[i], "dset": dset[i], "dset_full": full[i]}
             for i, a in enumerate(agents)
         }
         observations = dict(zip(agents, obs))
@@ -356,6 +388,9 @@ class WarehouseEnv(ParallelEnv):
 
         if self.render_mode == "ansi":
             return render_ansi(self)
+        if self.render_mode == "human":
+            print(render_ansi(self), flush=True)
+            return None
         return render_rgb(self)
 
     def close(self):
@@ -379,9 +414,9 @@ def _check_action(agent: str, value) -> None:
         raise ValueError(f"action for {agent!r} out of range: {value!r}; expected 0..3")
 
 
-def raw_env(**options) -> WarehouseEnv:
-    """The parallel GS itself (see :class:`WarehouseEnv` for the options)."""
-    return WarehouseEnv(**options)
+def raw_env(**options):
+    """The AEC version of the GS without wrappers (PettingZoo's ``raw_env`` convention)."""
+    return parallel_to_aec_wrapper(WarehouseEnv(**options))
 
 
 def parallel_env(**options) -> WarehouseEnv:
@@ -390,5 +425,6 @@ def parallel_env(**options) -> WarehouseEnv:
 
 
 def env(**options):
-    """The AEC version of the GS (``pettingzoo.utils.parallel_to_aec``)."""
+    """The AEC version of the GS with PettingZoo's order-enforcing wrapper
+    (``pettingzoo.utils.parallel_to_aec``)."""
     return parallel_to_aec(WarehouseEnv(**options))

@@ -1,11 +1,11 @@
-"""The warehouse local simulator (LS): one robot's 5 x 5 region, ``n_envs`` copies at once."""
+"""The warehouse local simulator (LS): robots' 5 x 5 regions, many copies in one numpy program."""
 
 from __future__ import annotations
 
 import numpy as np
 from gymnasium import spaces
 
-from ials_zoo.core.local import LocalSimulator
+from ials_zoo.core.local import LocalSimulator, agent_list, check_n_envs
 from ials_zoo.warehouse import regions as R
 
 _MOVE_FLAT = R.MOVE.ravel()
@@ -42,7 +42,9 @@ def _single_views(key: int):
 
 
 class WarehouseLocalSimulator(LocalSimulator):
-    """``n_envs`` copies of one warehouse region, stepped together (SPEC §1, paper §4).
+    """``n_envs`` copies of the region of each of ``agents``, stepped together in one numpy
+    program (SPEC §1, paper §4). Every region has the same layout and rules, so the rows differ
+    only by their state (and, through the AIP, by what their neighbours do).
 
     Each step, in every copy: the robot moves by its action; the influence sources ``u_t``
     (one class per side: right, below, left, above; 0..2 = the neighbour stands on that
@@ -54,12 +56,12 @@ class WarehouseLocalSimulator(LocalSimulator):
     :func:`regions.advance_items`), so a GS region stepped with its true ``u_t`` and the same
     appearance draws gives the same observations, rewards and d-sets.
 
-    Observations are ``float32 (n_envs, 37)`` as in the GS; d-sets are uint8,
-    ``{"dset": (n_envs, 24), "full": (n_envs, 37)}``. At reset every robot is at its
+    Observations are ``float32 (n_copies, 37)`` as in the GS; d-sets are uint8,
+    ``{"dset": (n_copies, 24), "full": (n_copies, 37)}``. At reset every robot is at its
     region's centre and each shelf cell holds a new item with probability
     ``item_probability`` (as in the GS).
 
-    With ``n_envs=1`` the state is kept in plain Python ints (position, item bitmask, list of
+    With a single copy the state is kept in plain Python ints (position, item bitmask, list of
     ages) and stepped without numpy (:meth:`step_single`, used by :class:`IALSEnv`): numpy's
     per-call overhead on 12-element arrays dominates a single copy's step. It draws the same
     random numbers in the same order (fetched ``64`` steps at a time) and gives the same
@@ -68,39 +70,41 @@ class WarehouseLocalSimulator(LocalSimulator):
 
     def __init__(
         self,
-        agent: str = "robot_20",
+        agents="robot_20",
         n_envs: int = 1,
         item_probability: float = R.DEFAULT_ITEM_PROBABILITY,
         max_cycles: int = R.DEFAULT_MAX_CYCLES,
         item_lifetime: int | None = None,
         robots=R.DEFAULT_ROBOTS,
     ):
-        if isinstance(n_envs, bool) or not isinstance(n_envs, (int, np.integer)) or n_envs < 1:
-            raise ValueError(f"n_envs must be a positive int, got {n_envs!r}")
-        self.region = R.region_spec(
-            agent,
-            robots=robots,
-            item_probability=item_probability,
-            item_lifetime=item_lifetime,
-            max_cycles=max_cycles,
+        self.n_envs = check_n_envs(n_envs)
+        self.agents = agent_list(agents)
+        self.regions = tuple(
+            R.region_spec(a, robots=robots, item_probability=item_probability,
+                          item_lifetime=item_lifetime, max_cycles=max_cycles)
+            for a in self.agents
         )
-        self.agent = agent
-        self.n_envs = int(n_envs)
-        self.item_probability = self.region.params["item_probability"]
-        self.item_lifetime = self.region.params["item_lifetime"]
-        self.max_cycles = self.region.params["max_cycles"]
+        params = self.regions[0].params
+        self.item_probability = params["item_probability"]
+        self.item_lifetime = params["item_lifetime"]
+        self.max_cycles = params["max_cycles"]
         self.observation_space = spaces.Box(0.0, 1.0, (R.OBS_SIZE,), np.float32)
         self.action_space = spaces.Discrete(4)
         self._rng = np.random.default_rng()
-        self._arange = np.arange(self.n_envs)
-        self._pos = np.full(self.n_envs, R.CENTRE, dtype=np.int64)
-        self._ages = np.zeros((self.n_envs, R.N_ITEMS), dtype=np.int64)
+        n = self.n_copies
+        self._pos = np.full(n, R.CENTRE, dtype=np.int64)
+        self._ages = np.zeros((n, R.N_ITEMS), dtype=np.int64)
         # Single-copy state (used iff self._scalar): position, item bitmask, 12 ages.
-        self._scalar = self.n_envs == 1
+        self._scalar = n == 1
         self._p = R.CENTRE
         self._items = 0
         self._age = [0] * R.N_ITEMS
         self._draws: list[int] = []  # pending appearance bitmasks, next one last
+
+    @property
+    def agent(self) -> str:
+        """The agent of a single-agent local simulator."""
+        return self.region.agent
 
     def reset(self, seed: int | None = None):
         if seed is not None:
@@ -109,8 +113,8 @@ class WarehouseLocalSimulator(LocalSimulator):
         if self._scalar:
             self._set_single(R.CENTRE, self._next_draw())
             return self.observe()
-        self._pos = np.full(self.n_envs, R.CENTRE, dtype=np.int64)
-        self._ages = (self._rng.random((self.n_envs, R.N_ITEMS)) < self.item_probability).astype(
+        self._pos = np.full(self.n_copies, R.CENTRE, dtype=np.int64)
+        self._ages = (self._rng.random((self.n_copies, R.N_ITEMS)) < self.item_probability).astype(
             np.int64
         )
         return self._views()
@@ -119,7 +123,7 @@ class WarehouseLocalSimulator(LocalSimulator):
 
     @property
     def supports_step_single(self) -> bool:
-        """Whether :meth:`step_single` / :meth:`observe_single` may be used (``n_envs=1``)."""
+        """Whether :meth:`step_single` / :meth:`observe_single` may be used (one copy)."""
         return self._scalar
 
     def _next_draw(self) -> int:
@@ -140,7 +144,7 @@ class WarehouseLocalSimulator(LocalSimulator):
         self._age = [(items >> b) & 1 for b in range(R.N_ITEMS)] if ages is None else ages
 
     def step_single(self, action: int, u0: int, u1: int, u2: int, u3: int) -> float:
-        """Advance the single copy (``n_envs=1``) by one step; returns the reward.
+        """Advance the single copy by one step; returns the reward.
 
         The fast form of ``step([action], [[u0, u1, u2, u3]])``: Python ints in 0..3 (not
         checked here: callers check them), the observation and d-sets of the new state
@@ -194,25 +198,26 @@ class WarehouseLocalSimulator(LocalSimulator):
         """Advance every copy (see the class docstring).
 
         Args:
-            actions: ints in 0..3, shape ``(n_envs,)``.
-            influences: ints in 0..3, shape ``(n_envs, 4)``.
-            new_items: optional bool ``(n_envs, 12)``: use these item-appearance draws
+            actions: ints in 0..3, shape ``(n_copies,)``.
+            influences: ints in 0..3, shape ``(n_copies, 4)``.
+            new_items: optional bool ``(n_copies, 12)``: use these item-appearance draws
                 instead of random ones (an item appears where True and the cell is empty);
                 lets tests replay a GS region exactly.
         """
-        actions = self._check_ints("actions", actions, (self.n_envs,), 4)
-        influences = self._check_ints("influences", influences, (self.n_envs, R.N_SOURCES), 4)
+        n = self.n_copies
+        actions = self._check_ints("actions", actions, (n,), 4)
+        influences = self._check_ints("influences", influences, (n, R.N_SOURCES), 4)
         if new_items is not None:
             appear = np.asarray(new_items)
-            if appear.shape != (self.n_envs, R.N_ITEMS) or appear.dtype != bool:
+            if appear.shape != (n, R.N_ITEMS) or appear.dtype != bool:
                 raise ValueError(
-                    f"new_items must be a bool array of shape {(self.n_envs, R.N_ITEMS)}, got "
+                    f"new_items must be a bool array of shape {(n, R.N_ITEMS)}, got "
                     f"{appear.dtype} {appear.shape}"
                 )
         if self._scalar:
             return self._step_single_arrays(int(actions[0]), influences[0], new_items)
         if new_items is None:
-            appear = self._rng.random((self.n_envs, R.N_ITEMS)) < self.item_probability
+            appear = self._rng.random((n, R.N_ITEMS)) < self.item_probability
         ages = self._ages
         max_age = ages.max(axis=1)
         pos = _MOVE_FLAT[self._pos * 4 + actions]
@@ -264,17 +269,18 @@ class WarehouseLocalSimulator(LocalSimulator):
     # ------------------------------------------------------------------ state access
 
     def get_state(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(positions (n_envs,), item ages (n_envs, 12))``, copies."""
+        """``(positions (n_copies,), item ages (n_copies, 12))``, copies."""
         if self._scalar:
             return np.array([self._p], dtype=np.int64), np.array([self._age], dtype=np.int64)
         return self._pos.copy(), self._ages.copy()
 
     def set_state(self, positions, item_ages) -> None:
         """Overwrite every copy's robot position and item ages (e.g. from a GS region)."""
-        pos = np.asarray(positions, dtype=np.int64).reshape(self.n_envs)
+        n = self.n_copies
+        pos = np.asarray(positions, dtype=np.int64).reshape(n)
         ages = np.asarray(item_ages, dtype=np.int64)
-        if ages.shape != (self.n_envs, R.N_ITEMS) or (ages < 0).any():
-            raise ValueError(f"item_ages must be non-negative ints of shape {(self.n_envs, R.N_ITEMS)}")
+        if ages.shape != (n, R.N_ITEMS) or (ages < 0).any():
+            raise ValueError(f"item_ages must be non-negative ints of shape {(n, R.N_ITEMS)}")
         if ((pos < 0) | (pos >= R.N_CELLS) | np.isin(pos, R.CORNERS)).any():
             raise ValueError(f"positions must be non-corner local positions 0..24, got {pos}")
         if self._scalar:
@@ -292,8 +298,8 @@ class WarehouseLocalSimulator(LocalSimulator):
         return self._views()
 
 
-def local_simulator(agent: str = "robot_20", n_envs: int = 1, **options) -> WarehouseLocalSimulator:
+def local_simulator(agents="robot_20", n_envs: int = 1, **options) -> WarehouseLocalSimulator:
     """Factory used by the domain registry. Accepts the GS's options: those that shape the
     region (``robots``, ``item_probability``, ``item_lifetime``, ``max_cycles``) are used,
     the GS-only ones (``learners``, ``render_mode``, ``scripted_learners``) are ignored."""
-    return WarehouseLocalSimulator(agent, n_envs=n_envs, **R.drop_gs_only_options(options))
+    return WarehouseLocalSimulator(agents, n_envs=n_envs, **R.drop_gs_only_options(options))

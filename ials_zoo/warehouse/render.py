@@ -1,8 +1,6 @@
-"""Pictures of the warehouse floor: an RGB image, a text view, and episode GIFs."""
+"""Pictures of the warehouse floor: an RGB image and a text view."""
 
 from __future__ import annotations
-
-import os
 
 import numpy as np
 
@@ -16,6 +14,10 @@ _ROBOT = np.array([40, 90, 220], np.uint8)
 _LEARNER = np.array([200, 0, 200], np.uint8)
 _OUTLINE = np.array([220, 0, 0], np.uint8)
 _AGE_SCALE = 30  # an item this old (or older) gets the darkest shade
+LEGEND = tuple((name, tuple(int(c) for c in colour)) for name, colour in (
+    ("shelf", _SHELF), ("new item", _ITEM_NEW), ("old item", _ITEM_OLD), ("robot", _ROBOT),
+    ("learner", _LEARNER), ("learner's region", _OUTLINE)))
+"""The colours of :func:`render_rgb`, for legends."""
 
 
 def render_rgb(env, cell_px: int = CELL_PX) -> np.ndarray:
@@ -38,7 +40,7 @@ def render_rgb(env, cell_px: int = CELL_PX) -> np.ndarray:
     img[mid::4 * cell_px, :] = (img[mid::4 * cell_px, :] * 0.5).astype(np.uint8)
     img[:, mid::4 * cell_px] = (img[:, mid::4 * cell_px] * 0.5).astype(np.uint8)
 
-    learners = set(env._learner_idx.tolist())
+    learners = set(env.learner_indices.tolist())
     pad = max(cell_px // 5, 1)
     for n, (r, c) in enumerate(env.robot_positions()):
         colour = _LEARNER if n in learners else _ROBOT
@@ -69,39 +71,7 @@ def render_ansi(env) -> str:
     grid[ages > 9] = "+"
     pos = env.robot_positions()
     grid[pos[:, 0], pos[:, 1]] = "R"
-    learners = env._learner_idx
+    learners = env.learner_indices
     grid[pos[learners, 0], pos[learners, 1]] = "L"
     header = f"warehouse_v0 step {env._cycle}/{env.max_cycles}, items collected {env.items_collected}"
     return header + "\n" + "\n".join("".join(row) for row in grid) + "\n"
-
-
-def save_gif(frames, path: str | os.PathLike, fps: int = 5) -> None:
-    """Write RGB ``frames`` (a list of HxWx3 uint8 arrays) to ``path`` as a GIF, atomically."""
-    import imageio.v2 as imageio
-
-    from ials_zoo.utils import atomic_path
-
-    frames = list(frames)
-    if not frames:
-        raise ValueError("save_gif needs at least one frame")
-    with atomic_path(path, suffix=".gif") as tmp:
-        imageio.mimsave(tmp, frames, format="GIF", duration=1.0 / fps, loop=0)
-
-
-def record_episode(env, actions_fn=None, seed: int | None = None) -> list[np.ndarray]:
-    """Run one episode of an ``rgb_array`` env and return its frames.
-
-    ``actions_fn(obs) -> {agent: action}``; default: uniformly random actions.
-    """
-    if env.render_mode != "rgb_array":
-        raise ValueError(f"record_episode needs render_mode='rgb_array', got {env.render_mode!r}")
-    obs, _ = env.reset(seed=seed)
-    frames = [env.render()]
-    while env.agents:
-        if actions_fn is None:
-            actions = {a: env.action_space(a).sample() for a in env.agents}
-        else:
-            actions = actions_fn(obs)
-        obs, *_ = env.step(actions)
-        frames.append(env.render())
-    return frames

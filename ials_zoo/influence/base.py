@@ -1,0 +1,201 @@
+"""The influence-predictor interface (paper §4.2): ``P(u_t | d_0 .. d_t)``.
+
+Every predictor implements :class:`InfluencePredictor`, the interface the IALS uses:
+
+* ``reset(n)`` -- start ``n`` parallel histories (zero recurrent state);
+* ``probs(dsets)`` -- feed the current d-sets ``d_t`` of shape ``[n, D]`` (advancing the
+  recurrent state, if any) and return one ``[n, K_m]`` probability array per source;
+* ``sample(dsets, rng)`` -- the same, then draw ``u_t`` (int64, ``[n, M]``).
+
+The sources are independent given the history (one softmax head per source, paper §4.2).
+Sampling from logits is shared here (:meth:`InfluencePredictor._sample_logits`, and a
+single-history path, :meth:`InfluencePredictor._sample_logits1`, bitwise the same draws).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ials_zoo.core.region import RegionSpec, check_dset_kind
+
+_max_reduce = np.maximum.reduce
+_add_accumulate = np.add.accumulate
+_add_reduce = np.add.reduce
+_HALF32 = np.array(0.5, dtype=np.float32)
+_ONE32 = np.array(1.0, dtype=np.float32)
+
+
+def _sigmoid(x, out=None):
+    # 0.5 * (1 + tanh(x / 2)) never overflows, unlike 1 / (1 + exp(-x)).
+    out = np.multiply(x, 0.5, out=out)
+    np.tanh(out, out=out)
+    out += 1.0
+    out *= 0.5
+    return out
+
+
+class InfluencePredictor:
+    """Interface of every influence predictor (see the module docstring).
+
+    Attributes:
+        region: the region this predictor is for (domain, agent, sources, d-set layout).
+        dset_kind: which d-set it reads, ``"dset"`` or ``"full"``.
+        metadata: free-form provenance (hyper-parameters, cross-entropies, ...), saved with it.
+    """
+
+    name = "base"
+
+    def __init__(self, region: RegionSpec, dset_kind: str = "dset", metadata: dict | None = None):
+        if not isinstance(region, RegionSpec):
+            raise TypeError(f"region must be a RegionSpec, got {type(region).__name__}")
+        self.region = region
+        self.dset_kind = check_dset_kind(dset_kind)
+        self.metadata = dict(metadata or {})
+        classes = np.asarray(region.influence_classes, dtype=np.int64)
+        if classes.size == 0:
+            raise ValueError(f"region of {region.agent!r} has no influence sources")
+        if (classes < 2).any():
+            raise ValueError(f"every influence source needs >= 2 classes, got {tuple(classes)}")
+        self.n_sources = int(classes.size)
+        self.n_classes = classes
+        self.max_classes = int(classes.max())
+        self.dset_size = region.dset_size(dset_kind)
+        # Layout of the concatenated logits [sum K_m] inside a padded [M, Kmax] array.
+        self._offsets = np.concatenate([[0], np.cumsum(classes)])
+        flat = np.full((self.n_sources, self.max_classes), -1, dtype=np.int64)
+        for m, k in enumerate(classes):
+            flat[m, :k] = np.arange(self._offsets[m], self._offsets[m] + k)
+        self._gather = np.where(flat >= 0, flat, 0)
+        self._pad_mask = flat < 0
+        self._kmax_minus1 = (classes - 1)[None, :]
+        self._same_k = bool((classes == classes[0]).all())
+        self._sample_bufs = None
+        self.n = 0
+
+    # Scratch state of the n=1 fast paths: buffers holding views of each other, which a copy
+    # or pickle would turn into unrelated arrays, and memo tables. Rebuilt on demand.
+    _SCRATCH = {"_sample_bufs": None, "_bufs1": None, "_h_spare": None, "_gi_cache": {}}
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        for k, v in self._SCRATCH.items():
+            if k in state:
+                state[k] = type(v)() if isinstance(v, dict) else v
+        return state
+
+    # -- interface -------------------------------------------------------------------------
+    def reset(self, n: int = 1) -> None:
+        """Start ``n`` new parallel histories (zero the recurrent state, if any)."""
+        n = int(n)
+        if n < 1:
+            raise ValueError(f"n must be >= 1, got {n}")
+        self.n = n
+
+    def probs_padded(self, dsets: np.ndarray) -> np.ndarray:
+        """Class probabilities ``[n, M, Kmax]`` (0 beyond a source's own classes)."""
+        raise NotImplementedError
+
+    def probs(self, dsets: np.ndarray) -> list[np.ndarray]:
+        """Feed ``d_t`` (``[n, D]``), advance the state, return one ``[n, K_m]`` array per source."""
+        p = self.probs_padded(dsets)
+        return [p[:, m, :k] for m, k in enumerate(self.n_classes)]
+
+    def sample(self, dsets: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """Feed ``d_t`` (``[n, D]``), advance the state, draw ``u_t`` (int64, ``[n, M]``)."""
+        p = self.probs_padded(dsets)
+        cum = np.cumsum(p, axis=-1)
+        r = rng.random((p.shape[0], self.n_sources, 1))
+        u = (cum < r).sum(axis=-1)
+        # cum[-1] may round to just below r; clamp to the last real class.
+        return np.minimum(u, self._kmax_minus1).astype(np.int64, copy=False)
+
+    # -- helpers ---------------------------------------------------------------------------
+    def _check_dsets(self, dsets) -> np.ndarray:
+        d = np.asarray(dsets)
+        if d.ndim != 2 or d.shape[1] != self.dset_size:
+            raise ValueError(
+                f"{type(self).__name__} for {self.region.agent!r} expects d-sets of shape "
+                f"[n, {self.dset_size}] ({self.dset_kind!r}), got {d.shape}"
+            )
+        if self.n == 0:
+            raise RuntimeError(f"{type(self).__name__}: call reset(n) before probs()/sample()")
+        if d.shape[0] != self.n:
+            raise ValueError(f"reset({self.n}) was called but got {d.shape[0]} d-sets")
+        return d
+
+    def _sample_logits(self, logits: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """Draw ``u`` from the per-source softmax of ``logits`` ``[n, sum K]``.
+
+        Inverse-CDF sampling on the *unnormalised* cumulative ``exp``: ``u`` is the number of
+        classes whose cumulative mass is below ``r * total``, ``r ~ U[0, 1)``. Padded
+        classes add no mass, and ``r * total < total``, so ``u`` is always a real class.
+        (Fewer numpy calls than normalising first: this is the IALS's hot path.)
+        """
+        n = logits.shape[0]
+        if self._same_k:
+            z = logits.reshape(n, self.n_sources, self.max_classes)
+            z = z - z.max(axis=-1, keepdims=True)
+        else:
+            z = logits[:, self._gather]
+            z[:, self._pad_mask] = -np.inf
+            z -= z.max(axis=-1, keepdims=True)
+        np.exp(z, out=z)
+        np.cumsum(z, axis=-1, out=z)
+        r = rng.random((n, self.n_sources, 1), dtype=z.dtype)
+        r *= z[:, :, -1:]
+        return (z < r).sum(axis=-1)
+
+    def _sample_logits1(self, logits: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """:meth:`_sample_logits` for one history (``n=1``) with equal class counts: the same
+        float operations in the same order (bitwise the same draws), on preallocated buffers
+        and without numpy's Python-level wrappers (``max``, ``cumsum``, ``sum``)."""
+        bufs = self._sample_bufs
+        if bufs is None or bufs[0].dtype != logits.dtype:
+            # 2-D [M, K] buffers: cheaper for numpy to iterate than [1, M, K] with broadcasting.
+            shape = (self.n_sources, self.max_classes)
+            z = np.empty(shape, logits.dtype)
+            bufs = self._sample_bufs = (z, np.empty((self.n_sources, 1), logits.dtype),
+                                        np.empty(shape, bool), z[:, -1:])
+        z, m, less, total = bufs
+        x = logits.reshape(z.shape)
+        _max_reduce(x, 1, None, m, True)
+        np.subtract(x, m, z)
+        np.exp(z, z)
+        _add_accumulate(z, 1, None, z)
+        r = rng.random((self.n_sources, 1), dtype=z.dtype)  # same draws as shape (1, M, 1)
+        np.multiply(r, total, r)
+        np.less(z, r, less)
+        return _add_reduce(less, 1, np.int64).reshape(1, self.n_sources)
+
+    def _logits_to_padded(self, logits: np.ndarray) -> np.ndarray:
+        z = logits[:, self._gather]
+        z[:, self._pad_mask] = -np.inf
+        z -= z.max(axis=-1, keepdims=True)
+        np.exp(z, out=z)
+        z /= z.sum(axis=-1, keepdims=True)
+        return z
+
+    def _arrays(self) -> dict[str, np.ndarray]:
+        """The numeric state to save (weights, probabilities)."""
+        return {}
+
+    def _config(self) -> dict:
+        """Constructor keyword arguments (JSON) other than region/dset_kind/metadata/arrays."""
+        return {}
+
+    def describe(self) -> str:
+        return f"{self.name} ({self.dset_kind!r} d-set, {self.region.domain}/{self.region.agent})"
+
+    def __repr__(self):
+        return f"<{type(self).__name__} {self.describe()}>"
+
+
+def _check_shapes(arrays, shapes, who):
+    missing = set(shapes) - set(arrays)
+    if missing:
+        raise ValueError(f"{who}: missing weight arrays {sorted(missing)}")
+    for k, s in shapes.items():
+        if arrays[k].shape != s:
+            raise ValueError(f"{who}: weight {k!r} has shape {arrays[k].shape}, expected {s}")
+        if not np.isfinite(arrays[k]).all():
+            raise ValueError(f"{who}: weight {k!r} is not finite")

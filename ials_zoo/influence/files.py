@@ -1,0 +1,134 @@
+"""Influence-predictor files: weights plus plain JSON, loaded without unpickling.
+
+One ``torch.save`` of a plain dict, read back with ``torch.load(weights_only=True)`` (which
+refuses anything but tensors and plain containers)::
+
+    {"format": "ials_zoo.influence_predictor", "format_version": 1,
+     "class": "GRUPredictor", "metadata_json": "<json>", "arrays": {name: tensor}}
+
+``metadata_json`` holds the domain id (versioned, e.g. ``warehouse_v0``), agent, region spec,
+d-set kind, architecture and hyper-parameters, data-set size, train/test cross-entropies,
+package version and creation time.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ials_zoo.core.region import RegionSpec
+from ials_zoo.influence.base import InfluencePredictor
+from ials_zoo.influence.constant import FixedPredictor, MarginalPredictor, UniformPredictor
+from ials_zoo.influence.networks import ARCHS, GRUPredictor, MLPPredictor
+
+FORMAT = "ials_zoo.influence_predictor"
+FORMAT_VERSION = 1
+
+_CLASSES = {
+    cls.__name__: cls
+    for cls in (MLPPredictor, GRUPredictor, UniformPredictor, FixedPredictor, MarginalPredictor)
+}
+
+
+def _package_version() -> str:
+    from ials_zoo import __version__
+
+    return __version__
+
+
+def save_predictor(predictor: InfluencePredictor, path) -> Path:
+    """Save ``predictor`` to one file (atomic), see the module docstring for the format."""
+    import torch
+
+    from ials_zoo.utils import atomic_path
+
+    if not isinstance(predictor, InfluencePredictor):
+        raise TypeError(f"expected an InfluencePredictor, got {type(predictor).__name__}")
+    cls_name = type(predictor).__name__
+    if cls_name not in _CLASSES:
+        raise TypeError(f"cannot save predictor class {cls_name}")
+    meta = dict(predictor.metadata)
+    meta.setdefault("created", time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()))
+    meta["package_version"] = meta.get("package_version") or _package_version()
+    meta.update(
+        {
+            "env_id": predictor.region.domain,
+            "agent": predictor.region.agent,
+            "region": predictor.region.to_dict(),
+            "dset_kind": predictor.dset_kind,
+            "predictor": predictor.name,
+            "config": predictor._config(),
+        }
+    )
+    payload = {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "class": cls_name,
+        "metadata_json": json.dumps(meta, sort_keys=True, default=_json_default),
+        "arrays": {k: torch.from_numpy(np.ascontiguousarray(v)) for k, v in predictor._arrays().items()},
+    }
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        torch.save(payload, tmp)
+    return path
+
+
+def _json_default(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+def load_predictor(path, env_id: str | None = None, agent: str | None = None) -> InfluencePredictor:
+    """Load a predictor saved by :func:`save_predictor`.
+
+    ``env_id``/``agent``, when given, must match the ones it was trained for (a clear
+    ``ValueError`` naming both otherwise). A file that is not a predictor file (corrupt,
+    truncated, something else) raises ``ValueError("not an ials_zoo influence predictor: ...")``.
+    """
+    import torch
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"influence predictor file not found: {path}")
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # torch raises many kinds for a corrupt/foreign file
+        raise ValueError(f"not an ials_zoo influence predictor: {path} ({type(exc).__name__}: {exc})") from None
+    if not isinstance(payload, dict) or payload.get("format") != FORMAT:
+        raise ValueError(f"not an ials_zoo influence predictor: {path} (no {FORMAT!r} header)")
+    if payload.get("format_version") != FORMAT_VERSION:
+        raise ValueError(
+            f"{path}: influence predictor format version {payload.get('format_version')!r}, this "
+            f"ials_zoo reads version {FORMAT_VERSION}"
+        )
+    try:
+        meta = json.loads(payload["metadata_json"])
+        cls = _CLASSES[payload["class"]]
+        region = RegionSpec.from_dict(meta["region"])
+        arrays = {k: v.numpy() for k, v in payload["arrays"].items()}
+        kwargs = dict(meta.get("config", {}))
+        if cls in ARCHS.values():
+            pred = cls(region, dset_kind=meta["dset_kind"], arrays=arrays, metadata=meta, **kwargs)
+        else:
+            pred = cls(region, dset_kind=meta["dset_kind"], metadata=meta, table=arrays["table"], **kwargs)
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise ValueError(f"not an ials_zoo influence predictor: {path} (bad content: {exc})") from None
+    if env_id is not None and region.domain != env_id:
+        raise ValueError(
+            f"{path} is an influence predictor for domain {region.domain!r}, not {env_id!r}"
+        )
+    if agent is not None and region.agent != agent:
+        raise ValueError(
+            f"{path} is an influence predictor for agent {region.agent!r} of {region.domain}, "
+            f"not for agent {agent!r}"
+        )
+    return pred
+
+
+__all__ = ["FORMAT", "FORMAT_VERSION", "load_predictor", "save_predictor"]

@@ -1,0 +1,134 @@
+"""The one vocabulary for influence predictors and training simulators.
+
+A *predictor spec* names the AIP of an IALS:
+
+==================  ==========================================================================
+``trained``          the AIP shipped with the package, else cached, else trained on demand
+``trained:gru``      the same with a given architecture (memory / no-memory AIP, paper §5.4)
+``trained:mlp``
+``untrained``        the domain's AIP network at a random initialisation (the paper's
+                     untrained-IALS); alias ``random-init``
+``uniform``          fixed per-class probabilities (``Domain.untrained_probs``, SPEC §3)
+``fixed:P``          F-IALS: each source "active" with probability P, in [0, 1]
+``marginal``         F-IALS with the empirical marginal of the trained AIP's data
+``PATH.pt``          a predictor file (any path ending in ``.pt`` or containing a separator)
+==================  ==========================================================================
+
+A *simulator spec* (``ials-zoo train --simulator``) is ``gs`` (the global simulator) or a
+predictor spec, with two historical aliases kept for the leaderboard's names: ``ials`` =
+``trained`` and ``untrained-ials`` = ``untrained``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+
+PREDICTOR_SPECS = "trained, trained:gru, trained:mlp, untrained, uniform, fixed:P, marginal or a .pt file"
+SIMULATOR_SPECS = "gs, ials, untrained-ials, uniform, fixed:P, marginal, trained:gru|mlp or a .pt file"
+SIMULATOR_ALIASES = {"ials": "trained", "untrained-ials": "untrained"}
+GS = "gs"
+
+
+@dataclass(frozen=True)
+class PredictorSpec:
+    """A parsed predictor spec.
+
+    Attributes:
+        kind: ``trained``, ``untrained``, ``uniform``, ``fixed``, ``marginal`` or ``file``.
+        arch: ``gru``/``mlp`` for ``trained:ARCH``, else None.
+        p: the probability of ``fixed:P``.
+        path: the file of ``file``.
+    """
+
+    kind: str
+    arch: str | None = None
+    p: float | None = None
+    path: str | None = None
+
+    def __str__(self) -> str:
+        if self.kind == "trained" and self.arch:
+            return f"trained:{self.arch}"
+        if self.kind == "fixed":
+            return f"fixed:{self.p:g}"
+        if self.kind == "file":
+            return str(self.path)
+        return self.kind
+
+
+def is_path(text) -> bool:
+    """Whether a spec names a file rather than a predictor kind."""
+    if isinstance(text, os.PathLike):
+        return True
+    return isinstance(text, str) and (text.endswith(".pt") or os.sep in text or (os.altsep or "\0") in text)
+
+
+def parse_predictor(text) -> PredictorSpec:
+    """Parse a predictor spec (see the module docstring); a ValueError naming the accepted
+    forms otherwise. A file spec is not opened here."""
+    if is_path(text):
+        return PredictorSpec("file", path=os.fspath(text))
+    if not isinstance(text, str):
+        raise TypeError(f"a predictor spec must be a string or a path, got {type(text).__name__}")
+    name = text.strip().lower()
+    if name in ("trained", "untrained", "uniform", "marginal"):
+        return PredictorSpec(name)
+    if name in ("random-init", "random_init"):
+        return PredictorSpec("untrained")
+    if name.startswith("trained:"):
+        arch = name.split(":", 1)[1]
+        if arch not in ("gru", "mlp"):
+            raise ValueError(f"bad predictor {text!r}; expected 'trained:gru' or 'trained:mlp'")
+        return PredictorSpec("trained", arch=arch)
+    if name.startswith("fixed:"):
+        try:
+            p = float(name.split(":", 1)[1])
+        except ValueError:
+            p = math.nan
+        if not 0.0 <= p <= 1.0:
+            raise ValueError(f"bad predictor {text!r}; expected fixed:P with P a number in [0, 1]")
+        return PredictorSpec("fixed", p=p)
+    raise ValueError(f"unknown influence predictor {text!r}; expected {PREDICTOR_SPECS}")
+
+
+def parse_simulator(text) -> PredictorSpec | None:
+    """Parse a simulator spec: None for the GS, else the IALS's :class:`PredictorSpec`."""
+    if isinstance(text, str) and text.strip().lower() == GS:
+        return None
+    if isinstance(text, str) and text.strip().lower() in SIMULATOR_ALIASES:
+        text = SIMULATOR_ALIASES[text.strip().lower()]
+    try:
+        spec = parse_predictor(text)
+    except ValueError:
+        raise ValueError(f"unknown simulator {text!r}; expected {SIMULATOR_SPECS}") from None
+    if spec.kind == "file" and not os.path.isfile(spec.path):
+        raise ValueError(f"simulator {text!r}: predictor file not found")
+    return spec
+
+
+def simulator_label(text, aip_variant: str | None = None) -> str:
+    """The training-simulator name a result carries: ``gs``, ``ials`` (a trained AIP, shipped
+    or from a file), ``untrained-ials``, ``uniform``, ``fixed:P``, ``marginal``. A predictor
+    file is named by what it holds (``aip_variant``, from its metadata)."""
+    spec = parse_simulator(text)
+    if spec is None:
+        return GS
+    if spec.kind == "file":
+        return "ials" if aip_variant in (None, "trained") else ("untrained-ials" if aip_variant == "untrained" else str(aip_variant))
+    if spec.kind == "trained":
+        return "ials" if spec.arch is None else f"ials:{spec.arch}"
+    if spec.kind == "untrained":
+        return "untrained-ials"
+    return str(spec)
+
+
+__all__ = [
+    "GS",
+    "PREDICTOR_SPECS",
+    "SIMULATOR_SPECS",
+    "PredictorSpec",
+    "parse_predictor",
+    "parse_simulator",
+    "simulator_label",
+]

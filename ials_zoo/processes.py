@@ -1,0 +1,117 @@
+"""Child processes that never outlive their parent, and pools that never hang on shutdown.
+
+Every process the zoo starts (SUMO workers, evaluation and collection pools, the SB3
+``SubprocVecEnv`` workers of a traffic run, the jobs of a study, DIALS learners) calls
+:func:`die_with_parent` first thing: on Linux the kernel then sends it ``SIGKILL`` when the
+parent dies, however the parent dies (Ctrl-C, ``SIGTERM``, ``kill -9``). Elsewhere a child
+notices its parent's death at its next pipe read (EOF).
+
+:func:`spawn_pool` is a ``ProcessPoolExecutor`` of fresh interpreters (``spawn``: nothing of a
+live libsumo simulation is inherited) whose workers die with this process and ignore
+``SIGINT`` (a Ctrl-C is the parent's to handle: it stops the pool, the workers do not each
+raise ``KeyboardInterrupt`` half-way through a task). :func:`shutdown_pool` stops one without
+waiting on a worker that no longer answers.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import contextlib
+import ctypes
+import multiprocessing
+import os
+import signal
+import sys
+
+_PR_SET_PDEATHSIG = 1
+
+
+def die_with_parent(sig: int = signal.SIGKILL, ignore_sigint: bool = False) -> None:
+    """Ask the kernel to send ``sig`` to this process when its parent dies (Linux), and exit
+    at once if the parent is already gone. ``ignore_sigint``: leave Ctrl-C to the parent."""
+    if ignore_sigint:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if sys.platform.startswith("linux"):
+        parent = os.getppid()
+        try:
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(_PR_SET_PDEATHSIG, int(sig), 0, 0, 0)
+        except (OSError, AttributeError):  # pragma: no cover - no prctl: rely on pipe EOF
+            return
+        if os.getppid() != parent or parent == 1:  # the parent died before prctl took effect
+            os._exit(1)
+
+
+def _pool_initializer(initializer, initargs) -> None:
+    die_with_parent(ignore_sigint=True)
+    if initializer is not None:
+        initializer(*initargs)
+
+
+def spawn_pool(max_workers: int, initializer=None, initargs=()) -> concurrent.futures.ProcessPoolExecutor:
+    """A process pool of fresh interpreters whose workers die with this process."""
+    return concurrent.futures.ProcessPoolExecutor(
+        max_workers=max_workers, mp_context=multiprocessing.get_context("spawn"),
+        initializer=_pool_initializer, initargs=(initializer, tuple(initargs)),
+    )
+
+
+def shutdown_pool(pool: concurrent.futures.ProcessPoolExecutor | None, kill: bool = False) -> None:
+    """Shut ``pool`` down; with ``kill`` (after an error or an interrupt) its workers are killed
+    first, so nothing waits on a task that will never finish."""
+    if pool is None:
+        return
+    if kill:
+        for proc in list(getattr(pool, "_processes", {}).values() or []):
+            with contextlib.suppress(Exception):
+                proc.kill()
+    with contextlib.suppress(Exception):
+        pool.shutdown(wait=not kill, cancel_futures=True)
+
+
+class WorkerError(RuntimeError):
+    """A worker process died, stopped answering, or took too long."""
+
+
+def recv_from(conn, process, what: str = "worker", timeout: float = 300.0,
+              stopped_after: float = 5.0):
+    """``conn.recv()`` that never waits forever: a :class:`WorkerError` naming ``what`` when
+    ``process`` (a ``multiprocessing.Process`` or ``subprocess.Popen``) dies, has been stopped
+    (``SIGSTOP``) for ``stopped_after`` seconds, or ``timeout`` seconds pass."""
+    import time
+
+    start = time.monotonic()
+    stopped_since = None
+    while not conn.poll(0.1):
+        now = time.monotonic()
+        alive = process.is_alive() if hasattr(process, "is_alive") else process.poll() is None
+        if not alive:
+            if conn.poll(0):  # it answered, then exited
+                break
+            raise WorkerError(f"the {what} (pid {process.pid}) died")
+        if process_state(process.pid) in ("T", "t"):
+            stopped_since = stopped_since or now
+            if now - stopped_since > stopped_after:
+                raise WorkerError(f"the {what} (pid {process.pid}) has been stopped for "
+                                  f"{now - stopped_since:.0f} s")
+        else:
+            stopped_since = None
+        if now - start > timeout:
+            raise WorkerError(f"the {what} (pid {process.pid}) did not answer within {timeout:.0f} s")
+    try:
+        return conn.recv()
+    except (EOFError, OSError) as exc:
+        raise WorkerError(f"the {what} (pid {process.pid}) closed its pipe: {exc}") from None
+
+
+def process_state(pid: int) -> str | None:
+    """The kernel's one-letter state of ``pid`` (``R``, ``S``, ``T`` stopped, ``Z`` zombie,
+    ...) from ``/proc``, or None where that cannot be read."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0]
+    except (OSError, IndexError):
+        return None
+
+
+__all__ = ["WorkerError", "die_with_parent", "process_state", "recv_from", "shutdown_pool", "spawn_pool"]

@@ -1,0 +1,55 @@
+"""The warehouse as a zoo domain: what generic code needs to know about it."""
+
+from __future__ import annotations
+
+import numpy as np
+from gymnasium import spaces
+
+from ials_zoo.core.domains import DIALSSettings, Domain, StudySettings
+from ials_zoo.warehouse import regions as R
+from ials_zoo.warehouse import render
+from ials_zoo.warehouse.env import parallel_env
+from ials_zoo.warehouse.local import local_simulator
+
+
+def episode_summary(env) -> dict[str, str]:
+    """Items collected by all robots, and the mean return of learners and scripted robots."""
+    returns = np.asarray(env.episode_returns, dtype=float)
+    learners = np.zeros(len(returns), bool)
+    learners[env.learner_indices] = True
+    out = {"items collected (all robots)": str(env.items_collected),
+           "mean return, learners": f"{returns[learners].mean():.3f} (n={learners.sum()})"}
+    if (~learners).any():
+        out["mean return, scripted robots"] = f"{returns[~learners].mean():.3f} (n={(~learners).sum()})"
+    return out
+
+
+DOMAIN = Domain(
+    env_id=R.DOMAIN_ID,
+    description="36 robots collect items from the shelves of a warehouse floor (numpy)",
+    parallel_env=parallel_env,
+    local_simulator=local_simulator,
+    region_spec=R.region_spec,
+    possible_agents=R.possible_agents,
+    observation_space=spaces.Box(0.0, 1.0, (R.OBS_SIZE,), np.float32),
+    action_space=spaces.Discrete(4),
+    default_agents=("robot_20",),
+    default_predictor="gru",
+    episode_length=R.DEFAULT_MAX_CYCLES,
+    frame_stack=8,
+    agent_options=("robots",),
+    null_influence=R.NONE,
+    untrained_probs=((0.25, 0.25, 0.25, 0.25),) * R.N_SOURCES,
+    scaling=("robots", ((4, 4), (6, 6), (10, 10))),
+    legend=render.LEGEND,
+    episode_summary=episode_summary,
+    # Fed the GS's own actions and u_t from the same start, the LS differs only where items
+    # appear at other times (its own draws); the exact replay, with the GS's draws, is
+    # tests/test_warehouse_local.py.
+    replay_agreement=0.85,
+    study=StudySettings(budget=2_000_000, ppo_steps_per_second={"gs": 4900.0, "ials": 6300.0},
+                        memory_variant={"item_lifetime": 8}, multi_agent_budget=500_000),
+    # SPEC §6: the warehouse AIP is a GRU (hidden 64, lr 1e-3) trained once, at the start.
+    dials=DIALSSettings(aip_arch="gru", aip_hidden=64, aip_lr=1e-3, aip_epochs=40, rollout_steps=8,
+                        collect_steps=10_000, refresh=0),
+)
