@@ -22,7 +22,7 @@ declare it in the ``ials_zoo.domains`` entry point group).
 
 __version__ = "0.2.0"
 
-from ials_zoo.core.domains import Domain, domain_ids, get_domain, register_domain  # noqa: E402
+from ials_zoo.core.domains import Domain, domain_ids, get_domain, register_domain
 
 
 def make_ials(*args, **kwargs):

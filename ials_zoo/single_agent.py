@@ -29,6 +29,7 @@ from gymnasium import spaces
 
 from ials_zoo.core.domains import get_domain
 
+
 def needs_own_process(env_id: str) -> bool:
     """True when each GS of ``env_id`` must live in its own process (SUMO via libsumo):
     ``Domain.one_simulation_per_process``."""

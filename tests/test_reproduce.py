@@ -280,7 +280,7 @@ def test_memory_budget_is_separate_from_the_training_budget():
     import argparse
 
     from ials_zoo.commands.reproduce import config_from_args, configure
-    from ials_zoo.reproduce.plan import DEFAULT_BUDGETS, DEFAULT_MEMORY_BUDGET
+    from ials_zoo.reproduce.plan import DEFAULT_MEMORY_BUDGET, default_budgets
 
     parser = argparse.ArgumentParser()
     configure(parser)
@@ -293,7 +293,7 @@ def test_memory_budget_is_separate_from_the_training_budget():
 
     # defaults: the published study (2M warehouse training runs, 500k memory runs)
     steps, cfg = memory_steps([])
-    assert steps == DEFAULT_MEMORY_BUDGET and cfg.budget_for("warehouse_v0") == DEFAULT_BUDGETS["warehouse_v0"]
+    assert steps == DEFAULT_MEMORY_BUDGET and cfg.budget_for("warehouse_v0") == default_budgets()["warehouse_v0"]
     assert memory_steps(["--memory-budget", "700"])[0] == 700
     # a quick study with --budget shrinks the memory runs too, unless told otherwise
     assert memory_steps(["--budget", "2000"])[0] == 2000

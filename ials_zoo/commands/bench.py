@@ -30,11 +30,6 @@ import numpy as np
 from ials_zoo.core.domains import domain_ids, get_domain
 from ials_zoo.utils import atomic_write_text
 
-SCALING_SIZES = {
-    "traffic_grid_v0": ("grid", [(3, 3), (5, 5), (7, 7), (10, 10)]),
-    "warehouse_v0": ("robots", [(4, 4), (6, 6), (10, 10)]),
-}
-
 
 def configure(parser):
     parser.add_argument("--domain", choices=["all", *domain_ids()], default="all")
@@ -152,7 +147,9 @@ def bench_scaling(env_id: str, steps: int | None, seed: int) -> list[dict]:
     the default ``ials-zoo bench`` table.
     """
     domain = get_domain(env_id)
-    key, sizes = SCALING_SIZES[env_id]
+    if domain.scaling is None:
+        return []
+    key, sizes = domain.scaling
     rows = []
     for size in sizes:
         options = {key: size}
@@ -183,8 +180,10 @@ def _plot_scaling(rows: list[dict], path: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
-    for ax, env_id in zip(axes, SCALING_SIZES):
+    domains = sorted({r["domain"] for r in rows})
+    fig, axes = plt.subplots(1, max(len(domains), 1), figsize=(5 * max(len(domains), 1), 4), squeeze=False)
+    axes = axes[0]
+    for ax, env_id in zip(axes, domains):
         sel = [r for r in rows if r["domain"] == env_id]
         if not sel:
             ax.set_visible(False)

@@ -15,12 +15,14 @@ off-policy cross-entropy). Each run is a subprocess writing into its own folder 
 continued across invocations. Afterwards the finished training runs are submitted to the
 leaderboard and ``<leaderboard>/reproduction.md`` + curve PNGs are re-made.
 
-Default budget: 2,000,000 PPO steps per warehouse run (the paper's), 300,000 per traffic run
-(paper: 2M) and 500,000 per memory-experiment run; see the ``--budget`` help and
-``ials_zoo.reproduce.plan.DEFAULT_BUDGETS`` for why.
+Default budget: each domain's ``Domain.study.budget`` (2,000,000 PPO steps per warehouse run,
+the paper's; 300,000 per traffic run, paper: 2M, because the SUMO GS trains ~5x slower and its
+curves are flat from ~100k steps) and 500,000 per memory-experiment run; see ``--budget``.
 """
 
 from __future__ import annotations
+
+from ials_zoo.commands import CommandError
 
 
 def _csv(text: str) -> tuple:
@@ -28,29 +30,27 @@ def _csv(text: str) -> tuple:
 
 
 def configure(parser):
+    from ials_zoo.core.domains import domain_ids
     from ials_zoo.reproduce.plan import (
-        DEFAULT_BUDGETS,
         DEFAULT_MEMORY_BUDGET,
         DEFAULT_SIMULATORS,
-        DOMAINS,
         EXPERIMENTS,
         Config,
+        default_budgets,
     )
 
     c = Config()
     parser.add_argument("--experiments", default=",".join(EXPERIMENTS),
                         help=f"comma-separated, some of {','.join(EXPERIMENTS)} (default: all)")
-    parser.add_argument("--domains", default=",".join(DOMAINS), help="comma-separated domain ids (default: both)")
+    parser.add_argument("--domains", default=",".join(domain_ids()), help="comma-separated domain ids (default: all)")
     parser.add_argument("--agents", default="",
                         help="learning agents, e.g. tls_12,tls_18 (default: robot_20 and tls_12)")
     parser.add_argument("--simulators", default=",".join(DEFAULT_SIMULATORS),
                         help="training simulators of the 'training' experiment (gs required; 'marginal' optional)")
     parser.add_argument("--budget", default=None,
                         help="PPO environment steps per run: N for every domain, and/or DOMAIN=N pairs, "
-                             "e.g. 200000 or warehouse_v0=1000000,traffic_grid_v0=300000 (default "
-                             f"{DEFAULT_BUDGETS['warehouse_v0']} for the warehouse, as in the paper, "
-                             f"{DEFAULT_BUDGETS['traffic_grid_v0']} for traffic, whose SUMO GS trains ~5x "
-                             "slower and whose curves are flat from ~100k steps)")
+                             "e.g. 200000 or warehouse_v0=1000000,traffic_grid_v0=300000 (default: "
+                             + ", ".join(f"{d}={b}" for d, b in default_budgets().items()) + ")")
     parser.add_argument("--memory-budget", type=int, default=None,
                         help="PPO environment steps per run of the memory experiment (12 warehouse runs; "
                              f"default {DEFAULT_MEMORY_BUDGET}, or the warehouse's budget when --budget is given)")
@@ -103,9 +103,9 @@ def parse_budget(text, default: int, default_domains: dict) -> tuple[int, dict]:
 
 def config_from_args(args):
     """The :class:`~ials_zoo.reproduce.plan.Config` of parsed command-line ``args``."""
-    from ials_zoo.reproduce.plan import DEFAULT_BUDGETS, DEFAULT_MEMORY_BUDGET, Config
+    from ials_zoo.reproduce.plan import DEFAULT_MEMORY_BUDGET, Config, default_budgets
 
-    budget, per = parse_budget(args.budget, Config.budget, DEFAULT_BUDGETS)
+    budget, per = parse_budget(args.budget, Config.budget, default_budgets())
     memory_budget = args.memory_budget
     if memory_budget is None and args.budget is None:
         memory_budget = DEFAULT_MEMORY_BUDGET
@@ -129,7 +129,7 @@ def run(args) -> int:
     try:
         cfg = config_from_args(args)
     except ValueError as exc:
-        raise SystemExit(f"ials-zoo reproduce: {exc}") from None
+        raise CommandError(str(exc)) from None
     jobs = build_plan(cfg)
     if args.dry_run:
         print(describe_plan(jobs))
@@ -139,7 +139,7 @@ def run(args) -> int:
         try:
             status = run_jobs(jobs, n_jobs=cfg.jobs, progress=not args.no_progress, lock_dir=cfg.out)
         except (ValueError, RuntimeError) as exc:
-            raise SystemExit(f"ials-zoo reproduce: {exc}") from None
+            raise CommandError(str(exc)) from None
         print(f"jobs: {len(status['done'])} run, {len(status['skipped'])} already done, "
               f"{len(status['failed'])} failed, {len(status['blocked'])} blocked")
         for jid in status["failed"]:

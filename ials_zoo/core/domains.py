@@ -44,12 +44,16 @@ class StudySettings:
             ``"ials"`` simulator, only used to start the longest runs first.
         memory_variant: GS options of the domain's memory variant (paper §5.4), or None when
             the domain has none; the memory experiment runs on domains that have one.
+        lifetime_probes: ``(gs_probe, ls_probe)``: ``gs_probe(env, agent)`` and
+            ``ls_probe(local_simulator)`` return the ages of the items in a region (0: no
+            item), for the memory experiment's item-lifetime histograms; None without items.
         multi_agent_budget: PPO steps *per agent* of a multi-agent (DIALS / IPPO) run.
     """
 
     budget: int = 500_000
     ppo_steps_per_second: dict = field(default_factory=lambda: {"gs": 1000.0, "ials": 5000.0})
     memory_variant: dict | None = None
+    lifetime_probes: tuple | None = None
     multi_agent_budget: int = 200_000
 
 

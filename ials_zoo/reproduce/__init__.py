@@ -33,7 +33,7 @@ def reproduce(cfg: Config, progress: bool = True, report: bool = True, submit: b
 def settings(cfg: Config) -> dict:
     """The settings that shape the numbers (printed in reproduction.md)."""
     budgets = {d: cfg.budget_for(d) for d in cfg.domains}
-    return {"budget": budgets, "memory_budget": cfg.memory_budget_steps(), "seeds": cfg.seeds, "jobs": cfg.jobs, "net_arch": cfg.net_arch,
+    return {"budget": budgets, "memory_budget": cfg.memory_budget if cfg.memory_budget is not None else "the domain's budget", "seeds": cfg.seeds, "jobs": cfg.jobs, "net_arch": cfg.net_arch,
             "n_envs": cfg.n_envs, "eval_points": cfg.eval_points, "eval_episodes": cfg.eval_episodes,
             "final_eval_episodes": cfg.final_eval_episodes, "aip_steps": cfg.aip_steps,
             "collect_workers": cfg.collect_workers,

@@ -84,36 +84,31 @@ def item_lifetimes(ages) -> list[int]:
     return sorted(int(x) for x in cur[ended])
 
 
-def _region_item_ages(env, agent: str) -> np.ndarray:
-    from ials_zoo.warehouse import regions as R
-
-    idx = R.agent_index(agent, env.robots)
-    r, c = divmod(idx, env.robots[1])
-    floor = env.item_ages_floor()
-    return np.array([floor[4 * r + i, 4 * c + j] for i, j in R.ITEM_CELLS], dtype=np.int64)
-
-
 def record_item_ages(env_id: str, agent: str, simulator: str = "gs", episodes: int = 10,
                      seed: int = 0, policy=None, **options) -> list[np.ndarray]:
-    """Item ages ``[T+1, 12]`` of ``agent``'s region per episode, in the warehouse GS
-    (``simulator="gs"``) or an IALS (``simulator`` = a predictor spec for ``make_ials``).
-    ``policy``: ``obs -> action`` (default uniform random)."""
-    if env_id != "warehouse_v0":
-        raise ValueError(f"item lifetimes are a warehouse measurement, got env_id {env_id!r}")
+    """Item ages ``[T+1, K]`` of ``agent``'s region per episode, in the GS
+    (``simulator="gs"``) or an IALS (``simulator`` = a predictor spec for ``make_ials``), for a
+    domain with ``Domain.study.lifetime_probes`` (the warehouse). ``policy``: ``obs -> action``
+    (default uniform random)."""
+    from ials_zoo.core.domains import get_domain
+
+    domain = get_domain(env_id)
+    if domain.study.lifetime_probes is None:
+        raise ValueError(f"{env_id} has no items whose lifetimes could be measured "
+                         "(Domain.study.lifetime_probes is not set)")
+    gs_probe, ls_probe = domain.study.lifetime_probes
     rng = np.random.default_rng(seed)
-    act = policy or (lambda obs: int(rng.integers(4)))
+    act = policy or (lambda obs: int(rng.integers(domain.n_actions)))
     out = []
     if simulator == "gs":
-        from ials_zoo.core.domains import get_domain
-
-        env = get_domain(env_id).parallel_env(learners=[agent], **options)
+        env = domain.parallel_env(learners=[agent], **options)
         try:
             for ep in range(episodes):
                 obs, _ = env.reset(seed=seed + ep)
-                rows = [_region_item_ages(env, agent)]
+                rows = [gs_probe(env, agent)]
                 while env.agents:
                     obs, *_ = env.step({agent: act(obs[agent])})
-                    rows.append(_region_item_ages(env, agent))
+                    rows.append(gs_probe(env, agent))
                 out.append(np.stack(rows))
         finally:
             env.close()
@@ -124,12 +119,11 @@ def record_item_ages(env_id: str, agent: str, simulator: str = "gs", episodes: i
     try:
         for ep in range(episodes):
             obs, _ = env.reset(seed=seed + ep)
-            # The warehouse LS's public state: (positions, item ages [n_envs, 12]); one copy here.
-            rows = [env.ls.get_state()[1][0]]
+            rows = [ls_probe(env.ls)]
             done = False
             while not done:
                 obs, _, term, trunc, _ = env.step(act(obs))
-                rows.append(env.ls.get_state()[1][0])
+                rows.append(ls_probe(env.ls))
                 done = term or trunc
             out.append(np.stack(rows))
     finally:
@@ -225,7 +219,9 @@ def off_policy_cross_entropy(predictors: dict, on_policy, on_policy_episodes, of
 def biased_policy(env_id: str, seed: int = 0, p: float = 0.7):
     """A random policy that takes action 0 with probability ``p`` (traffic: keep the green,
     so the light switches rarely; warehouse: mostly up)."""
-    n = 2 if env_id.startswith("traffic") else 4  # SPEC: Discrete(2) / Discrete(4)
+    from ials_zoo.core.domains import get_domain
+
+    n = get_domain(env_id).n_actions
     rng = np.random.default_rng(seed)
 
     def act(obs):

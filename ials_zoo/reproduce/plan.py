@@ -22,24 +22,25 @@ import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ials_zoo.core.domains import domain_ids, domain_of_agent, get_domain
+
 EXPERIMENTS = ("training", "memory", "dset")
-DOMAINS = ("warehouse_v0", "traffic_grid_v0")
-# The paper's agents: warehouse robot 20; traffic intersection 12 (and 18, opt-in: --agents).
-DEFAULT_AGENTS = {"warehouse_v0": ("robot_20",), "traffic_grid_v0": ("tls_12",)}
 DEFAULT_SIMULATORS = ("gs", "ials", "untrained-ials", "fixed:0.1")
 KNOWN_SIMULATORS = DEFAULT_SIMULATORS + ("marginal",)
-MEMORY_LIFETIME = 8  # SPEC §1 memory variant
-# Default PPO steps per run: what the published study (leaderboard/reproduction.md) used.
-# Measured on a quiet 2-core machine, ppo_single runs ~4,900 steps/s on the warehouse GS (so
-# the paper's 2M steps take ~7 min, and the curves still rise at 500k-1M), but ~1,000 on the
-# SUMO traffic GS, whose curves are flat from ~100k steps on: 300k keeps the traffic GS runs at
-# ~5 min. The memory experiment (12 warehouse runs) compares simulators with each other, not
-# with the GS's wall-clock, and uses 500k (``Config.memory_budget``).
-DEFAULT_BUDGETS = {"warehouse_v0": 2_000_000, "traffic_grid_v0": 300_000}
+# The memory experiment (12 runs) compares simulators with each other, not with the GS's
+# wall-clock: 500k steps per run (``Config.memory_budget``). Each domain's own default budget
+# is ``Domain.study.budget`` (what the published study used).
 DEFAULT_MEMORY_BUDGET = 500_000
-# Rough ppo_single steps/s measured here, only used to start the longest runs first.
-NOMINAL_STEPS_PER_SECOND = {("traffic_grid_v0", "gs"): 1000, ("traffic_grid_v0", "ials"): 5000,
-                            ("warehouse_v0", "gs"): 4900, ("warehouse_v0", "ials"): 6300}
+
+
+def default_budgets() -> dict:
+    """PPO steps per single-agent run of each domain (``Domain.study.budget``)."""
+    return {d: get_domain(d).study.budget for d in domain_ids()}
+
+
+def memory_domains() -> tuple:
+    """The domains with a memory variant (paper §5.4): ``Domain.study.memory_variant``."""
+    return tuple(d for d in domain_ids() if get_domain(d).study.memory_variant)
 
 
 @dataclass
@@ -47,7 +48,7 @@ class Config:
     """Settings of one study (the options of ``ials-zoo reproduce``)."""
 
     experiments: tuple = EXPERIMENTS
-    domains: tuple = DOMAINS
+    domains: tuple = field(default_factory=lambda: tuple(domain_ids()))
     agents: tuple = ()  # extra/override agents, e.g. ("tls_12", "tls_18")
     simulators: tuple = DEFAULT_SIMULATORS
     budget: int = 500_000  # PPO environment steps per run (see DEFAULT_BUDGETS)
@@ -70,7 +71,7 @@ class Config:
 
     def check(self) -> Config:
         """Clear errors for bad settings; returns self."""
-        for name, allowed in (("experiments", EXPERIMENTS), ("domains", DOMAINS),
+        for name, allowed in (("experiments", EXPERIMENTS), ("domains", tuple(domain_ids())),
                               ("simulators", KNOWN_SIMULATORS)):
             values = tuple(getattr(self, name))
             if not values:
@@ -81,8 +82,8 @@ class Config:
         if "gs" not in self.simulators:
             raise ValueError(f"simulators {list(self.simulators)} must include 'gs' (the reference)")
         for env_id, steps in dict(self.domain_budgets).items():
-            if env_id not in DOMAINS:
-                raise ValueError(f"unknown domain {env_id!r} in domain_budgets; expected one of {list(DOMAINS)}")
+            if env_id not in domain_ids():
+                raise ValueError(f"unknown domain {env_id!r} in domain_budgets; expected one of {domain_ids()}")
             if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
                 raise ValueError(f"budget of {env_id} must be a positive int, got {steps!r}")
         for name in ("budget", "seeds", "jobs", "collect_workers", "n_envs", "eval_points", "eval_episodes",
@@ -96,14 +97,14 @@ class Config:
         if self.aip_epochs is not None and (not isinstance(self.aip_epochs, int) or self.aip_epochs < 0):
             raise ValueError(f"aip_epochs must be None or an int >= 0, got {self.aip_epochs!r}")
         for a in self.agents:
-            if domain_of_agent(a) is None:
-                raise ValueError(f"unknown agent {a!r}; expected e.g. robot_20, tls_12, tls_18")
+            domain_of_agent(a)  # one domain has it, else a ValueError naming the problem
         return self
 
     def agents_of(self, env_id: str) -> tuple:
-        """The learning agents of ``env_id`` in this study (``--agents`` overrides per domain)."""
+        """The learning agents of ``env_id`` in this study (``--agents`` overrides per domain;
+        default: the domain's first paper agent)."""
         mine = tuple(a for a in self.agents if domain_of_agent(a) == env_id)
-        return mine or DEFAULT_AGENTS[env_id]
+        return mine or get_domain(env_id).default_agents[:1]
 
     def budget_for(self, env_id: str) -> int:
         """PPO steps per run in ``env_id`` (a per-domain budget wins over ``budget``)."""
@@ -111,29 +112,18 @@ class Config:
 
     def collect_workers_for(self, env_id: str) -> int:
         """GS processes collecting a training AIP's data: ``collect_workers`` where each GS
-        needs its own process anyway (SUMO), else 1 (the numpy warehouse collects 50k steps
-        in ~2 s, less than starting processes costs)."""
-        from ials_zoo.single_agent import needs_own_process
+        needs its own process anyway (SUMO), else 1 (a numpy GS collects 50k steps in ~2 s,
+        less than starting processes costs)."""
+        return self.collect_workers if get_domain(env_id).one_simulation_per_process else 1
 
-        return self.collect_workers if needs_own_process(env_id) else 1
-
-    def memory_budget_steps(self) -> int:
-        """PPO steps per run of the memory experiment."""
-        return self.budget_for("warehouse_v0") if self.memory_budget is None else int(self.memory_budget)
+    def memory_budget_steps(self, env_id: str) -> int:
+        """PPO steps per run of the memory experiment in ``env_id``."""
+        return self.budget_for(env_id) if self.memory_budget is None else int(self.memory_budget)
 
     def eval_every(self, env_id: str | None = None, budget: int | None = None) -> int:
         if budget is None:
             budget = self.budget if env_id is None else self.budget_for(env_id)
         return max(1, -(-budget // self.eval_points))
-
-
-def domain_of_agent(agent: str) -> str | None:
-    """The domain an agent id belongs to (robot_* -> warehouse, tls_* -> traffic)."""
-    if agent.startswith("robot_"):
-        return "warehouse_v0"
-    if agent.startswith("tls_"):
-        return "traffic_grid_v0"
-    return None
 
 
 @dataclass
@@ -181,7 +171,7 @@ class Job:
         p = self.params
         if self.kind == "ppo":
             sim = "gs" if p["simulator"] == "gs" else "ials"
-            rate = NOMINAL_STEPS_PER_SECOND.get((p["env_id"], sim), 1000)
+            rate = get_domain(p["env_id"]).study.ppo_steps_per_second.get(sim, 1000.0)
             return (1, -p["total_timesteps"] / rate)
         return (1, 0.0)
 
@@ -251,43 +241,44 @@ def plan_training(cfg: Config) -> list[Job]:
 
 
 def plan_memory(cfg: Config) -> list[Job]:
-    """Paper §5.4 (warehouse with ``item_lifetime=8``): M-IALS (GRU AIP) vs NM-IALS (MLP AIP)
-    x agents with (frame stack 8) and without (1) memory, plus the item-lifetime histograms."""
-    if "warehouse_v0" not in cfg.domains:
-        return []
+    """Paper §5.4, on every domain with a memory variant (``Domain.study.memory_variant``,
+    the warehouse's ``item_lifetime=8``): M-IALS (GRU AIP) vs NM-IALS (MLP AIP) x agents with
+    (the domain's frame stack) and without (1) memory, plus the item-lifetime histograms."""
     jobs = []
-    options = {"item_lifetime": MEMORY_LIFETIME}
-    for agent in cfg.agents_of("warehouse_v0"):
-        base = Path(cfg.out) / "memory" / f"warehouse_v0__{agent}"
-        aips = {}
-        for arch in ("gru", "mlp"):
-            d = base / f"aip_{arch}"
-            aips[arch] = Job(id=f"memory/{agent}/aip_{arch}", kind="aip", dir=str(d),
-                             marker="report.json", experiment="memory", label=f"aip_{arch}",
-                             params={"env_id": "warehouse_v0", "agent": agent, "steps": cfg.aip_steps,
-                                     "epochs": cfg.aip_epochs, "seed": 0, "options": options,
-                                     "arch": arch})
-            jobs.append(aips[arch])
-        for arch, name in (("gru", "M-IALS"), ("mlp", "NM-IALS")):
-            for fs in (8, 1):
-                for seed in range(cfg.seeds):
-                    d = base / f"{name}__fs{fs}__s{seed}"
-                    params = _ppo_params(cfg, "warehouse_v0", agent, str(Path(aips[arch].dir) / "aip.pt"),
-                                         seed, d, f"ials-zoo reproduce (memory, {name}, frame stack {fs})",
-                                         budget=cfg.memory_budget_steps())
-                    # ppo_single trains on, and scores on, the item_lifetime=8 variant.
-                    params.update(frame_stack=fs, env_options=json.dumps(options, sort_keys=True))
-                    jobs.append(Job(id=f"memory/{agent}/{name}/fs{fs}/s{seed}", kind="ppo",
-                                    dir=str(d), marker="result.json", deps=[aips[arch].id],
-                                    experiment="memory", label=f"{name} fs{fs}", params=params))
-        d = base / "lifetimes"
-        jobs.append(Job(id=f"memory/{agent}/lifetimes", kind="lifetimes", dir=str(d),
-                        marker="lifetimes.json", deps=[aips["gru"].id, aips["mlp"].id],
-                        experiment="memory", label="lifetimes",
-                        params={"env_id": "warehouse_v0", "agent": agent, "options": options,
-                                "episodes": cfg.lifetime_episodes,
-                                "aips": {"M-IALS": str(Path(aips["gru"].dir) / "aip.pt"),
-                                         "NM-IALS": str(Path(aips["mlp"].dir) / "aip.pt")}}))
+    for env_id in [d for d in cfg.domains if d in memory_domains()]:
+        options = dict(get_domain(env_id).study.memory_variant)
+        stack = get_domain(env_id).frame_stack
+        for agent in cfg.agents_of(env_id):
+            base = Path(cfg.out) / "memory" / f"{env_id}__{agent}"
+            aips = {}
+            for arch in ("gru", "mlp"):
+                d = base / f"aip_{arch}"
+                aips[arch] = Job(id=f"memory/{agent}/aip_{arch}", kind="aip", dir=str(d),
+                                 marker="report.json", experiment="memory", label=f"aip_{arch}",
+                                 params={"env_id": env_id, "agent": agent, "steps": cfg.aip_steps,
+                                         "epochs": cfg.aip_epochs, "seed": 0, "options": options,
+                                         "arch": arch})
+                jobs.append(aips[arch])
+            for arch, name in (("gru", "M-IALS"), ("mlp", "NM-IALS")):
+                for fs in sorted({stack, 1}, reverse=True):
+                    for seed in range(cfg.seeds):
+                        d = base / f"{name}__fs{fs}__s{seed}"
+                        params = _ppo_params(cfg, env_id, agent, str(Path(aips[arch].dir) / "aip.pt"),
+                                             seed, d, f"ials-zoo reproduce (memory, {name}, frame stack {fs})",
+                                             budget=cfg.memory_budget_steps(env_id))
+                        # ppo_single trains on, and scores on, the memory variant.
+                        params.update(frame_stack=fs, env_options=json.dumps(options, sort_keys=True))
+                        jobs.append(Job(id=f"memory/{agent}/{name}/fs{fs}/s{seed}", kind="ppo",
+                                        dir=str(d), marker="result.json", deps=[aips[arch].id],
+                                        experiment="memory", label=f"{name} fs{fs}", params=params))
+            d = base / "lifetimes"
+            jobs.append(Job(id=f"memory/{agent}/lifetimes", kind="lifetimes", dir=str(d),
+                            marker="lifetimes.json", deps=[aips["gru"].id, aips["mlp"].id],
+                            experiment="memory", label="lifetimes",
+                            params={"env_id": env_id, "agent": agent, "options": options,
+                                    "episodes": cfg.lifetime_episodes,
+                                    "aips": {"M-IALS": str(Path(aips["gru"].dir) / "aip.pt"),
+                                             "NM-IALS": str(Path(aips["mlp"].dir) / "aip.pt")}}))
     return jobs
 
 

@@ -24,6 +24,16 @@ def episode_summary(env) -> dict[str, str]:
     return out
 
 
+def gs_item_ages(env, agent: str) -> np.ndarray:
+    """The ages of the 12 items of ``agent``'s region in the GS ``env`` (0: no item)."""
+    return env.get_region_state(agent)[1]
+
+
+def ls_item_ages(ls) -> np.ndarray:
+    """The ages of the 12 items of a single-copy local simulator (0: no item)."""
+    return ls.get_state()[1][0]
+
+
 DOMAIN = Domain(
     env_id=R.DOMAIN_ID,
     description="36 robots collect items from the shelves of a warehouse floor (numpy)",
@@ -48,7 +58,8 @@ DOMAIN = Domain(
     # tests/test_warehouse_local.py.
     replay_agreement=0.85,
     study=StudySettings(budget=2_000_000, ppo_steps_per_second={"gs": 4900.0, "ials": 6300.0},
-                        memory_variant={"item_lifetime": 8}, multi_agent_budget=500_000),
+                        memory_variant={"item_lifetime": 8}, lifetime_probes=(gs_item_ages, ls_item_ages),
+                        multi_agent_budget=500_000),
     # SPEC §6: the warehouse AIP is a GRU (hidden 64, lr 1e-3) trained once, at the start.
     dials=DIALSSettings(aip_arch="gru", aip_hidden=64, aip_lr=1e-3, aip_epochs=40, rollout_steps=8,
                         collect_steps=10_000, refresh=0),
