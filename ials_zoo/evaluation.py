@@ -1,29 +1,31 @@
-"""Scoring a policy on the global simulator (SPEC §3: "a policy trained anywhere is scored on
-the GS, with the other agents scripted").
+"""Scoring policies on the global simulator (SPEC §3: "a policy trained anywhere is scored on
+the GS"): one agent among scripted neighbours, or every agent at once (the multi-agent track).
 
-Protocol (the same for every leaderboard entry):
+Protocol (the same for every leaderboard entry, :data:`PROTOCOL_EPISODES` episodes):
 
-* the policy controls one agent of the GS; every other agent runs its scripted controller;
-* episode ``i`` (``i = 0 .. episodes-1``) is reset with seed ``EVAL_SEED_BASE + i``
-  (:data:`EVAL_SEED_BASE` = 10,000, far from the small seeds used for training), so every
-  policy is scored on the same episodes;
-* a stochastic policy samples its actions from a generator seeded with the episode seed, so a
-  score is reproducible bit for bit for a fixed seed set (on the same software);
-* the score is the mean episodic (undiscounted) return over the episodes, with a 95%
-  confidence interval from the Student t-distribution over episodes:
-  ``mean +- t_{0.975, n-1} * s / sqrt(n)`` with ``s`` the sample standard deviation
-  (``ddof=1``); with a single episode the interval is ``[mean, mean]`` (undefined width is
-  reported as zero and flagged by ``n == 1``).
+* single-agent track (:func:`evaluate`): the policy controls one agent of the GS; every other
+  agent runs its scripted controller;
+* multi-agent track (:func:`evaluate_joint`): every agent of the GS (or the listed ones) acts
+  with its own policy (a joint policy file holds one set of weights per agent); the score of
+  an episode is the mean over agents of each agent's episodic return;
+* episode ``i`` is reset with seed ``EVAL_SEED_BASE + i`` (:data:`EVAL_SEED_BASE` = 10,000, far
+  from the small seeds used for training), so every policy is scored on the same episodes;
+* a stochastic policy draws its actions from a generator seeded with the episode seed
+  (:meth:`ials_zoo.policy.PolicyNetwork.act`), so a score is reproducible exactly;
+* the score is the mean episodic (undiscounted) return with a 95% BCa bootstrap interval over
+  the episodes (:mod:`ials_zoo.stats`).
 
 Policies (:func:`load_policy`):
 
 * ``"random"``: uniform random actions (reference);
-* ``"scripted"``: the domain's own scripted controller drives the agent (reference; the GS is
-  built with ``scripted_learners=True`` so the agent is still observed and rewarded);
-* a path to a saved baseline model (SB3 ``.zip``) with its metadata sidecar
-  (``<name>.meta.json``, written by the baselines): the frame stack comes from the metadata;
-* ``"package.module:function"``: any importable callable ``fn(obs) -> action``; it reads the
-  current observation unless it has an integer attribute ``frame_stack``.
+* ``"scripted"``: the domain's own scripted controller drives the agent(s) (reference; the GS
+  is built with ``scripted_learners=True`` so they are still observed and rewarded);
+* a policy file (``.safetensors``, :mod:`ials_zoo.policy`) -- weights and JSON, never code;
+* an SB3 PPO model zip with its metadata sidecar (``<name>.meta.json``, written by the
+  baselines), read safely (weights only, serialized fields ignored);
+* ``"module:function"``: an importable callable ``fn(obs) -> action`` (the current directory
+  is importable); it reads ``fn.frame_stack`` observations (default 1), stacked as below.
+  Such code runs on your machine only: a result of a callable policy can never be submitted.
 
 Frame stacking follows SB3's ``VecFrameStack`` exactly (newest observation last, zeros before
 the first observation of an episode), so a model trained with ``VecFrameStack`` sees here what
@@ -35,8 +37,9 @@ from __future__ import annotations
 import hashlib
 import importlib
 import json
-import math
 import os
+import sys
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -45,107 +48,33 @@ from typing import Any
 import numpy as np
 
 from ials_zoo.core.domains import get_domain
+from ials_zoo.policy import (
+    PolicyNetwork,
+    is_policy_file,
+    load_policy_file,
+    policy_from_sb3_zip,
+)
+from ials_zoo.stats import CI_LEVEL, EPISODES_METHOD, bootstrap_interval
 
 EVAL_SEED_BASE = 10_000
 """Episode ``i`` of an evaluation is reset with seed ``EVAL_SEED_BASE + i``."""
+PROTOCOL_EPISODES = 20
+"""Episodes of the official protocol (seeds ``EVAL_SEED_BASE .. EVAL_SEED_BASE + 19``)."""
 
-CI_LEVEL = 0.95
 REFERENCE_POLICIES = ("random", "scripted")
 META_SUFFIX = ".meta.json"
 
 
-def eval_seeds(episodes: int, base: int = EVAL_SEED_BASE) -> list[int]:
+def eval_seeds(episodes: int = PROTOCOL_EPISODES, base: int = EVAL_SEED_BASE) -> list[int]:
     """The documented evaluation seed set: ``base, base+1, ..., base+episodes-1``."""
-    if int(episodes) < 1:
+    if isinstance(episodes, bool) or int(episodes) < 1:
         raise ValueError(f"episodes must be >= 1, got {episodes}")
     return [base + i for i in range(int(episodes))]
 
 
-# --------------------------------------------------------------------------------------------
-# Statistics (no scipy in the dependencies: the t quantile is computed here).
-
-
-def _betacf(a: float, b: float, x: float) -> float:
-    # Continued fraction of the regularised incomplete beta function (modified Lentz).
-    tiny = 1e-300
-    qab, qap, qam = a + b, a + 1.0, a - 1.0
-    c, d = 1.0, 1.0 - qab * x / qap
-    d = 1.0 / (d if abs(d) > tiny else tiny)
-    h = d
-    for m in range(1, 500):
-        m2 = 2 * m
-        aa = m * (b - m) * x / ((qam + m2) * (a + m2))
-        d = 1.0 + aa * d
-        d = 1.0 / (d if abs(d) > tiny else tiny)
-        c = 1.0 + aa / c
-        c = c if abs(c) > tiny else tiny
-        h *= d * c
-        aa = -(a + m) * (qab + m) * x / ((a + m2) * (qap + m2))
-        d = 1.0 + aa * d
-        d = 1.0 / (d if abs(d) > tiny else tiny)
-        c = 1.0 + aa / c
-        c = c if abs(c) > tiny else tiny
-        delta = d * c
-        h *= delta
-        if abs(delta - 1.0) < 1e-15:
-            break
-    return h
-
-
-def _betainc(a: float, b: float, x: float) -> float:
-    if x <= 0.0:
-        return 0.0
-    if x >= 1.0:
-        return 1.0
-    lbeta = math.lgamma(a + b) - math.lgamma(a) - math.lgamma(b)
-    front = math.exp(lbeta + a * math.log(x) + b * math.log1p(-x))
-    if x < (a + 1.0) / (a + b + 2.0):
-        return front * _betacf(a, b, x) / a
-    return 1.0 - front * _betacf(b, a, 1.0 - x) / b
-
-
-def student_t_cdf(t: float, df: float) -> float:
-    """CDF of Student's t-distribution with ``df`` degrees of freedom."""
-    if df <= 0:
-        raise ValueError(f"df must be > 0, got {df}")
-    tail = 0.5 * _betainc(df / 2.0, 0.5, df / (df + t * t))
-    return 1.0 - tail if t >= 0 else tail
-
-
-def student_t_ppf(q: float, df: float) -> float:
-    """Quantile of Student's t-distribution (bisection on :func:`student_t_cdf`)."""
-    if not 0.0 < q < 1.0:
-        raise ValueError(f"q must be in (0, 1), got {q}")
-    if q < 0.5:
-        return -student_t_ppf(1.0 - q, df)
-    lo, hi = 0.0, 1.0
-    while student_t_cdf(hi, df) < q:
-        hi *= 2.0
-    for _ in range(200):
-        mid = 0.5 * (lo + hi)
-        if student_t_cdf(mid, df) < q:
-            lo = mid
-        else:
-            hi = mid
-        if hi - lo < 1e-12:
-            break
-    return 0.5 * (lo + hi)
-
-
-def mean_ci(values: Sequence[float], level: float = CI_LEVEL) -> tuple[float, float, float]:
-    """``(mean, ci_low, ci_high)``: the t-interval of the mean of ``values`` (module doc)."""
-    x = np.asarray(values, dtype=np.float64)
-    if x.ndim != 1 or x.size == 0:
-        raise ValueError(f"need a non-empty 1-D sequence of values, got shape {x.shape}")
-    mean = float(x.mean())
-    if x.size == 1:
-        return mean, mean, mean
-    half = student_t_ppf(0.5 + level / 2.0, x.size - 1) * float(x.std(ddof=1)) / math.sqrt(x.size)
-    return mean, mean - half, mean + half
-
-
-# --------------------------------------------------------------------------------------------
-# Policies
+def mean_ci(values: Sequence[float]) -> tuple[float, float, float]:
+    """``(mean, low, high)`` over episodes: the bootstrap interval of :mod:`ials_zoo.stats`."""
+    return bootstrap_interval(values, CI_LEVEL)
 
 
 def sha256_file(path: str | os.PathLike) -> str:
@@ -158,10 +87,14 @@ def sha256_file(path: str | os.PathLike) -> str:
 
 
 def meta_path(model_path: str | os.PathLike) -> Path:
-    """The metadata sidecar of a saved model: ``run/model.zip`` -> ``run/model.meta.json``."""
+    """The metadata sidecar of an SB3 model zip: ``run/model.zip`` -> ``run/model.meta.json``."""
     p = Path(model_path)
     stem = p.name[: -len(".zip")] if p.name.endswith(".zip") else p.name
     return p.with_name(stem + META_SUFFIX)
+
+
+# --------------------------------------------------------------------------------------------
+# Policies
 
 
 class Policy:
@@ -170,18 +103,20 @@ class Policy:
     Attributes:
         name: short description (``"random"``, a file name, ``"module:fn"``).
         kind: ``"random"``, ``"scripted"``, ``"model"`` or ``"callable"``.
-        frame_stack: how many observations the policy reads (stacked as ``VecFrameStack``).
-        file: the file the policy was loaded from (None for reference policies).
-        sha256: that file's sha256 (None when there is no file).
-        metadata: the model's metadata (baselines), else ``{}``.
+        frame_stack: how many observations the policy reads.
+        file, sha256: the file the policy was loaded from and its hash (None otherwise).
+        agents: the agents the policy has weights for (None: any agent).
+        metadata: the model's metadata (domain, training record, ...), else ``{}``.
     """
 
     kind = "callable"
     frame_stack = 1
     file: str | None = None
     sha256: str | None = None
+    agents: tuple | None = None
     metadata: dict = {}
     name = "policy"
+    deterministic = False
 
     def reset(self, seed: int) -> None:
         """Called at the start of each episode with the episode seed."""
@@ -200,10 +135,7 @@ class RandomPolicy(Policy):
         self._rng = np.random.default_rng(seed)
 
     def act(self, obs, action_space):
-        if hasattr(action_space, "n"):
-            return int(self._rng.integers(int(action_space.n)))
-        action_space.seed(int(self._rng.integers(2**31)))
-        return action_space.sample()
+        return int(self._rng.integers(int(action_space.n)))
 
 
 class ScriptedPolicy(Policy):
@@ -213,7 +145,7 @@ class ScriptedPolicy(Policy):
     name = "scripted"
 
     def act(self, obs, action_space):
-        return 0  # ignored: the GS is built with scripted_learners=True
+        return 0
 
 
 class CallablePolicy(Policy):
@@ -230,119 +162,133 @@ class CallablePolicy(Policy):
         return self.fn(obs)
 
 
-class SB3Policy(Policy):
-    """An SB3 model (any object with ``predict(obs, deterministic)``).
-
-    A stochastic policy samples with torch's generator, seeded at each episode start, so an
-    evaluation is reproducible for a fixed seed set.
-    """
+class NetworkPolicy(Policy):
+    """Policy networks of one or more agents (:class:`ials_zoo.policy.PolicyNetwork`)."""
 
     kind = "model"
 
-    def __init__(self, model, frame_stack: int = 1, deterministic: bool = False,
-                 name: str = "model", file: str | None = None, metadata: dict | None = None):
-        self.model = model
-        self.frame_stack = int(frame_stack)
+    def __init__(self, net: PolicyNetwork, deterministic: bool = False, name: str = "model",
+                 file: str | None = None):
+        self.net = net
+        self.frame_stack = net.frame_stack
         self.deterministic = bool(deterministic)
         self.name = name
         self.file = file
         self.sha256 = sha256_file(file) if file else None
-        self.metadata = dict(metadata or {})
+        self.agents = net.agents
+        self.metadata = dict(net.metadata)
+        self._rng = None
+
+    def for_agents(self, agents) -> NetworkPolicy:
+        """The same policy restricted to ``agents`` (each must have weights)."""
+        sub = NetworkPolicy(self.net.subset(agents), self.deterministic, self.name)
+        sub.file, sub.sha256, sub.metadata = self.file, self.sha256, self.metadata
+        return sub
 
     def reset(self, seed):
-        import torch
-
-        torch.manual_seed(seed)
+        self._rng = np.random.default_rng(seed)
 
     def act(self, obs, action_space):
-        action, _ = self.model.predict(obs, deterministic=self.deterministic)
-        return action.item() if np.ndim(action) == 0 or np.size(action) == 1 else action
+        return int(self.act_all(np.asarray(obs)[None])[0])
+
+    def act_all(self, obs: np.ndarray) -> np.ndarray:
+        """One action per agent for stacked inputs ``[A, input]``."""
+        return self.net.act(obs, self._rng, self.deterministic)
 
 
-def load_model(path: str | os.PathLike):
-    """Load a saved baseline model and its metadata sidecar: ``(model, metadata)``.
-
-    Only SB3 is needed (not the training code): schedules are replaced by constants since
-    the model is only used for prediction.
-    """
-    import stable_baselines3
-
+def load_model(path: str | os.PathLike, agent: str | None = None) -> NetworkPolicy:
+    """A policy file or an SB3 model zip (with its sidecar), loaded without running code."""
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"policy file {str(path)!r} does not exist")
-    mpath = meta_path(path)
-    if not mpath.is_file():
-        raise ValueError(
-            f"policy file {str(path)!r} has no metadata sidecar {str(mpath)!r} (written by the "
-            "baselines next to the model)"
-        )
+    if is_policy_file(path):
+        net = load_policy_file(path)
+    elif path.suffix == ".zip":
+        mpath = meta_path(path)
+        if not mpath.is_file():
+            raise ValueError(f"policy file {str(path)!r} has no metadata sidecar {str(mpath)!r} (written by the "
+                             "baselines next to the model)")
+        try:
+            meta = json.loads(mpath.read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise ValueError(f"metadata {str(mpath)!r} is not valid JSON: {exc}") from None
+        if meta.get("sb3_class", "PPO") != "PPO":
+            raise ValueError(f"metadata {str(mpath)!r}: sb3_class {meta.get('sb3_class')!r} is not supported "
+                             "(PPO actor-critic MLP policies only)")
+        env_id = meta.get("env_id")
+        obs = get_domain(env_id).observation_space
+        provenance = {k: v for k, v in meta.items() if k not in ("format", "sb3_class", "model_sha256", "agents")}
+        net = policy_from_sb3_zip(path, meta.get("agent") or agent, int(np.prod(obs.shape)),
+                                  int(meta.get("frame_stack", 1)), metadata=provenance)
+    else:
+        raise ValueError(f"policy file {str(path)!r}: expected a .safetensors policy or an SB3 .zip model")
+    return NetworkPolicy(net, name=path.name, file=str(path))
+
+
+def _import_callable(spec: str, frame_stack: int | None) -> CallablePolicy:
+    module_name, _, attr = spec.partition(":")
+    if os.getcwd() not in sys.path and "" not in sys.path:
+        sys.path.insert(0, os.getcwd())  # as `python -m` would: modules of the current folder
     try:
-        meta = json.loads(mpath.read_text())
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"metadata {str(mpath)!r} is not valid JSON: {exc}") from None
-    cls_name = meta.get("sb3_class", "PPO")
-    cls = getattr(stable_baselines3, cls_name, None)
-    if cls is None:
-        raise ValueError(f"metadata {str(mpath)!r}: unknown sb3_class {cls_name!r}")
-    custom = {"learning_rate": 0.0, "lr_schedule": lambda _: 0.0, "clip_range": lambda _: 0.0}
-    model = cls.load(str(path), device="cpu", custom_objects=custom)
-    return model, meta
+        module = importlib.import_module(module_name)
+    except ImportError as exc:
+        raise ValueError(f"policy {spec!r}: cannot import module {module_name!r}: {exc}") from None
+    fn = module
+    for part in attr.split("."):
+        fn = getattr(fn, part, None)
+        if fn is None:
+            raise ValueError(f"policy {spec!r}: module {module_name!r} has no {attr!r}")
+    if not callable(fn):
+        raise ValueError(f"policy {spec!r}: {attr!r} is not callable")
+    return CallablePolicy(fn, spec, frame_stack)
 
 
 def load_policy(spec, env_id: str | None = None, agent: str | None = None,
                 deterministic: bool = False, frame_stack: int | None = None) -> Policy:
-    """Resolve a policy spec: a :class:`Policy`, ``"random"``, ``"scripted"``, a model path, or
-    ``"module:function"`` (see module doc).
+    """Resolve a policy spec: a :class:`Policy`, ``"random"``, ``"scripted"``, a policy file,
+    an SB3 model zip or ``"module:function"`` (see module doc).
 
-    When a model's metadata names a domain/agent that differs from ``env_id``/``agent``, a
-    ValueError says so (a policy is scored on the agent it was trained for).
-    """
+    A model is checked against ``env_id`` and ``agent``: a policy is scored on the domain and
+    the agent it was trained for (a ValueError says so otherwise). ``frame_stack`` may only
+    repeat a model's own."""
+    if frame_stack is not None and (isinstance(frame_stack, bool) or int(frame_stack) < 1):
+        raise ValueError(f"frame_stack must be >= 1, got {frame_stack}")
     if isinstance(spec, Policy):
-        return spec
-    if callable(spec):
-        return CallablePolicy(spec, getattr(spec, "__name__", "callable"), frame_stack)
-    if not isinstance(spec, (str, os.PathLike)):
+        pol = spec
+    elif callable(spec):
+        pol = CallablePolicy(spec, getattr(spec, "__name__", "callable"), frame_stack)
+    elif not isinstance(spec, (str, os.PathLike)):
         raise TypeError(f"policy must be a path, 'module:function', 'random' or 'scripted', got {spec!r}")
-    spec = os.fspath(spec)
-    if spec == "random":
-        return RandomPolicy()
-    if spec == "scripted":
-        return ScriptedPolicy()
-    if os.path.exists(spec) or spec.endswith(".zip"):
-        model, meta = load_model(spec)
-        for key, want in (("env_id", env_id), ("agent", agent)):
-            if want is not None and meta.get(key) not in (None, want) and not (
-                key == "agent" and want in meta.get("agents", [])
-            ):
-                raise ValueError(
-                    f"policy {spec!r} was trained for {key}={meta.get(key)!r}, not {want!r}"
-                )
-        return SB3Policy(model, frame_stack=int(frame_stack or meta.get("frame_stack", 1)),
-                         deterministic=deterministic, name=Path(spec).name, file=spec,
-                         metadata=meta)
-    if ":" in spec:
-        module_name, _, attr = spec.partition(":")
-        try:
-            module = importlib.import_module(module_name)
-        except ImportError as exc:
-            raise ValueError(f"policy {spec!r}: cannot import module {module_name!r}: {exc}") from None
-        fn = module
-        for part in attr.split("."):
-            fn = getattr(fn, part, None)
-            if fn is None:
-                raise ValueError(f"policy {spec!r}: module {module_name!r} has no {attr!r}")
-        if not callable(fn):
-            raise ValueError(f"policy {spec!r}: {attr!r} is not callable")
-        return CallablePolicy(fn, spec, frame_stack)
-    raise ValueError(
-        f"policy {spec!r} is neither 'random', 'scripted', an existing model file, nor "
-        "'module:function'"
-    )
+    else:
+        spec = os.fspath(spec)
+        if spec == "random":
+            pol = RandomPolicy()
+        elif spec == "scripted":
+            pol = ScriptedPolicy()
+        elif os.path.exists(spec) or spec.endswith((".zip", ".safetensors")):
+            pol = load_model(spec, agent)
+            pol.deterministic = bool(deterministic)
+        elif ":" in spec:
+            pol = _import_callable(spec, frame_stack)
+        else:
+            raise ValueError(f"policy {spec!r} is neither 'random', 'scripted', an existing policy file, nor "
+                             "'module:function'")
+    if pol.kind == "model":
+        trained_env = pol.metadata.get("env_id")
+        if env_id is not None and trained_env not in (None, env_id):
+            raise ValueError(f"policy {pol.name!r} was trained for {trained_env}, not {env_id}")
+        if agent is not None and agent not in pol.agents:
+            raise ValueError(f"policy {pol.name!r} was trained for {', '.join(pol.agents)}, not {agent!r}; a "
+                             "policy is scored on the agent it was trained for")
+        if frame_stack is not None and int(frame_stack) != pol.frame_stack:
+            raise ValueError(f"frame_stack {frame_stack} contradicts the model's ({pol.frame_stack})")
+    return pol
 
 
 class FrameStack:
     """Stacks the last ``n`` observations exactly like SB3's ``VecFrameStack`` on a 1-D Box:
-    concatenated on the last axis, newest last, zeros before the episode's first observation."""
+    concatenated on the last axis, newest last, zeros before the episode's first observation.
+    Works on one observation or a batch (``[..., obs]``)."""
 
     def __init__(self, n: int):
         if int(n) < 1:
@@ -363,7 +309,7 @@ class FrameStack:
         obs = np.asarray(obs, dtype=np.float32)
         if self.n == 1:
             return obs
-        self._buf = np.roll(self._buf, -self._width, axis=-1)
+        self._buf[..., : -self._width] = self._buf[..., self._width:]
         self._buf[..., -self._width:] = obs
         return self._buf.copy()
 
@@ -374,20 +320,26 @@ class FrameStack:
 
 @dataclass
 class EvaluationResult:
-    """The score of one policy on the GS.
+    """The score of a policy on the GS.
 
     Attributes:
-        env_id, agent: what was evaluated.
-        policy: the policy's name; policy_kind: random | scripted | model | callable.
+        env_id: the domain.
+        agent: the agent scored (single-agent track), or None (multi-agent track).
+        agents: the agents whose returns make the score (``[agent]`` on the single-agent track).
+        policy, policy_kind: the policy's name and kind (random | scripted | model | callable).
         policy_file, policy_sha256: the evaluated file and its hash (None for references).
         frame_stack, deterministic: how the policy was run.
-        seeds: the episode seeds; returns: the episodic return of each.
-        mean, ci_low, ci_high: mean return and its 95% t-interval (module doc).
+        seeds: the episode seeds; returns: the score of each episode (the agent's return, or
+            the mean over agents of their returns).
+        per_agent_returns: ``{agent: [return per episode]}`` (multi-agent track).
+        mean, ci_low, ci_high: mean and its 95% bootstrap interval over episodes.
         episode_length: steps per episode; seconds: wall-clock of the evaluation.
+        options: GS options.
     """
 
     env_id: str
-    agent: str
+    agent: str | None
+    agents: list
     policy: str
     policy_kind: str
     policy_file: str | None
@@ -402,6 +354,8 @@ class EvaluationResult:
     episode_length: int
     seconds: float
     options: dict = field(default_factory=dict)
+    per_agent_returns: dict | None = None
+    ci_method: str = EPISODES_METHOD
 
     @property
     def episodes(self) -> int:
@@ -417,93 +371,163 @@ class EvaluationResult:
         return d
 
 
-def evaluate(env_id: str, agent: str, policy, episodes: int = 10,
+def _check_seeds(seeds, episodes) -> list[int]:
+    from ials_zoo.utils import check_seed
+
+    seeds = list(eval_seeds(episodes) if seeds is None else seeds)
+    if not seeds:
+        raise ValueError("seeds must not be empty")
+    return [check_seed(s, "evaluation seed", allow_none=False) for s in seeds]
+
+
+def evaluate(env_id: str, agent: str, policy, episodes: int = PROTOCOL_EPISODES,
              seeds: Sequence[int] | None = None, deterministic: bool = False,
-             frame_stack: int | None = None, progress: bool = False,
-             **options) -> EvaluationResult:
-    """Score ``policy`` for ``agent`` on the GS of ``env_id`` (protocol in the module doc).
+             frame_stack: int | None = None, progress: bool = False, **options) -> EvaluationResult:
+    """Score ``policy`` for ``agent`` on the GS of ``env_id``, every other agent scripted.
 
     Args:
         policy: anything :func:`load_policy` accepts.
         episodes: number of episodes when ``seeds`` is not given (seeds ``10000 + i``).
         seeds: explicit episode seeds (overrides ``episodes``).
-        deterministic: take the policy's most likely action instead of sampling (models only).
-        frame_stack: override the policy's frame stack.
+        deterministic: take the policy's most likely action instead of sampling (models).
+        frame_stack: the callable policy's frame stack (a model's own only).
         **options: GS options (passed to the domain's ``parallel_env``).
     """
-    import time
+    from ials_zoo.single_agent import SingleAgentGS
 
-    from ials_zoo.single_agent import SingleAgentGS, check_agent
-
-    get_domain(env_id)  # clear error for an unknown domain
-    check_agent(env_id, agent)
+    domain = get_domain(env_id)
+    domain.check_agent(agent, **options)
     pol = load_policy(policy, env_id, agent, deterministic=deterministic, frame_stack=frame_stack)
-    seeds = list(eval_seeds(episodes) if seeds is None else seeds)
-    if not seeds:
-        raise ValueError("seeds must not be empty")
+    if isinstance(pol, NetworkPolicy) and pol.agents != (agent,):
+        pol = pol.for_agents([agent])
+    seeds = _check_seeds(seeds, episodes)
     stack = FrameStack(pol.frame_stack)
     env = SingleAgentGS(env_id, agent, scripted_learner=(pol.kind == "scripted"), **options)
     start = time.perf_counter()
     iterator = seeds
     if progress:
-        from tqdm import tqdm
+        from tqdm.auto import tqdm
 
-        iterator = tqdm(seeds, desc=f"evaluate {agent}", unit="ep")
-    import contextlib
-
-    rng_guard = contextlib.nullcontext()
-    if pol.kind == "model":
-        import torch
-
-        # SB3Policy reseeds torch per episode: keep the caller's (a training run's) stream.
-        rng_guard = torch.random.fork_rng(devices=[])
+        iterator = tqdm(seeds, desc=f"evaluate {agent}", unit="episode")
     try:
-        with rng_guard:
-            returns, length = _run_episodes(env, pol, stack, iterator)
+        returns, length = [], 0
+        for seed in iterator:
+            pol.reset(int(seed))
+            obs, _ = env.reset(seed=int(seed))
+            obs = stack.reset(obs)
+            total, steps, done = 0.0, 0, False
+            while not done:
+                raw, reward, terminated, truncated, _ = env.step(pol.act(obs, env.action_space))
+                obs = stack.step(raw)
+                total += reward
+                steps += 1
+                done = terminated or truncated
+            returns.append(float(total))
+            length = steps
     finally:
         env.close()
     mean, lo, hi = mean_ci(returns)
     return EvaluationResult(
-        env_id=env_id, agent=agent, policy=pol.name, policy_kind=pol.kind,
+        env_id=env_id, agent=agent, agents=[agent], policy=pol.name, policy_kind=pol.kind,
         policy_file=pol.file, policy_sha256=pol.sha256, frame_stack=pol.frame_stack,
-        deterministic=bool(deterministic) if pol.kind == "model" else False,
+        deterministic=bool(pol.deterministic) if pol.kind == "model" else False,
         seeds=[int(s) for s in seeds], returns=returns, mean=mean, ci_low=lo, ci_high=hi,
         episode_length=length, seconds=time.perf_counter() - start, options=dict(options),
     )
 
 
-def _run_episodes(env, pol: Policy, stack: FrameStack, seeds) -> tuple[list[float], int]:
-    returns, length = [], 0
-    for seed in seeds:
-        pol.reset(int(seed))
-        obs, _ = env.reset(seed=int(seed))
-        obs = stack.reset(obs)
-        total, steps, done = 0.0, 0, False
-        while not done:
-            raw, reward, terminated, truncated, _ = env.step(pol.act(obs, env.action_space))
-            obs = stack.step(raw)
-            total += reward
-            steps += 1
-            done = terminated or truncated
-        returns.append(float(total))
-        length = steps
-    return returns, length
+def evaluate_joint(env_id: str, policy, agents=None, episodes: int = PROTOCOL_EPISODES,
+                   seeds: Sequence[int] | None = None, deterministic: bool = False,
+                   progress: bool = False, **options) -> EvaluationResult:
+    """Score a joint policy on the GS of ``env_id`` with ``agents`` (default: all) acting at
+    once, each with its own policy (multi-agent track; module docstring).
+
+    ``policy``: a joint policy file (weights for every agent), a :class:`NetworkPolicy`,
+    ``"random"`` or ``"scripted"``."""
+    domain = get_domain(env_id)
+    pol = load_policy(policy, env_id, deterministic=deterministic)
+    if pol.kind == "callable":
+        raise ValueError("the multi-agent track scores joint policy files, 'random' or 'scripted'")
+    if agents is None:
+        agents = list(pol.agents) if pol.kind == "model" else domain.agents(**options)
+    agents = domain.check_agents(agents, **options)
+    if isinstance(pol, NetworkPolicy):
+        missing = [a for a in agents if a not in pol.agents]
+        if missing:
+            raise ValueError(f"policy {pol.name!r} has no weights for {missing}")
+        if tuple(agents) != pol.agents:
+            pol = pol.for_agents(agents)
+    seeds = _check_seeds(seeds, episodes)
+    env = domain.parallel_env(learners=agents, scripted_learners=(pol.kind == "scripted"), **options)
+    stack = FrameStack(pol.frame_stack)
+    n_actions = domain.n_actions
+    start = time.perf_counter()
+    iterator = seeds
+    if progress:
+        from tqdm.auto import tqdm
+
+        iterator = tqdm(seeds, desc=f"evaluate {len(agents)} agents", unit="episode")
+    per_agent = np.zeros((len(agents), len(seeds)))
+    length = 0
+    try:
+        for e, seed in enumerate(iterator):
+            pol.reset(int(seed))
+            obs, _ = env.reset(seed=int(seed))
+            x = stack.reset(np.stack([obs[a] for a in agents]))
+            steps = 0
+            while env.agents:
+                if isinstance(pol, NetworkPolicy):
+                    acts = pol.act_all(x)
+                elif pol.kind == "random":
+                    acts = pol._rng.integers(n_actions, size=len(agents))
+                else:
+                    acts = np.zeros(len(agents), np.int64)
+                obs, rewards, _, _, _ = env.step({a: int(u) for a, u in zip(agents, acts)})
+                per_agent[:, e] += [rewards[a] for a in agents]
+                steps += 1
+                if env.agents:
+                    x = stack.step(np.stack([obs[a] for a in agents]))
+            length = steps
+    finally:
+        env.close()
+    returns = per_agent.mean(axis=0).tolist()
+    mean, lo, hi = mean_ci(returns)
+    return EvaluationResult(
+        env_id=env_id, agent=None, agents=list(agents), policy=pol.name, policy_kind=pol.kind,
+        policy_file=pol.file, policy_sha256=pol.sha256, frame_stack=pol.frame_stack,
+        deterministic=bool(pol.deterministic) if pol.kind == "model" else False,
+        seeds=[int(s) for s in seeds], returns=returns, mean=mean, ci_low=lo, ci_high=hi,
+        episode_length=length, seconds=time.perf_counter() - start, options=dict(options),
+        per_agent_returns={a: per_agent[i].tolist() for i, a in enumerate(agents)},
+    )
 
 
-def evaluate_in_subprocess(env_id: str, agent: str, policy_path: str, start_method="forkserver",
-                           **kwargs) -> EvaluationResult:
-    """:func:`evaluate` a saved model in a fresh worker process (for SUMO domains, whose GS
-    must not share this process's libsumo simulation). Blocks until done."""
-    import concurrent.futures
-    import multiprocessing
-
-    ctx = multiprocessing.get_context(start_method)
-    with concurrent.futures.ProcessPoolExecutor(max_workers=1, mp_context=ctx) as pool:
-        return pool.submit(_evaluate_worker, env_id, agent, str(policy_path), kwargs).result()
-
-
-def _evaluate_worker(env_id, agent, policy_path, kwargs):
+def _evaluate_worker(env_id, agent, policy, kwargs):
+    """:func:`evaluate` (``agent``) or :func:`evaluate_joint` (``agent=None``) in a worker."""
     import torch
 
     torch.set_num_threads(1)
-    return evaluate(env_id, agent, policy_path, **kwargs)
+    if agent is None:
+        return evaluate_joint(env_id, policy, **kwargs)
+    return evaluate(env_id, agent, policy, **kwargs)
+
+
+__all__ = [
+    "EVAL_SEED_BASE",
+    "PROTOCOL_EPISODES",
+    "CallablePolicy",
+    "EvaluationResult",
+    "FrameStack",
+    "NetworkPolicy",
+    "Policy",
+    "RandomPolicy",
+    "ScriptedPolicy",
+    "eval_seeds",
+    "evaluate",
+    "evaluate_joint",
+    "load_model",
+    "load_policy",
+    "mean_ci",
+    "meta_path",
+    "sha256_file",
+]

@@ -13,7 +13,7 @@ from ials_zoo.evaluation import eval_seeds, evaluate
 from ials_zoo.leaderboard import load_result
 
 ENV, AGENT = "warehouse_v0", "robot_20"
-TINY = dict(total_timesteps=1024, n_envs=4, n_steps=64, batch_size=128, net_arch="16",
+TINY = dict(env_id=ENV, total_timesteps=1024, n_envs=4, n_steps=64, batch_size=128, net_arch="16",
             eval_every=512, eval_episodes=2, final_eval_episodes=3, progress=False)
 
 
@@ -30,8 +30,12 @@ def small_aip(tmp_path_factory):
 
 
 def _check_run(out, simulator, result):
-    assert (out / "model.zip").is_file() and (out / "model.meta.json").is_file()
-    assert (out / "checkpoint.zip").is_file()
+    from ials_zoo.baselines.runs import run_state
+
+    assert (out / "policy.safetensors").is_file() and (out / "progress.csv").is_file()
+    assert (out / "checkpoint.pt").is_file() and (out / "checkpoint.json").is_file()
+    assert run_state(out) == "finished"
+    assert "train/entropy_loss" in (out / "progress.csv").read_text().splitlines()[0]
     curve = json.loads((out / "curve.json").read_text())["points"]
     assert [p["env_steps"] for p in curve] == [512, 1024]
     assert all(b["wall_clock_seconds"] > a["wall_clock_seconds"] for a, b in zip(curve, curve[1:]))
@@ -42,8 +46,8 @@ def _check_run(out, simulator, result):
     assert data["policy"]["frame_stack"] == 8
     assert data["learning_curves"][0]["points"] == curve
     assert data["evaluation"]["seeds"] == eval_seeds(3)
-    # The saved model is scored later without the training code, to the same numbers.
-    again = evaluate(ENV, AGENT, str(out / "model.zip"), episodes=3)
+    # The saved policy is scored later without the training code, to the same numbers.
+    again = evaluate(ENV, AGENT, str(out / "policy.safetensors"), episodes=3)
     assert again.returns == data["scores"][0]["returns"]
     assert again.policy_sha256 == data["scores"][0]["policy_sha256"]
     return data
@@ -87,7 +91,38 @@ def test_train_command_runs_a_baseline(tmp_path):
                "--out-dir", str(out), "--no-progress"])
     assert rc == 0
     assert load_result(out / "result.json")["training"]["env_steps"] == 256
-    assert main(["train", "ppo_single", "--simulator", "bogus", "--out-dir", str(out)]) == 2
+    assert main(["train", "ppo_single", "--env", ENV, "--simulator", "bogus", "--out-dir", str(out)]) == 2
+    assert main(["train", "ppo_single", "--simulator", "gs"]) == 2  # which domain?
+
+
+def test_a_used_out_dir_is_refused_unless_resume_or_overwrite(tmp_path, capsys):
+    from ials_zoo.baselines.runs import RunFolder, run_state
+
+    out = tmp_path / "run"
+    args = dict(TINY, total_timesteps=512, eval_every=256, final_eval_episodes=2)
+    first = ppo_single.main(ppo_single.Args(simulator="gs", out_dir=str(out), **args))
+    with pytest.raises(ValueError, match="already holds a finished run"):
+        ppo_single.main(ppo_single.Args(simulator="gs", out_dir=str(out), **args))
+    with pytest.raises(ValueError, match="nothing to resume"):
+        ppo_single.main(ppo_single.Args(simulator="gs", out_dir=str(out), resume=True, **args))
+    again = ppo_single.main(ppo_single.Args(simulator="gs", out_dir=str(out), overwrite=True, **args))
+    assert again["scores"][0]["returns"] == first["scores"][0]["returns"]  # same seed, same run
+    # a run killed after a checkpoint: status says running with a dead pid -> "killed"
+    status = json.loads((out / "status.json").read_text())
+    status.update(state="running", pid=2**22 + 12345)
+    (out / "status.json").write_text(json.dumps(status))
+    (out / "result.json").unlink()
+    assert run_state(out) == "killed"
+    with pytest.raises(ValueError, match="already holds a killed run"):
+        RunFolder(out, settings=status["settings"])
+    with pytest.raises(ValueError, match="other settings"):
+        ppo_single.main(ppo_single.Args(simulator="gs", out_dir=str(out), resume=True, **dict(args, seed=1)))
+    resumed = ppo_single.main(ppo_single.Args(simulator="gs", out_dir=str(out), resume=True, **args))
+    assert resumed["training"]["env_steps"] >= 512 and run_state(out) == "finished"
+    file = tmp_path / "a_file"
+    file.write_text("x")
+    with pytest.raises(ValueError, match="is a file"):
+        ppo_single.main(ppo_single.Args(simulator="gs", out_dir=str(file), **args))
 
 
 @pytest.mark.parametrize("bad,match", [("bogus", "unknown simulator"), ("fixed:2", "fixed:P"),
@@ -100,7 +135,7 @@ def test_bad_simulator_is_named(bad, match):
 def test_ppo_shared_short_run(tmp_path):
     out = tmp_path / "shared"
     results = ppo_shared.main(ppo_shared.Args(
-        learners="robot_20,robot_21", eval_agents="robot_20,robot_21", total_timesteps=512,
+        env_id=ENV, learners="robot_20,robot_21", eval_agents="robot_20,robot_21", total_timesteps=512,
         n_steps=64, batch_size=64, net_arch="16", eval_every=256, eval_episodes=2,
         final_eval_episodes=2, out_dir=str(out), progress=False))
     assert [r["agent"] for r in results] == ["robot_20", "robot_21"]
@@ -203,7 +238,7 @@ def test_stock_supersuit_wrapper_does_not_bootstrap():
 def test_training_clock_stands_still_while_paused():
     import time
 
-    from ials_zoo.baselines.common import Clock
+    from ials_zoo.baselines.runs import Clock
 
     clock = Clock(offset=100.0)
     time.sleep(0.01)
@@ -224,12 +259,12 @@ def test_env_options_reach_training_and_evaluation(tmp_path):
     result = ppo_single.main(ppo_single.Args(simulator="untrained-ials", out_dir=str(out),
                                              env_options='{"item_lifetime": 2}', **args))
     assert result["evaluation"]["options"] == {"item_lifetime": 2}
-    plain = evaluate(ENV, AGENT, str(out / "model.zip"), episodes=2)
-    memory = evaluate(ENV, AGENT, str(out / "model.zip"), episodes=2, item_lifetime=2)
+    plain = evaluate(ENV, AGENT, str(out / "policy.safetensors"), episodes=2)
+    memory = evaluate(ENV, AGENT, str(out / "policy.safetensors"), episodes=2, item_lifetime=2)
     assert memory.returns == result["scores"][0]["returns"] != plain.returns
-    rc = main(["evaluate", "--policy", str(out / "model.zip"), "--episodes", "2",
+    rc = main(["evaluate", "--policy", str(out / "policy.safetensors"), "--episodes", "2",
                "--out", str(tmp_path / "r.json"), "--no-progress"])
     assert rc == 0
     assert load_result(tmp_path / "r.json")["scores"][0]["returns"] == memory.returns
     with pytest.raises(ValueError, match="JSON object"):
-        ppo_single.main(ppo_single.Args(env_options="[1]", out_dir=str(out)))
+        ppo_single.main(ppo_single.Args(env_id=ENV, env_options="[1]", out_dir=str(out)))

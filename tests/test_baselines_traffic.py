@@ -27,7 +27,7 @@ def _check(out, simulator, result):
     assert curve[1]["wall_clock_seconds"] > curve[0]["wall_clock_seconds"]
     # scored again later from the saved file, in this process (training ran its GS copies and
     # evaluations in worker processes, so no libsumo simulation is live here)
-    again = evaluate(ENV, AGENT, str(out / "model.zip"), episodes=2)
+    again = evaluate(ENV, AGENT, str(out / "policy.safetensors"), episodes=2)
     assert again.returns == data["scores"][0]["returns"]
     return data
 

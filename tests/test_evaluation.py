@@ -14,29 +14,35 @@ from ials_zoo.evaluation import (
     evaluate,
     load_policy,
     mean_ci,
-    student_t_ppf,
 )
 from ials_zoo.single_agent import SingleAgentGS, make_gs_vec_env
+from ials_zoo.stats import bootstrap_interval, t_interval
 
 ENV, AGENT = "warehouse_v0", "robot_20"
 
 
-@pytest.mark.parametrize("df,expected", [(1, 12.706205), (4, 2.776445), (9, 2.262157),
-                                         (29, 2.045230), (200, 1.971896)])
-def test_student_t_quantile_matches_tables(df, expected):
-    assert student_t_ppf(0.975, df) == pytest.approx(expected, abs=2e-6)
-    assert student_t_ppf(0.025, df) == pytest.approx(-expected, abs=2e-6)
-
-
-def test_mean_ci_is_the_t_interval():
+def test_t_interval_over_seeds_matches_tables():
     x = [1.0, 2.0, 3.0, 4.0, 10.0]
-    mean, lo, hi = mean_ci(x)
-    half = 2.776445 * np.std(x, ddof=1) / math.sqrt(5)
+    mean, lo, hi = t_interval(x)
+    half = 2.776445 * np.std(x, ddof=1) / math.sqrt(5)  # t(0.975, 4) from the tables
     assert mean == pytest.approx(4.0)
     assert (lo, hi) == pytest.approx((4.0 - half, 4.0 + half), abs=1e-5)
-    assert mean_ci([3.5]) == (3.5, 3.5, 3.5)
+    assert t_interval([3.5]) == (3.5, 3.5, 3.5)
     with pytest.raises(ValueError, match="non-empty"):
-        mean_ci([])
+        t_interval([])
+    with pytest.raises(ValueError, match="finite"):
+        t_interval([1.0, float("nan")])
+
+
+def test_bootstrap_interval_over_episodes_respects_the_data():
+    # Non-negative returns, mostly 0: the t interval reaches below 0, the bootstrap does not.
+    x = [0.0] * 7 + [1.2, 0.5, 3.0]
+    _, t_lo, _ = t_interval(x)
+    mean, lo, hi = bootstrap_interval(x)
+    assert t_lo < 0 <= lo < mean < hi <= max(x)
+    assert bootstrap_interval(x) == (mean, lo, hi)  # deterministic: a fixed resampling seed
+    assert mean_ci(x) == (mean, lo, hi)  # the evaluator's interval
+    assert bootstrap_interval([2.0, 2.0, 2.0]) == (2.0, 2.0, 2.0)
 
 
 def test_eval_seeds_are_documented_set():
@@ -122,8 +128,13 @@ def test_callable_policy_spec(tmp_path, monkeypatch):
             return 1
         stacked.frame_stack = 3
     """))
-    monkeypatch.syspath_prepend(str(tmp_path))
+    # importable from the folder the user is in, as `python -m` would have it
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr("sys.path", [p for p in __import__("sys").path if p not in ("", str(tmp_path))])
+    res = evaluate(ENV, AGENT, "my_policies:go_up", episodes=1)
     import my_policies
+
+    my_policies.SEEN.clear()
 
     res = evaluate(ENV, AGENT, "my_policies:go_up", episodes=2)
     assert res.policy_kind == "callable" and res.frame_stack == 1
@@ -137,6 +148,7 @@ def test_callable_policy_spec(tmp_path, monkeypatch):
     ("nonexistent_module_xyz:fn", "cannot import"),
     ("json:no_such_function", "has no"),
     ("/no/such/model.zip", "does not exist"),
+    ("/no/such/policy.safetensors", "does not exist"),
     ("greedy", "neither"),
 ])
 def test_bad_policy_specs_are_named(spec, match):

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from ials_zoo.policy import PolicyNetwork, save_policy
 from ials_zoo.reproduce import Config, build_plan, describe_plan, reproduce
 from ials_zoo.reproduce import experiments as X
 from ials_zoo.reproduce.report import aggregate_curves, time_to_reach
@@ -31,7 +32,7 @@ def test_dry_run_plans_the_right_runs(tmp_path):
     for j in ppo:
         assert j.params["total_timesteps"] == 12345
         assert j.params["eval_every"] == 2469  # ceil(12345 / 5)
-        assert j.marker == "result.json" and j.params["out_dir"] == j.dir
+        assert j.marker == "run/result.json" and j.params["out_dir"] == str(Path(j.dir) / "run")
         if j.label == "ials":
             # the AIP trained (and timed) by this study, not a shipped file
             (dep,) = j.deps
@@ -98,13 +99,13 @@ def test_tiny_training_study_runs_reports_and_resumes(tmp_path):
     assert len(res["jobs"]["done"]) == 4  # AIP + 3 PPO runs
     base = tmp_path / "out" / "training" / "warehouse_v0__robot_20"
     for sim in ("gs", "ials", "untrained-ials"):
-        r = json.loads((base / f"{sim}__s0" / "result.json").read_text())
+        r = json.loads((base / f"{sim}__s0" / "run" / "result.json").read_text())
         assert r["training"]["env_steps"] >= 512
-        assert (base / f"{sim}__s0" / "curve.json").is_file()
+        assert (base / f"{sim}__s0" / "run" / "curve.json").is_file()
         assert (base / f"{sim}__s0" / "log.txt").is_file()
     # the IALS run is charged the AIP time measured by this study
     aip = json.loads((base / "aip" / "report.json").read_text())
-    ials = json.loads((base / "ials__s0" / "result.json").read_text())
+    ials = json.loads((base / "ials__s0" / "run" / "result.json").read_text())
     assert ials["training"]["aip_seconds"] == pytest.approx(
         aip["dataset"]["collect_seconds"] + aip["train_seconds"])
     assert aip["dataset"]["steps"] == 1000
@@ -123,10 +124,10 @@ def test_tiny_training_study_runs_reports_and_resumes(tmp_path):
     assert {p: p.stat().st_mtime_ns for p in base.glob("*/result.json")} == stamp
     assert again["leaderboard"]["submitted"] == [] and len(again["leaderboard"]["already"]) == 3
     # A run without its result.json (e.g. interrupted) is the only one that runs again.
-    (base / "untrained-ials__s0" / "result.json").unlink()
+    (base / "untrained-ials__s0" / "run" / "result.json").unlink()
     status = run_jobs(build_plan(cfg), n_jobs=2, progress=False)
     assert status["done"] == ["training/warehouse_v0/robot_20/untrained-ials/s0"]
-    assert (base / "untrained-ials__s0" / "result.json").is_file()
+    assert (base / "untrained-ials__s0" / "run" / "result.json").is_file()
 
 
 def test_failed_job_blocks_its_dependants(tmp_path):
@@ -386,7 +387,7 @@ def test_second_invocation_on_the_same_study_is_refused(tmp_path):
 
 def test_submit_merges_the_seeds_of_a_finished_configuration_only(tmp_path):
     from ials_zoo import leaderboard as lb
-    from ials_zoo.evaluation import CallablePolicy, evaluate
+    from ials_zoo.evaluation import evaluate
     from ials_zoo.reproduce.report import submit_results
 
     base = tmp_path / "out" / "training" / "warehouse_v0__robot_20"
@@ -396,12 +397,18 @@ def test_submit_merges_the_seeds_of_a_finished_configuration_only(tmp_path):
         d.mkdir(parents=True)
         params = {"env_id": "warehouse_v0", "agent": "robot_20", "seed": seed, "total_timesteps": 1000}
         (d / "job.json").write_text(json.dumps({"kind": "ppo", "label": label, "params": params}))
-        if action is not None:  # a finished run: a real GS score of a fixed-action policy
-            ev = evaluate("warehouse_v0", "robot_20", CallablePolicy(lambda obs: action, f"a{action}"), episodes=2)
+        if action is not None:  # a finished run: a real GS score of a fixed-action policy file
+            (d / "run").mkdir()
+            bias = np.full((1, 4), -50.0, np.float32)
+            bias[0, action] = 50.0
+            net = PolicyNetwork(["robot_20"], 37, 4, [(np.zeros((1, 37, 4), np.float32), bias)],
+                                metadata={"env_id": "warehouse_v0"})
+            policy = save_policy(net, d / "run" / "policy.safetensors")
+            ev = evaluate("warehouse_v0", "robot_20", str(policy), episodes=2)
             result = lb.make_result([ev], algorithm="ppo_single", training_seeds=[seed], training={
                 "simulator": label, "aip": None, "seeds": [seed], "env_steps": 1000,
                 "wall_clock_seconds": 10.0 + seed, "aip_seconds": 0.0, "hyperparameters": {}})
-            (d / "result.json").write_text(json.dumps(result))
+            (d / "run" / "result.json").write_text(json.dumps(result))
 
     run("gs", 0, action=0)
     run("gs", 1, action=3)

@@ -1,21 +1,20 @@
 """Pieces shared by the PPO baselines: dataclass <-> command line, training simulators, the
-periodic GS evaluation with its learning curve, and saving a model with its metadata sidecar.
+periodic GS evaluation with its learning curve, checkpoints and the final policy file.
 """
 
 from __future__ import annotations
 
 import argparse
-import contextlib
 import dataclasses
 import json
 import os
 import time
 import typing
-from pathlib import Path
 
 import numpy as np
 
-from ials_zoo.utils import atomic_path, atomic_write_text
+from ials_zoo.baselines.runs import Clock
+from ials_zoo.utils import atomic_write_text
 
 # --------------------------------------------------------------------------------------------
 # dataclass <-> argparse
@@ -60,14 +59,18 @@ def parse_args(cls, argv=None, description: str | None = None):
 
 def run_cli(module) -> int:
     """``python -m`` entry point of a baseline module: parse its ``Args``, run its ``main``;
-    bad arguments print one clear line instead of a traceback."""
+    bad arguments print one clear line instead of a traceback (``ials-zoo train``'s style)."""
     import sys
 
     args = parse_args(module.Args, description=module.__doc__.splitlines()[0])
+    name = module.__name__.rsplit(".", 1)[-1]
     try:
         module.main(args)
-    except (ValueError, TypeError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
+    except KeyboardInterrupt:
+        print(f"{name}: interrupted", file=sys.stderr)
+        return 130
+    except (ValueError, TypeError, FileNotFoundError) as exc:
+        print(f"{name}: {exc}", file=sys.stderr)
         return 2
     return 0
 
@@ -200,65 +203,55 @@ def as_float_box(venv):
 
 
 # --------------------------------------------------------------------------------------------
-# Saving models
+# Policies and periodic evaluation on the GS
 
 
-def save_model(model, path: Path, metadata: dict) -> Path:
-    """Save an SB3 model atomically with its metadata sidecar (``<name>.meta.json``)."""
-    from ials_zoo.evaluation import meta_path, sha256_file
+def policy_of(model, agents, frame_stack: int, metadata: dict):
+    """The actor of a live SB3 model as a :class:`~ials_zoo.policy.PolicyNetwork` for
+    ``agents`` (one set of weights shared by all of them)."""
+    from ials_zoo.policy import PolicyNetwork, policy_from_sb3_model
 
-    path = Path(path)
-    with atomic_path(path, suffix=".zip") as tmp:
-        model.save(str(tmp))
-    meta = dict(metadata, model_sha256=sha256_file(path))
-    atomic_write_text(meta_path(path), json.dumps(meta, indent=2, default=str) + "\n")
-    return path
-
-
-# --------------------------------------------------------------------------------------------
-# Periodic evaluation on the GS
+    agents = list(agents)
+    net = policy_from_sb3_model(model, agents[0], frame_stack, metadata)
+    if len(agents) == 1:
+        return net
+    return PolicyNetwork(agents, net.obs_size, net.n_actions, net.layers, net.activation, net.frame_stack,
+                         metadata, shared=True)
 
 
 class Evaluator:
-    """Scores the current policy on the GS, in this process or in a worker process.
+    """Scores a policy on the GS (one agent, the others scripted), in this process or in a
+    worker process (SUMO: one simulation per process). The worker dies with this process."""
 
-    SUMO domains are evaluated in a worker process (libsumo: one simulation per process) from
-    a checkpoint saved just before; other domains in this process from the live model.
-    """
-
-    def __init__(self, env_id: str, agent: str, frame_stack: int, episodes: int,
-                 deterministic: bool, in_subprocess: bool, options: dict | None = None):
-        self.env_id, self.agent, self.frame_stack = env_id, agent, frame_stack
+    def __init__(self, env_id: str, agent: str, episodes: int, deterministic: bool,
+                 in_subprocess: bool, options: dict | None = None):
+        self.env_id, self.agent = env_id, agent
         self.options = dict(options or {})
         self.episodes, self.deterministic = episodes, deterministic
         self.in_subprocess = in_subprocess
         self._pool = None
 
-    def __call__(self, model, checkpoint: Path | None, episodes: int | None = None):
-        from ials_zoo.evaluation import SB3Policy, evaluate
+    def __call__(self, policy, episodes: int | None = None, progress: bool = False):
+        """Score ``policy`` (a PolicyNetwork, a NetworkPolicy or a policy file)."""
+        from ials_zoo.evaluation import NetworkPolicy, _evaluate_worker, evaluate
+        from ials_zoo.policy import PolicyNetwork
 
-        n = int(episodes or self.episodes)
-        if self.in_subprocess:
-            if checkpoint is None:
-                raise ValueError("subprocess evaluation needs a saved checkpoint")
-            from ials_zoo.evaluation import _evaluate_worker
-            from ials_zoo.processes import shutdown_pool, spawn_pool
+        if isinstance(policy, PolicyNetwork):
+            policy = NetworkPolicy(policy)
+        kwargs = {"episodes": int(episodes or self.episodes), "deterministic": self.deterministic,
+                  "progress": progress, **self.options}
+        if not self.in_subprocess:
+            return evaluate(self.env_id, self.agent, policy, **kwargs)
+        from ials_zoo.processes import shutdown_pool, spawn_pool
 
-            if self._pool is None:
-                self._pool = spawn_pool(1)
-            try:
-                return self._pool.submit(
-                    _evaluate_worker, self.env_id, self.agent, str(checkpoint),
-                    {"episodes": n, "deterministic": self.deterministic, **self.options},
-                ).result()
-            except BaseException:
-                shutdown_pool(self._pool, kill=True)
-                self._pool = None
-                raise
-        policy = SB3Policy(model, frame_stack=self.frame_stack, deterministic=self.deterministic,
-                           name=Path(checkpoint).name if checkpoint else "model",
-                           file=str(checkpoint) if checkpoint else None)
-        return evaluate(self.env_id, self.agent, policy, episodes=n, **self.options)
+        if self._pool is None:
+            self._pool = spawn_pool(1)
+        try:
+            return self._pool.submit(_evaluate_worker, self.env_id, self.agent, policy, kwargs).result()
+        except BaseException:
+            shutdown_pool(self._pool, kill=True)
+            self._pool = None
+            raise
 
     def close(self, kill: bool = False):
         from ials_zoo.processes import shutdown_pool
@@ -270,70 +263,6 @@ class Evaluator:
 def curve_point(steps: int, seconds: float, ev) -> dict:
     return {"env_steps": int(steps), "wall_clock_seconds": float(seconds), "mean": ev.mean,
             "ci_low": ev.ci_low, "ci_high": ev.ci_high}
-
-
-def make_progress_callback(total: int, evaluate_fn, eval_every: int, progress: bool):
-    """An SB3 callback: a tqdm progress bar, and ``evaluate_fn(num_timesteps)`` every
-    ``eval_every`` environment steps (0 = never)."""
-    from stable_baselines3.common.callbacks import BaseCallback
-
-    class _Callback(BaseCallback):
-        def _on_training_start(self):
-            self.next_eval = eval_every if eval_every > 0 else None
-            self.bar = None
-            if progress:
-                from tqdm import tqdm
-
-                self.bar = tqdm(total=total, unit="step", dynamic_ncols=True)
-            self.last = self.num_timesteps
-
-        def _on_step(self):
-            if self.bar is not None:
-                self.bar.update(self.num_timesteps - self.last)
-            self.last = self.num_timesteps
-            if self.next_eval is not None and self.num_timesteps >= self.next_eval:
-                ev = evaluate_fn(self.num_timesteps)
-                if self.bar is not None:
-                    self.bar.set_postfix(gs=f"{ev.mean:.2f}")
-                while self.next_eval <= self.num_timesteps:
-                    self.next_eval += eval_every
-            return True
-
-        def _on_training_end(self):
-            if self.bar is not None:
-                self.bar.close()
-
-    return _Callback()
-
-
-class Clock:
-    """Training wall-clock that excludes the time spent evaluating and checkpointing.
-
-    ``offset`` (the AIP's collection + training seconds) is added; inside ``with
-    clock.pause():`` the clock stands still at the value it had when the pause began."""
-
-    def __init__(self, offset: float = 0.0):
-        self.offset = float(offset)
-        self._start = time.perf_counter()
-        self._paused = 0.0
-        self._pause_start = None
-
-    @contextlib.contextmanager
-    def pause(self):
-        if self._pause_start is not None:  # nested: already stopped
-            yield
-            return
-        self._pause_start = time.perf_counter()
-        try:
-            yield
-        finally:
-            self._paused += time.perf_counter() - self._pause_start
-            self._pause_start = None
-
-    @property
-    def seconds(self) -> float:
-        now = self._pause_start if self._pause_start is not None else time.perf_counter()
-        return self.offset + now - self._start - self._paused
 
 
 # --------------------------------------------------------------------------------------------
@@ -356,61 +285,175 @@ def make_ppo(venv, args, hidden: list[int]):
     )
 
 
-class TrainingRun:
-    """The bookkeeping of one training run in ``out``: at every evaluation point, save
-    ``checkpoint.zip`` (+ metadata), score it on the GS and rewrite ``curve.json``; at the end,
-    save ``model.zip`` and score it for every evaluator's agent.
+def estimate_seconds(env_id: str, simulator: str, steps: int) -> float:
+    """Rough training time from the domain's measured PPO throughput (``Domain.study``)."""
+    from ials_zoo.core.domains import get_domain
 
-    ``meta`` is the model metadata; its ``training`` record and ``learning_curve`` are updated
-    in place. The first evaluator's agent is the one the curve follows. The clock starts at
-    ``aip_seconds`` and stands still during evaluation and checkpointing.
+    rates = get_domain(env_id).study.ppo_steps_per_second
+    rate = rates.get("gs" if simulator == GS else "ials", 1000.0)
+    return steps / max(rate, 1.0)
+
+
+def format_seconds(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.1f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
+class TrainingRun:
+    """The bookkeeping of one SB3 training run in a :class:`~ials_zoo.baselines.runs.RunFolder`.
+
+    * every ``eval_every`` steps: checkpoint, score the policy on the GS, rewrite ``curve.json``;
+    * every ``checkpoint_seconds`` of training (and after the first update): checkpoint, so a
+      crash loses little and ``--resume`` continues from there;
+    * at the end: ``policy.safetensors`` and its GS score for every evaluator's agent.
+
+    ``meta`` is the policy metadata (domain, agents, algorithm, frame stack, options); its
+    ``training`` record and ``learning_curve`` are updated in place. The first evaluator's agent
+    is the one the curve follows. The clock (training only: evaluation and checkpointing
+    excluded) starts at ``aip_seconds`` (plus a resumed run's seconds).
     """
 
-    def __init__(self, model, out: Path, meta: dict, evaluators: dict, aip_seconds: float = 0.0):
-        self.model, self.out, self.meta = model, Path(out), meta
+    def __init__(self, model, run, meta: dict, evaluators: dict, aip_seconds: float = 0.0,
+                 policy_agents=None, frame_stack: int = 1, checkpoint_seconds: float = 300.0):
+        self.model, self.run, self.meta = model, run, meta
+        self.out = run.path
         self.training, self.curve = meta["training"], meta["learning_curve"]
         self.evaluators = evaluators
         self.curve_agent = next(iter(evaluators))
+        self.policy_agents = list(policy_agents or [self.curve_agent])
+        self.frame_stack = int(frame_stack)
         self.aip_seconds = float(aip_seconds)
+        self.checkpoint_seconds = float(checkpoint_seconds)
         self.clock = Clock(offset=self.aip_seconds)
-        self.checkpoint = self.out / "checkpoint.zip"
+        if run.resuming:
+            self._resume()
+        self._last_checkpoint = time.monotonic()
+
+    def _resume(self):
+        from ials_zoo.baselines.runs import load_training_state
+
+        state, info = load_training_state(self.out)
+        self.model.policy.load_state_dict(state["policy"])
+        self.model.policy.optimizer.load_state_dict(state["optimizer"])
+        self.model.num_timesteps = int(info["num_timesteps"])
+        self.curve[:] = info["learning_curve"]
+        self.clock = Clock(offset=float(info["clock_seconds"]))
+
+    def policy(self):
+        return policy_of(self.model, self.policy_agents, self.frame_stack, self.meta)
+
+    def checkpoint(self):
+        from ials_zoo.baselines.runs import save_training_state
+
+        with self.clock.pause():
+            state = {"policy": self.model.policy.state_dict(),
+                     "optimizer": self.model.policy.optimizer.state_dict()}
+            info = {"num_timesteps": int(self.model.num_timesteps), "clock_seconds": self.clock.seconds,
+                    "learning_curve": self.curve}
+            save_training_state(self.out, state, info)
+        self._last_checkpoint = time.monotonic()
+
+    def maybe_checkpoint(self, first: bool = False):
+        if first or time.monotonic() - self._last_checkpoint > self.checkpoint_seconds:
+            self.checkpoint()
 
     def record(self, steps: int):
-        """Checkpoint, evaluate on the GS, append to the curve (clock paused)."""
+        """Score the current policy on the GS, append it to the curve, checkpoint (clock paused)."""
         with self.clock.pause():
             self.training["env_steps"] = int(steps)
             self.training["wall_clock_seconds"] = self.clock.seconds - self.aip_seconds
-            save_model(self.model, self.checkpoint, self.meta)
-            ev = self.evaluators[self.curve_agent](self.model, self.checkpoint)
+            ev = self.evaluators[self.curve_agent](self.policy())
             self.curve.append(curve_point(steps, self.clock.seconds, ev))
             header = {k: self.meta[k] for k in ("env_id", "algorithm", "seed")}
             atomic_write_text(self.out / "curve.json", json.dumps(dict(
                 header, agent=self.curve_agent, simulator=self.training["simulator"],
                 points=self.curve), indent=2) + "\n")
-            save_model(self.model, self.checkpoint, self.meta)  # metadata now holds the curve
+            self.checkpoint()
         return ev
 
     def learn(self, total_timesteps: int, eval_every: int, final_episodes: int,
               progress: bool) -> dict:
-        """Train; return ``{agent: EvaluationResult}`` of the final model (``model.zip``)
-        over ``final_episodes`` GS episodes. Closes the training env and the evaluators."""
-        callback = make_progress_callback(total_timesteps, self.record, eval_every, progress)
+        """Train up to ``total_timesteps``; return ``{agent: EvaluationResult}`` of the final
+        policy (``policy.safetensors``) over ``final_episodes`` GS episodes. Closes the
+        training env and the evaluators (killing workers after an error or an interrupt)."""
+        from ials_zoo.policy import save_policy
+
+        done = int(self.model.num_timesteps)
+        callback = make_progress_callback(total_timesteps, self, eval_every, progress)
+        ok = False
         try:
-            self.model.learn(total_timesteps=total_timesteps, callback=callback)
+            if done < total_timesteps:
+                self.model.learn(total_timesteps=total_timesteps - done, callback=callback,
+                                 reset_num_timesteps=done == 0)
             steps = int(self.model.num_timesteps)
-            # The final model is on the curve (unless the last evaluation was at this very
+            # The final policy is on the curve (unless the last evaluation was at this very
             # step) and is scored again for the result on final_episodes episodes.
             if not self.curve or self.curve[-1]["env_steps"] != steps:
                 self.record(steps)
-            model_path = self.out / "model.zip"
+            self.training["env_steps"] = steps
+            self.training["wall_clock_seconds"] = self.clock.seconds - self.aip_seconds
+            path = self.out / "policy.safetensors"
             with self.clock.pause():
-                save_model(self.model, model_path, self.meta)
-                finals = {a: ev(self.model, model_path, final_episodes)
+                save_policy(self.policy(), path)
+                finals = {a: ev(_file_policy(path), final_episodes, progress=progress)
                           for a, ev in self.evaluators.items()}
+            ok = True
         finally:
             for ev in self.evaluators.values():
-                ev.close()
+                ev.close(kill=not ok)
             self.model.get_env().close()
         for ev in finals.values():
-            ev.policy_file = "model.zip"  # relative to the run folder (where results live)
+            ev.policy_file = "policy.safetensors"  # relative to the run folder (where results live)
         return finals
+
+
+def _file_policy(path):
+    from ials_zoo.evaluation import load_model
+
+    return load_model(path)
+
+
+def make_progress_callback(total: int, run: TrainingRun, eval_every: int, progress: bool):
+    """An SB3 callback: a tqdm progress bar (with the last GS score), ``run.record`` every
+    ``eval_every`` environment steps (0 = never), checkpoints after the first update and every
+    ``run.checkpoint_seconds``."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class _Callback(BaseCallback):
+        def _on_training_start(self):
+            start = self.num_timesteps
+            self.next_eval = None
+            if eval_every > 0:
+                self.next_eval = (start // eval_every + 1) * eval_every
+            self.bar = None
+            if progress:
+                from tqdm.auto import tqdm
+
+                self.bar = tqdm(total=total, initial=start, unit="step", dynamic_ncols=True, desc="train")
+            self.last = start
+            self.updates = 0
+
+        def _on_step(self):
+            if self.bar is not None:
+                self.bar.update(self.num_timesteps - self.last)
+            self.last = self.num_timesteps
+            if self.next_eval is not None and self.num_timesteps >= self.next_eval:
+                ev = run.record(self.num_timesteps)
+                if self.bar is not None:
+                    self.bar.set_postfix(gs=f"{ev.mean:.2f}")
+                while self.next_eval <= self.num_timesteps:
+                    self.next_eval += eval_every
+            return True
+
+        def _on_rollout_end(self):
+            self.updates += 1
+            run.maybe_checkpoint(first=self.updates == 1)
+
+        def _on_training_end(self):
+            if self.bar is not None:
+                self.bar.close()
+
+    return _Callback()

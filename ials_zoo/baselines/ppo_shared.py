@@ -32,7 +32,6 @@ per evaluated agent. The learning curve follows the first evaluated agent. Outpu
 from __future__ import annotations
 
 import dataclasses
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -123,7 +122,7 @@ def make_shared_vec_env(env_id: str, learners=None, n_copies: int = 1, seed: int
 class Args(PPOSettings):
     """Arguments of :func:`main` (``python -m baselines.ppo_shared --help``)."""
 
-    env_id: str = arg("warehouse_v0", "domain id", aliases=("--env",))
+    env_id: str | None = arg(None, "domain id (required)", aliases=("--env",))
     learners: str = arg("all", "comma-separated learning agents, or 'all'")
     eval_agents: str | None = arg(None, "comma-separated learners to score (default: the domain's default agents among the learners, else the first learner)")
     seed: int = arg(0, "training seed")
@@ -139,21 +138,19 @@ class Args(PPOSettings):
     final_eval_episodes: int = arg(20, "GS episodes of the final evaluation")
     deterministic_eval: bool = arg(False, "evaluate with the most likely action")
     out_dir: str | None = arg(None, "output folder (default: runs/<env>__shared__s<seed>)")
+    resume: bool = arg(False, "continue the unfinished run in --out-dir from its last checkpoint")
+    overwrite: bool = arg(False, "replace whatever --out-dir holds")
     progress: bool = arg(True, "show a progress bar")
     submitter: str = arg("", "submitter name for the results")
     notes: str = arg("", "notes for the results")
 
 
-def _agent_list(text: str | None, env_id: str, default) -> list[str]:
-    from ials_zoo.single_agent import check_agent
+def _agent_list(text: str | None, env_id: str, default, **options) -> list[str]:
+    from ials_zoo.core.domains import get_domain
 
     if text is None or text == "":
         return list(default)
-    if text == "all":
-        from ials_zoo.core.domains import get_domain
-
-        return list(get_domain(env_id).possible_agents())
-    return [check_agent(env_id, a.strip()) for a in text.split(",") if a.strip()]
+    return get_domain(env_id).check_agents(None if text == "all" else text, **options)
 
 
 def main(args: Args | None = None) -> list[dict]:
@@ -164,70 +161,76 @@ def main(args: Args | None = None) -> list[dict]:
     import ials_zoo
     from ials_zoo.core.domains import get_domain
     from ials_zoo.leaderboard import make_result, now_iso, write_result
-    from ials_zoo.single_agent import needs_own_process
 
     args = args or Args()
+    from ials_zoo.baselines.common import estimate_seconds, format_seconds
+    from ials_zoo.baselines.ppo_single import check_ppo_args
+    from ials_zoo.baselines.runs import RunFolder, training_logger
+    from ials_zoo.core.domains import domain_ids
+
+    if args.env_id is None:
+        raise ValueError(f"name the domain to train on: --env, one of {', '.join(domain_ids())}")
+    check_ppo_args(args, positive=("total_timesteps", "n_copies"))
     torch.set_num_threads(1)
     dom = get_domain(args.env_id)
-    learners = _agent_list(args.learners, args.env_id, dom.possible_agents())
-    if not learners:
-        raise ValueError("learners must name at least one agent")
+    options = parse_env_options(args.env_options)
+    learners = _agent_list(args.learners, args.env_id, dom.agents(**options), **options)
     default_eval = [a for a in dom.default_agents if a in learners] or learners[:1]
-    eval_agents = _agent_list(args.eval_agents, args.env_id, default_eval)
+    eval_agents = _agent_list(args.eval_agents, args.env_id, default_eval, **options)
     outside = [a for a in eval_agents if a not in learners]
     if outside or not eval_agents:
         raise ValueError(f"eval_agents {outside or eval_agents} must be learners ({learners})")
-    for name in ("total_timesteps", "n_copies", "n_steps", "batch_size", "n_epochs",
-                 "eval_episodes", "final_eval_episodes"):
-        if int(getattr(args, name)) < 1:
-            raise ValueError(f"{name} must be >= 1, got {getattr(args, name)}")
     hidden = _hidden(args.net_arch)
-    options = parse_env_options(args.env_options)
     frame_stack = int(args.frame_stack or dom.frame_stack)
     out = Path(args.out_dir or f"runs/{args.env_id}__shared__s{args.seed}")
-    out.mkdir(parents=True, exist_ok=True)
+    settings = {k: v for k, v in dataclasses.asdict(args).items()
+                if k not in ("resume", "overwrite", "progress", "out_dir", "submitter", "notes")}
+    run = RunFolder(out, resume=args.resume, overwrite=args.overwrite, settings=settings)
+    eta = estimate_seconds(args.env_id, "gs", args.total_timesteps)
+    print(f"ppo_shared: one PPO policy shared by {len(learners)} learners of {args.env_id} on the GS, seed "
+          f"{args.seed}\n  {args.total_timesteps:,} agent transitions, expected ~{format_seconds(eta)} here; "
+          f"writing {out}/" + (" (resuming)" if run.resuming else ""), flush=True)
 
-    all_agents = list(dom.possible_agents())
-    venv = make_shared_vec_env(args.env_id,
-                               learners=None if learners == all_agents else learners,
-                               n_copies=args.n_copies, seed=args.seed, **options)
-    venv = VecMonitor(as_float_box(venv))
-    if frame_stack > 1:
-        venv = VecFrameStack(venv, frame_stack)
-    model = make_ppo(venv, args, hidden)
-    training = {
-        "simulator": "gs", "aip": None, "seeds": [args.seed], "env_steps": 0,
-        "wall_clock_seconds": 0.0, "aip_seconds": 0.0,
-        "hyperparameters": dict(dataclasses.asdict(args), learners=learners,
-                                eval_agents=eval_agents),
-    }
-    meta = {
-        "format": "ials_zoo-model/1", "sb3_class": "PPO", "algorithm": "ppo_shared",
-        "env_id": args.env_id, "agent": eval_agents[0], "agents": learners,
-        "frame_stack": frame_stack, "env_options": options, "seed": args.seed, "training": training,
-        "learning_curve": [], "package_version": ials_zoo.__version__, "created": now_iso(),
-    }
-    own = needs_own_process(args.env_id)
-    evaluators = {a: Evaluator(args.env_id, a, frame_stack, args.eval_episodes,
-                               args.deterministic_eval, in_subprocess=own, options=options)
-                  for a in eval_agents}
-    run = TrainingRun(model, out, meta, evaluators)
-    start = time.perf_counter()
-    finals = run.learn(args.total_timesteps, args.eval_every, args.final_eval_episodes,
-                       args.progress)
-    results = []
-    for a, final in finals.items():
-        result = make_result(
-            [final], algorithm="ppo_shared", training=training, training_seeds=[args.seed],
-            learning_curves=[{"seed": args.seed, "points": run.curve}] if a == run.curve_agent else [],
-            trained_agents=learners, submitter=args.submitter, notes=args.notes)
-        write_result(out / f"result_{a}.json", result)
-        results.append(result)
-    if args.progress:
-        for r in results:
-            s = r["score"]
-            print(f"{r['agent']}: GS score {s['mean']:.3f} [{s['ci_low']:.3f}, {s['ci_high']:.3f}]")
-        print(f"{training['env_steps']} agent transitions in {time.perf_counter() - start:.0f} s; wrote {out}")
+    all_agents = dom.agents(**options)
+    with run.running():
+        venv = make_shared_vec_env(args.env_id,
+                                   learners=None if learners == all_agents else learners,
+                                   n_copies=args.n_copies, seed=args.seed, **options)
+        venv = VecMonitor(as_float_box(venv))
+        if frame_stack > 1:
+            venv = VecFrameStack(venv, frame_stack)
+        model = make_ppo(venv, args, hidden)
+        model.set_logger(training_logger(out))
+        training = {
+            "simulator": "gs", "aip": None, "seeds": [args.seed], "env_steps": 0,
+            "wall_clock_seconds": 0.0, "aip_seconds": 0.0,
+            "hyperparameters": dict(dataclasses.asdict(args), learners=learners,
+                                    eval_agents=eval_agents),
+        }
+        meta = {
+            "algorithm": "ppo_shared", "env_id": args.env_id, "agent": eval_agents[0],
+            "frame_stack": frame_stack, "env_options": options, "seed": args.seed, "training": training,
+            "learning_curve": [], "package_version": ials_zoo.__version__, "created": now_iso(),
+        }
+        evaluators = {a: Evaluator(args.env_id, a, args.eval_episodes, args.deterministic_eval,
+                                   in_subprocess=dom.one_simulation_per_process, options=options)
+                      for a in eval_agents}
+        trainer = TrainingRun(model, run, meta, evaluators, policy_agents=learners, frame_stack=frame_stack)
+        finals = trainer.learn(args.total_timesteps, args.eval_every, args.final_eval_episodes,
+                               args.progress)
+        results = []
+        for a, final in finals.items():
+            result = make_result(
+                [final], algorithm="ppo_shared", training=training, training_seeds=[args.seed],
+                learning_curves=[{"seed": args.seed, "points": trainer.curve}] if a == trainer.curve_agent else [],
+                trained_agents=learners, submitter=args.submitter, notes=args.notes)
+            write_result(out / f"result_{a}.json", result)
+            results.append(result)
+    for r in results:
+        s = r["score"]
+        print(f"ppo_shared: GS score of {r['agent']} {s['mean']:.3f} [{s['ci_low']:.3f}, {s['ci_high']:.3f}]")
+    print(f"ppo_shared: {training['env_steps']:,} agent transitions, wall-clock "
+          f"{format_seconds(training['wall_clock_seconds'])} (training); wrote {out}", flush=True)
     return results
 
 

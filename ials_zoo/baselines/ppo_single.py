@@ -2,34 +2,44 @@
 
 Usage::
 
-    python -m baselines.ppo_single --env warehouse_v0 --simulator ials
-    ials-zoo train ppo_single --env traffic_grid_v0 --agent intersection_12 --simulator gs
+    ials-zoo train ppo_single --env warehouse_v0 --simulator ials
+    ials-zoo train ppo_single --env traffic_grid_v0 --agent tls_12 --simulator gs --total-timesteps 100000
+    python -m baselines.ppo_single --help
 
 ``--simulator``: ``gs`` (the global simulator, other agents scripted), ``ials`` (the local
-simulator + the trained AIP shipped with the package), ``untrained-ials``, ``fixed:P``
-(F-IALS with the fixed probability P), ``marginal`` (F-IALS with the empirical marginal) or a
-path to a predictor ``.pt`` file.
+simulator + the trained AIP shipped with the package), ``untrained-ials``, ``uniform``,
+``fixed:P`` (F-IALS with the fixed probability P), ``marginal`` (F-IALS with the empirical
+marginal) or a path to a predictor ``.pt`` file (:mod:`ials_zoo.influence.specs`).
 
 The defaults are the authors' (SPEC §3): lr 2.5e-4 decayed linearly to 0, clip 0.1, entropy
 0.01, value coefficient 1, gamma 0.99, GAE lambda 0.95, 8 parallel envs, 3 epochs, an MLP of
-256-128 (separate policy and value networks), 2M steps, GS evaluation every 100k steps.
-Chosen here (the paper does not say): a rollout of 128 steps per env (1,024 per update) in
-minibatches of 256, SB3's default tanh activations and gradient clipping at 0.5. The warehouse
-policy reads the last 8 observations (``VecFrameStack``, from the domain's ``frame_stack``).
+256-128 (separate policy and value networks), GS evaluation every 100k steps. The budget
+defaults to the domain's study budget (``Domain.study.budget``: 2M steps in the warehouse as in
+the paper, about 7 min here; 300k in traffic, about 5 min); the run prints its expected
+duration before it starts. Chosen here (the paper does not say): a rollout of 128 steps per
+env (1,024 per update) in minibatches of 256, SB3's default tanh activations and gradient
+clipping at 0.5. The warehouse policy reads the last 8 observations (``VecFrameStack``, from
+the domain's ``frame_stack``).
 
-Outputs in ``--out-dir`` (default ``runs/<env>__<agent>__<simulator>__s<seed>``), all written
-atomically:
+Outputs in ``--out-dir`` (default ``runs/<env>__<agent>__<simulator>__s<seed>``; a used folder
+is refused unless ``--resume`` or ``--overwrite``), all written atomically (see
+:mod:`ials_zoo.baselines.runs`):
 
+* ``status.json`` -- running / finished / failed / interrupted;
+* ``progress.csv`` -- SB3's training metrics per update (episode return, losses, entropy);
 * ``curve.json`` -- the learning curve, rewritten after every evaluation: GS mean return and
-  95% CI vs environment steps and wall-clock seconds. Wall-clock counts training only
-  (evaluation and checkpointing excluded) plus, for an IALS, the AIP's data collection and
-  training time read from the predictor's metadata (as in the paper's plots);
-* ``checkpoint.zip`` (+ ``checkpoint.meta.json``) -- the latest model, saved at every
-  evaluation so that a crash loses at most ``--eval-every`` steps;
-* ``model.zip`` + ``model.meta.json`` -- the final model and everything needed to score it
-  later without this code (``ials-zoo evaluate --policy runs/.../model.zip``);
-* ``result.json`` -- a leaderboard result (``ials_zoo/leaderboard_schema.json``) with the
-  final GS score over ``--final-eval-episodes`` episodes.
+  95% CI vs environment steps and wall-clock seconds;
+* ``checkpoint.pt`` + ``checkpoint.json`` -- the training state, saved after the first
+  update, at every evaluation and every 5 minutes (``--resume`` continues from it);
+* ``policy.safetensors`` -- the final policy (weights + JSON, loadable without running code:
+  ``ials-zoo evaluate --policy runs/.../policy.safetensors``);
+* ``result.json`` -- a leaderboard result with the final GS score over
+  ``--final-eval-episodes`` episodes.
+
+**Wall-clock**: one figure, ``training.wall_clock_seconds`` = the seconds spent training
+(rollouts and updates; GS evaluations and checkpoints excluded), plus, for an IALS, the AIP's
+data collection and training seconds (``training.aip_seconds``, from the predictor's metadata),
+as in the paper's plots.
 
 Truncation: every zoo episode ends by a time limit. The GS vec env (``DummyVecEnv`` /
 ``SubprocVecEnv`` over :class:`~ials_zoo.single_agent.SingleAgentGS`) and the IALS vec env
@@ -40,7 +50,6 @@ bootstraps ``gamma * V(s_T)`` instead of treating the time limit as a terminal s
 from __future__ import annotations
 
 import dataclasses
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -63,11 +72,11 @@ from ials_zoo.baselines.common import (
 class Args(PPOSettings):
     """Arguments of :func:`main` (``python -m baselines.ppo_single --help``)."""
 
-    env_id: str = arg("warehouse_v0", "domain id", aliases=("--env",))
+    env_id: str | None = arg(None, "domain id (required)", aliases=("--env",))
     agent: str | None = arg(None, "learning agent (default: the domain's first default agent)")
-    simulator: str = arg("gs", "gs | ials | untrained-ials | fixed:P | marginal | PATH.pt")
+    simulator: str = arg("gs", "gs | ials | untrained-ials | uniform | fixed:P | marginal | PATH.pt")
     seed: int = arg(0, "training seed")
-    total_timesteps: int = arg(2_000_000, "environment steps of training")
+    total_timesteps: int | None = arg(None, "environment steps of training (default: the domain's study budget)")
     n_envs: int = arg(8, "parallel environments")
     n_steps: int = arg(128, "rollout length per environment and update")
     batch_size: int = arg(256, "minibatch size")
@@ -81,6 +90,8 @@ class Args(PPOSettings):
     deterministic_eval: bool = arg(False, "evaluate with the most likely action instead of sampling")
     vec_env: str = arg("auto", "GS vec env: auto | dummy | subproc (SUMO domains: subproc)")
     out_dir: str | None = arg(None, "output folder (default: runs/<env>__<agent>__<sim>__s<seed>)")
+    resume: bool = arg(False, "continue the unfinished run in --out-dir from its last checkpoint")
+    overwrite: bool = arg(False, "replace whatever --out-dir holds")
     progress: bool = arg(True, "show a progress bar")
     submitter: str = arg("", "submitter name for result.json")
     notes: str = arg("", "notes for result.json")
@@ -96,19 +107,44 @@ def _hidden(net_arch: str) -> list[int]:
     return sizes
 
 
-def check_args(args: Args) -> None:
-    """Clear errors for bad arguments before anything is built."""
-    for name in ("total_timesteps", "n_envs", "n_steps", "batch_size", "n_epochs",
-                 "eval_episodes", "final_eval_episodes"):
-        if int(getattr(args, name)) < 1:
-            raise ValueError(f"{name} must be >= 1, got {getattr(args, name)}")
+def check_ppo_args(args, positive=()) -> None:
+    """Clear errors for the PPO settings before anything is built."""
+    import math
+
+    from ials_zoo.utils import check_seed
+
+    for name in ("n_envs", "n_steps", "batch_size", "n_epochs", "eval_episodes", "final_eval_episodes",
+                 *positive):
+        value = getattr(args, name, None)
+        if value is not None and int(value) < 1:
+            raise ValueError(f"{name} must be >= 1, got {value}")
+    for name in ("learning_rate", "clip_range", "max_grad_norm"):
+        value = getattr(args, name)
+        if not (math.isfinite(value) and value > 0):
+            raise ValueError(f"{name} must be a finite number > 0, got {value}")
+    for name in ("ent_coef", "vf_coef"):
+        if not (math.isfinite(getattr(args, name)) and getattr(args, name) >= 0):
+            raise ValueError(f"{name} must be a finite number >= 0, got {getattr(args, name)}")
+    for name in ("gamma", "gae_lambda"):
+        if not 0.0 <= getattr(args, name) <= 1.0:
+            raise ValueError(f"{name} must be in [0, 1], got {getattr(args, name)}")
     if args.eval_every < 0:
         raise ValueError(f"eval_every must be >= 0, got {args.eval_every}")
     if args.frame_stack is not None and args.frame_stack < 1:
         raise ValueError(f"frame_stack must be >= 1, got {args.frame_stack}")
+    check_seed(args.seed, "seed")
     _hidden(args.net_arch)
-    predictor_for(args.simulator)
     parse_env_options(args.env_options)
+
+
+def check_args(args: Args) -> None:
+    """Clear errors for bad arguments before anything is built."""
+    from ials_zoo.core.domains import domain_ids
+
+    if args.env_id is None:
+        raise ValueError(f"name the domain to train on: --env, one of {', '.join(domain_ids())}")
+    check_ppo_args(args, positive=("total_timesteps",))
+    predictor_for(args.simulator)
 
 
 def make_training_env(args: Args, agent: str):
@@ -142,55 +178,66 @@ def main(args: Args | None = None) -> dict:
     from stable_baselines3.common.vec_env import VecFrameStack, VecMonitor
 
     import ials_zoo
+    from ials_zoo.baselines.common import estimate_seconds, format_seconds
+    from ials_zoo.baselines.runs import RunFolder, training_logger
     from ials_zoo.core.domains import get_domain
     from ials_zoo.leaderboard import make_result, now_iso, write_result
-    from ials_zoo.single_agent import check_agent, needs_own_process
+    from ials_zoo.single_agent import check_agent
 
     args = args or Args()
+    check_args(args)
     torch.set_num_threads(1)
     dom = get_domain(args.env_id)
-    agent = check_agent(args.env_id, args.agent or dom.default_agents[0])
-    check_args(args)
+    options = parse_env_options(args.env_options)
+    agent = check_agent(args.env_id, args.agent or dom.default_agents[0], **options)
+    if args.total_timesteps is None:
+        args.total_timesteps = dom.study.budget
     frame_stack = int(args.frame_stack or dom.frame_stack)
     out = Path(args.out_dir) if args.out_dir else default_out_dir(args, agent)
-    out.mkdir(parents=True, exist_ok=True)
+    settings = {k: v for k, v in dataclasses.asdict(args).items()
+                if k not in ("resume", "overwrite", "progress", "out_dir", "submitter", "notes")}
+    run = RunFolder(out, resume=args.resume, overwrite=args.overwrite, settings=settings)
+    sim_text = "the GS (every other agent scripted)" if args.simulator == "gs" else f"the IALS ({args.simulator})"
+    eta = estimate_seconds(args.env_id, args.simulator, args.total_timesteps)
+    print(f"ppo_single: PPO for {agent} of {args.env_id}, trained on {sim_text}, seed {args.seed}\n"
+          f"  {args.total_timesteps:,} steps, expected ~{format_seconds(eta)} here (plus GS evaluations every "
+          f"{args.eval_every:,} steps); writing {out}/" + (" (resuming)" if run.resuming else ""), flush=True)
 
-    venv, aip = make_training_env(args, agent)
-    aip_seconds = (aip["collection_seconds"] + aip["training_seconds"]) if aip else 0.0
-    venv = VecMonitor(as_float_box(venv))
-    if frame_stack > 1:
-        venv = VecFrameStack(venv, frame_stack)
-
-    model = make_ppo(venv, args, _hidden(args.net_arch))
-    training = {
-        "simulator": simulator_label(args.simulator, aip), "aip": aip, "seeds": [args.seed], "env_steps": 0,
-        "wall_clock_seconds": 0.0, "aip_seconds": aip_seconds,
-        "hyperparameters": dataclasses.asdict(args),
-    }
-    options = parse_env_options(args.env_options)
-    meta = {
-        "format": "ials_zoo-model/1", "sb3_class": "PPO", "algorithm": "ppo_single",
-        "env_id": args.env_id, "agent": agent, "agents": [agent], "frame_stack": frame_stack,
-        "env_options": options, "seed": args.seed, "training": training, "learning_curve": [],
-        "package_version": ials_zoo.__version__, "created": now_iso(),
-    }
-    evaluator = Evaluator(args.env_id, agent, frame_stack, args.eval_episodes,
-                          args.deterministic_eval, in_subprocess=needs_own_process(args.env_id),
-                          options=options)
-    run = TrainingRun(model, out, meta, {agent: evaluator}, aip_seconds)
-    start = time.perf_counter()
-    final = run.learn(args.total_timesteps, args.eval_every, args.final_eval_episodes,
-                      args.progress)[agent]
-    result = make_result(
-        [final], algorithm="ppo_single", training=training, training_seeds=[args.seed],
-        learning_curves=[{"seed": args.seed, "points": run.curve}], trained_agents=[agent],
-        submitter=args.submitter, notes=args.notes,
-    )
-    write_result(out / "result.json", result)
-    if args.progress:
-        print(f"GS score {result['score']['mean']:.3f} "
-              f"[{result['score']['ci_low']:.3f}, {result['score']['ci_high']:.3f}] after "
-              f"{training['env_steps']} steps, {time.perf_counter() - start:.0f} s; wrote {out}/result.json")
+    with run.running():
+        venv, aip = make_training_env(args, agent)
+        aip_seconds = (aip["collection_seconds"] + aip["training_seconds"]) if aip else 0.0
+        venv = VecMonitor(as_float_box(venv))
+        if frame_stack > 1:
+            venv = VecFrameStack(venv, frame_stack)
+        model = make_ppo(venv, args, _hidden(args.net_arch))
+        model.set_logger(training_logger(out))
+        training = {
+            "simulator": simulator_label(args.simulator, aip), "aip": aip, "seeds": [args.seed], "env_steps": 0,
+            "wall_clock_seconds": 0.0, "aip_seconds": aip_seconds,
+            "hyperparameters": dataclasses.asdict(args),
+        }
+        meta = {
+            "algorithm": "ppo_single", "env_id": args.env_id, "agent": agent, "frame_stack": frame_stack,
+            "env_options": options, "seed": args.seed, "training": training, "learning_curve": [],
+            "package_version": ials_zoo.__version__, "created": now_iso(),
+        }
+        evaluator = Evaluator(args.env_id, agent, args.eval_episodes, args.deterministic_eval,
+                              in_subprocess=dom.one_simulation_per_process, options=options)
+        trainer = TrainingRun(model, run, meta, {agent: evaluator}, aip_seconds, frame_stack=frame_stack)
+        final = trainer.learn(args.total_timesteps, args.eval_every, args.final_eval_episodes,
+                              args.progress)[agent]
+        result = make_result(
+            [final], algorithm="ppo_single", training=training, training_seeds=[args.seed],
+            learning_curves=[{"seed": args.seed, "points": trainer.curve}], trained_agents=[agent],
+            submitter=args.submitter, notes=args.notes,
+        )
+        write_result(out / "result.json", result)
+    s = result["score"]
+    total = training["wall_clock_seconds"] + training["aip_seconds"]
+    print(f"ppo_single: GS score of {agent} {s['mean']:.3f} [{s['ci_low']:.3f}, {s['ci_high']:.3f}] "
+          f"({result['evaluation']['episodes']} episodes) after {training['env_steps']:,} steps; wall-clock "
+          f"{format_seconds(total)} (training" + (f" + AIP {format_seconds(training['aip_seconds'])}" if aip_seconds else "")
+          + f"); wrote {out}/result.json", flush=True)
     return result
 
 

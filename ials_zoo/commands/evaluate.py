@@ -1,91 +1,105 @@
-"""``ials-zoo evaluate``: score a policy on the GS (other agents scripted) and write a
-leaderboard result JSON.
+"""``ials-zoo evaluate``: score a policy on the GS and write a leaderboard result JSON.
 
-    ials-zoo evaluate --env warehouse_v0 --agent robot_20 --policy scripted --episodes 30 --out r.json
-    ials-zoo evaluate --policy runs/warehouse_v0__robot_20__ials__s0/model.zip --out r.json
+    ials-zoo evaluate --env warehouse_v0 --agent robot_20 --policy scripted --out r.json
+    ials-zoo evaluate --policy runs/warehouse_v0__robot_20__gs__s0/policy.safetensors --out r.json
+    ials-zoo evaluate --env traffic_grid_v0 --joint --policy runs/dials_traffic/policy.safetensors
 
-``--policy``: ``random``, ``scripted``, a saved baseline model (``.zip`` with its
-``.meta.json`` sidecar: domain, agent and frame stack come from it) or ``module:function``.
-Protocol (seeds 10000 + i, 95% Student-t CI): :mod:`ials_zoo.evaluation`.
+``--policy``: ``random``, ``scripted``, a policy file (``.safetensors``: weights + JSON), an
+SB3 PPO ``.zip`` with its ``.meta.json`` sidecar (read without unpickling), or
+``module:function`` -- a callable ``fn(obs) -> action`` importable from the current folder
+(it reads ``fn.frame_stack`` stacked observations, default 1; a result of such code can be
+kept locally but never submitted). ``--joint`` scores every agent at once (the multi-agent
+track); a policy file with several agents is scored jointly by default.
+Protocol (20 episodes, seeds 10000 + i, 95% bootstrap interval): :mod:`ials_zoo.evaluation`.
 """
 
 from __future__ import annotations
 
-import json
-import sys
+from ials_zoo.commands import CommandError
 
 
 def configure(parser):
+    from ials_zoo.evaluation import PROTOCOL_EPISODES
+
     parser.add_argument("--env", dest="env_id", default=None,
-                        help="domain id (default: from the model's metadata)")
+                        help="domain id (default: from the policy file)")
     parser.add_argument("--agent", default=None,
-                        help="agent to control (default: the model's, else the domain's default)")
+                        help="agent to control (default: the policy's, else the domain's first paper agent)")
+    parser.add_argument("--joint", action="store_true",
+                        help="every agent acts with its own policy (multi-agent track)")
     parser.add_argument("--policy", required=True,
-                        help="random | scripted | PATH.zip (baseline model) | module:function")
-    parser.add_argument("--episodes", type=int, default=20, help="episodes (seeds 10000..)")
+                        help="random | scripted | FILE.safetensors | FILE.zip (SB3) | module:function")
+    parser.add_argument("--episodes", type=int, default=PROTOCOL_EPISODES,
+                        help=f"episodes, seeds 10000.. (default: the protocol's {PROTOCOL_EPISODES})")
     parser.add_argument("--deterministic", action="store_true",
                         help="take the most likely action (models) instead of sampling")
     parser.add_argument("--frame-stack", type=int, default=None,
-                        help="override the policy's frame stack (callables default to 1)")
+                        help="observations a callable policy reads (a model's own is used)")
     parser.add_argument("--env-options", default="",
                         help="GS options as a JSON object, e.g. '{\"item_lifetime\": 8}' "
-                             "(default: the model's training options)")
+                             "(default: the model's training options; any option makes a protocol variant)")
     parser.add_argument("--out", default=None, help="write the result JSON here (atomic)")
     parser.add_argument("--submitter", default="", help="submitter name in the result")
     parser.add_argument("--notes", default="", help="notes in the result")
-    parser.add_argument("--no-progress", dest="progress", action="store_false",
-                        help="no progress bar")
+    parser.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
 
 
 def result_for(env_id, agent, policy, episodes, deterministic=False, frame_stack=None,
-               submitter="", notes="", progress=False, options: dict | None = None) -> dict:
+               submitter="", notes="", progress=False, options: dict | None = None, joint: bool = False) -> dict:
     """Evaluate ``policy`` and build its leaderboard result (training record from a model's
     metadata; none for reference policies and callables)."""
     from ials_zoo.core.domains import get_domain
-    from ials_zoo.evaluation import evaluate, load_policy
+    from ials_zoo.evaluation import evaluate, evaluate_joint, load_policy
     from ials_zoo.leaderboard import make_result
 
-    probe = load_policy(policy) if str(policy).endswith(".zip") else None
-    meta = probe.metadata if probe is not None else {}
+    pol = load_policy(policy, env_id, agent, deterministic=deterministic, frame_stack=frame_stack)
+    meta = pol.metadata if pol.kind == "model" else {}
     env_id = env_id or meta.get("env_id")
     if env_id is None:
-        raise ValueError("--env is required unless the policy is a model with metadata")
-    agent = agent or meta.get("agent") or get_domain(env_id).default_agents[0]
+        raise ValueError("--env is required unless the policy is a model that names its domain")
+    domain = get_domain(env_id)
+    if pol.kind == "model" and len(pol.agents) > 1 and agent is None:
+        joint = True
     options = meta.get("env_options", {}) if options is None else options
-    ev = evaluate(env_id, agent, probe or policy, episodes=episodes, deterministic=deterministic,
-                  frame_stack=frame_stack, progress=progress, **options)
-    if meta:
-        training = meta.get("training")
-        curve = meta.get("learning_curve") or []
+    if joint:
+        if agent is not None:
+            raise ValueError("--joint scores every agent: leave out --agent")
+        ev = evaluate_joint(env_id, pol, episodes=episodes, deterministic=deterministic, progress=progress, **options)
+    else:
+        agent = agent or (pol.agents[0] if pol.kind == "model" else domain.default_agents[0])
+        ev = evaluate(env_id, agent, pol, episodes=episodes, deterministic=deterministic,
+                      frame_stack=frame_stack, progress=progress, **options)
+    if meta.get("training"):
         seed = meta.get("seed")
-        return make_result([ev], algorithm=meta.get("algorithm", "model"), training=training,
+        curve = meta.get("learning_curve") or []
+        return make_result([ev], algorithm=meta.get("algorithm", "model"), training=meta["training"],
                            training_seeds=[seed],
                            learning_curves=[{"seed": seed, "points": curve}] if curve else [],
-                           trained_agents=meta.get("agents", [agent]),
-                           submitter=submitter, notes=notes)
-    algorithm = ev.policy_kind if ev.policy_kind in ("random", "scripted") else "callable"
+                           trained_agents=list(pol.agents), submitter=submitter, notes=notes)
+    algorithm = ev.policy_kind if ev.policy_kind in ("random", "scripted", "callable") else "model"
     return make_result([ev], algorithm=algorithm, submitter=submitter, notes=notes)
 
 
 def run(args) -> int:
     from ials_zoo.baselines.common import parse_env_options
     from ials_zoo.leaderboard import write_result
+    from ials_zoo.utils import check_output_file
 
-    try:
-        options = parse_env_options(args.env_options) if args.env_options else None
-        result = result_for(args.env_id, args.agent, args.policy, args.episodes,
-                            args.deterministic, args.frame_stack, args.submitter, args.notes,
-                            args.progress, options)
-    except (ValueError, TypeError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    if args.episodes < 1:
+        raise CommandError(f"--episodes must be >= 1, got {args.episodes}")
+    if args.frame_stack is not None and args.frame_stack < 1:
+        raise CommandError(f"--frame-stack must be >= 1, got {args.frame_stack}")
+    if args.out:
+        check_output_file(args.out, "--out")
+    options = parse_env_options(args.env_options) if args.env_options else None
+    result = result_for(args.env_id, args.agent, args.policy, args.episodes, args.deterministic,
+                        args.frame_stack, args.submitter, args.notes, args.progress, options, args.joint)
     s = result["score"]
-    print(f"{result['env_id']} {result['agent']} policy={result['policy']['name']}: "
-          f"GS mean return {s['mean']:.3f}, 95% CI [{s['ci_low']:.3f}, {s['ci_high']:.3f}] "
-          f"over {result['evaluation']['episodes']} episodes")
+    who = result["agent"] or f"{len(result['agents'])} agents (mean over agents)"
+    print(f"{result['env_id']} {who}, policy {result['policy']['name']} ({result['policy']['kind']}): GS mean "
+          f"return {s['mean']:.3f}, 95% CI [{s['ci_low']:.3f}, {s['ci_high']:.3f}] over "
+          f"{result['evaluation']['episodes']} episodes ({result['evaluation']['protocol']} protocol)")
     if args.out:
         write_result(args.out, result)
         print(f"wrote {args.out}")
-    else:
-        print(json.dumps(result["score"]))
     return 0

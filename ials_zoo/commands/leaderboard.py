@@ -1,12 +1,16 @@
-"""``ials-zoo leaderboard {submit,show,render,verify}``: the results board in ``leaderboard/``.
+"""``ials-zoo leaderboard``: the results board (``leaderboard/`` of the repository).
 
-    ials-zoo leaderboard submit result.json [--dir leaderboard]
-    ials-zoo leaderboard merge run_s0/result.json run_s1/result.json --out merged.json
-    ials-zoo leaderboard show
+    ials-zoo leaderboard show                                   # where the board is, and its tables
+    ials-zoo leaderboard submit result.json
+    ials-zoo leaderboard verify leaderboard/results/<file>.json
     ials-zoo leaderboard render
-    ials-zoo leaderboard verify leaderboard/results/<file>.json [--policy model.zip]
+    ials-zoo leaderboard merge run_s0/result.json run_s1/result.json --out merged.json
+    ials-zoo leaderboard validate result.json
+    ials-zoo leaderboard convert model.zip --out policy.safetensors   # SB3 zip -> policy file
 
-See :mod:`ials_zoo.leaderboard` and ``leaderboard/SCHEMA.md``.
+The board is ``--dir``, else ``$IALS_ZOO_LEADERBOARD``, else ``./leaderboard``. See
+:mod:`ials_zoo.leaderboard` and ``leaderboard/SCHEMA.md``. A rejected submission or a failed
+verification exits with status 1, bad input with 2.
 """
 
 from __future__ import annotations
@@ -16,23 +20,31 @@ import sys
 
 def configure(parser):
     sub = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
+
+    def board(p):
+        p.add_argument("--dir", default=None, help="the board folder (default: $IALS_ZOO_LEADERBOARD or ./leaderboard)")
+
     p = sub.add_parser("submit", help="validate a result and add it to the board")
     p.add_argument("file")
-    p.add_argument("--dir", default="leaderboard", help="leaderboard folder")
+    board(p)
     p = sub.add_parser("show", help="print the board")
-    p.add_argument("--dir", default="leaderboard", help="leaderboard folder")
-    p = sub.add_parser("render", help="regenerate <dir>/README.md and its plots")
-    p.add_argument("--dir", default="leaderboard", help="leaderboard folder")
-    p = sub.add_parser("verify", help="re-score a result's policy on the GS")
+    board(p)
+    p = sub.add_parser("render", help="regenerate <board>/README.md and its plots")
+    board(p)
+    p = sub.add_parser("verify", help="re-score a result's policies on the GS (exact)")
     p.add_argument("file")
     p.add_argument("--policy", action="append", default=None,
-                   help="policy file (one per training seed) when the recorded path is not valid here")
+                   help="policy file (one per training seed) when the recorded one is not found")
+    board(p)
     p = sub.add_parser("validate", help="check a result file without submitting it")
     p.add_argument("file")
     p = sub.add_parser("merge", help="combine single-seed results of one experiment")
     p.add_argument("files", nargs="+")
     p.add_argument("--out", required=True, help="merged result JSON (atomic)")
     p.add_argument("--notes", default=None)
+    p = sub.add_parser("convert", help="turn an SB3 PPO model zip (+ its .meta.json) into a policy file")
+    p.add_argument("file")
+    p.add_argument("--out", required=True, help="the .safetensors policy file to write")
 
 
 def run(args) -> int:
@@ -40,12 +52,14 @@ def run(args) -> int:
 
     try:
         if args.action == "submit":
-            dest = lb.submit(args.file, args.dir)
-            print(f"accepted: {dest}")
+            print(f"accepted: {lb.submit(args.file, args.dir)}")
         elif args.action == "validate":
             lb.load_result(args.file)
             print(f"{args.file}: valid")
         elif args.action == "merge":
+            from ials_zoo.utils import check_output_file
+
+            check_output_file(args.out, "--out")
             merged = lb.merge_results([lb.load_result(f) for f in args.files], notes=args.notes)
             lb.write_result(args.out, merged)
             s = merged["score"]
@@ -55,20 +69,27 @@ def run(args) -> int:
             print(lb.show(args.dir))
         elif args.action == "render":
             print(f"wrote {lb.render(args.dir)}")
+        elif args.action == "convert":
+            from ials_zoo.evaluation import load_model
+            from ials_zoo.policy import save_policy
+            from ials_zoo.utils import check_output_file
+
+            if not args.out.endswith(".safetensors"):
+                raise ValueError("--out must name a .safetensors file")
+            check_output_file(args.out, "--out")
+            pol = load_model(args.file)
+            save_policy(pol.net, args.out)
+            print(f"wrote {args.out} ({pol.net!r})")
         elif args.action == "verify":
-            reports = lb.verify(args.file, args.policy, progress=True)
+            reports = lb.verify(args.file, args.policy, progress=True, directory=args.dir)
             ok = True
             for r in reports:
-                status = "OK" if r["ok"] else "FAILED"
-                print(f"seed {'-' if r['seed'] is None else r['seed']}: claimed {r['claimed']:.4f}, re-measured "
-                      f"{r['measured']:.4f} [{r['ci'][0]:.4f}, {r['ci'][1]:.4f}] "
-                      f"{'(exact)' if r['exact'] else ''} {status}")
+                status = "OK (every episode re-measured exactly)" if r["ok"] else f"FAILED (episodes differ: {r['differences'][:10]})"
+                print(f"seed {'-' if r['seed'] is None else r['seed']}: claimed {r['claimed']:.6f}, re-measured "
+                      f"{r['measured']:.6f}: {status}")
                 ok &= r["ok"]
             return 0 if ok else 1
     except lb.ResultError as exc:
-        print(f"rejected: {exc}", file=sys.stderr)
+        print(f"ials-zoo leaderboard {args.action}: rejected: {exc}", file=sys.stderr)
         return 1
-    except (ValueError, TypeError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
     return 0

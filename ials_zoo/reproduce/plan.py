@@ -8,7 +8,8 @@ second invocation plans the same jobs and skips the done ones.
 Layout under ``--out`` (default ``runs/reproduce``)::
 
     training/<env_id>__<agent>/aip/            AIP collected + trained once per agent (timed)
-    training/<env_id>__<agent>/<label>__s<seed>/   one ppo_single run (curve.json, result.json)
+    training/<env_id>__<agent>/<label>__s<seed>/   one ppo_single job; its run folder run/ holds
+                                               curve.json, result.json, policy.safetensors, ...
     memory/<env_id>__<agent>/aip_gru/, aip_mlp/    M-IALS / NM-IALS AIPs (item_lifetime=8)
     memory/<env_id>__<agent>/<aip>__fs<k>__s<seed>/ PPO on that IALS with frame stack k
     memory/<env_id>__<agent>/lifetimes/        item-lifetime histograms (GS, M-IALS, NM-IALS)
@@ -25,6 +26,7 @@ from pathlib import Path
 from ials_zoo.core.domains import domain_ids, domain_of_agent, get_domain
 
 EXPERIMENTS = ("training", "memory", "dset")
+RUN_SUBDIR = "run"  # a PPO job's run folder inside its job folder (which holds job.json, log.txt)
 DEFAULT_SIMULATORS = ("gs", "ials", "untrained-ials", "fixed:0.1")
 KNOWN_SIMULATORS = DEFAULT_SIMULATORS + ("marginal",)
 # The memory experiment (12 runs) compares simulators with each other, not with the GS's
@@ -201,7 +203,7 @@ def _ppo_params(cfg: Config, env_id: str, agent: str, simulator: str, seed: int,
         "env_id": env_id, "agent": agent, "simulator": simulator, "seed": seed,
         "total_timesteps": budget, "n_envs": cfg.n_envs, "net_arch": cfg.net_arch,
         "eval_every": cfg.eval_every(budget=budget), "eval_episodes": cfg.eval_episodes,
-        "final_eval_episodes": cfg.final_eval_episodes, "out_dir": str(out),
+        "final_eval_episodes": cfg.final_eval_episodes, "out_dir": str(Path(out) / RUN_SUBDIR),
         "progress": False, "notes": notes,
     }
 
@@ -233,7 +235,7 @@ def plan_training(cfg: Config) -> list[Job]:
                     d = base / f"{label_of(sim)}__s{seed}"
                     jobs.append(Job(
                         id=f"training/{env_id}/{agent}/{label_of(sim)}/s{seed}", kind="ppo",
-                        dir=str(d), marker="result.json", deps=deps, experiment="training",
+                        dir=str(d), marker=f"{RUN_SUBDIR}/result.json", deps=deps, experiment="training",
                         label=sim,
                         params=_ppo_params(cfg, env_id, agent, spec, seed, d,
                                            f"ials-zoo reproduce (training, {sim}, budget {cfg.budget_for(env_id)})")))
@@ -269,7 +271,7 @@ def plan_memory(cfg: Config) -> list[Job]:
                         # ppo_single trains on, and scores on, the memory variant.
                         params.update(frame_stack=fs, env_options=json.dumps(options, sort_keys=True))
                         jobs.append(Job(id=f"memory/{agent}/{name}/fs{fs}/s{seed}", kind="ppo",
-                                        dir=str(d), marker="result.json", deps=[aips[arch].id],
+                                        dir=str(d), marker=f"{RUN_SUBDIR}/result.json", deps=[aips[arch].id],
                                         experiment="memory", label=f"{name} fs{fs}", params=params))
             d = base / "lifetimes"
             jobs.append(Job(id=f"memory/{agent}/lifetimes", kind="lifetimes", dir=str(d),

@@ -1,13 +1,6 @@
-"""Aggregation of a study: curves, tables, ``reproduction.md`` and leaderboard submissions.
-
-Everything is re-made from the run folders (``job.json``, ``curve.json``, ``result.json``,
-``report.json``, ``lifetimes.json``, ``dset.json``), so ``ials-zoo reproduce --report-only``
-works on a partly finished study: missing runs are listed as missing, never guessed.
-
-Curves: each seed's GS learning curve (mean return vs wall-clock seconds, AIP collection and
-training included) is interpolated linearly onto a common grid over the span every seed
-covers; the band is the 95% Student-t interval over seeds (none with one seed).
-"""
+"""Formatting a study: figures, ``reproduction.md`` and leaderboard submissions, from the data
+of :mod:`ials_zoo.reproduce.claims` (re-made from the run folders, so
+``ials-zoo reproduce --report-only`` works on a partly finished study)."""
 
 from __future__ import annotations
 
@@ -17,174 +10,28 @@ from pathlib import Path
 
 import numpy as np
 
-from ials_zoo.evaluation import mean_ci
+from ials_zoo.reproduce.claims import (  # noqa: F401 - names of the former single module
+    CE_ROWS,
+    CLEAR_CE_GAP,
+    PAPER,
+    TARGET_SCORE_RATIO,
+    TARGET_TIME_RATIO,
+    _load,
+    aggregate_curves,
+    dset_verdicts,
+    group,
+    load_runs,
+    memory_claims,
+    memory_stats,
+    normalize_ce,
+    paper_steps_per_second,
+    reference_scores,
+    summarize_training,
+    time_to_reach,
+    training_claims,
+)
 from ials_zoo.reproduce.plan import label_of
 from ials_zoo.utils import atomic_path, atomic_write_text
-
-# SPEC §4 (authors' plotting notebooks).
-PAPER = {
-    "traffic_grid_v0": {"gs_hours": 6.16, "ials_hours": 2.13, "collect_s": 104, "train_s": 36,
-                        "ce_trained": 0.22, "ce_untrained": 0.78},
-    "warehouse_v0": {"gs_hours": 13.1, "ials_hours": 3.9, "collect_s": 112, "train_s": 207,
-                     "ce_trained": 0.362, "ce_untrained": 1.46},
-}
-TARGET_SCORE_RATIO = 0.95
-TARGET_TIME_RATIO = 1 / 3
-# A difference in cross-entropy increase below this (nats) is not called a difference.
-CLEAR_CE_GAP = 0.02
-# Rows of a train_predictor report besides "trained".
-CE_ROWS = (("untrained", "untrained (randomly initialised network, the paper's)"),
-           ("uniform", "uniform (fixed class probabilities)"),
-           ("marginal", "marginal"))
-
-
-def normalize_ce(ce: dict) -> dict:
-    """Cross-entropy rows under today's names: reports written before the influence package
-    renamed its rows called the random network "random-init" and the fixed probabilities
-    "untrained"; now they are "untrained" and "uniform"."""
-    if "random-init" in ce and "uniform" not in ce:
-        ce = dict(ce)
-        ce["uniform"] = ce.pop("untrained")
-        ce["untrained"] = ce.pop("random-init")
-    return ce
-
-
-def _load(path: Path):
-    try:
-        return json.loads(Path(path).read_text())
-    except (OSError, ValueError):
-        return None
-
-
-# --------------------------------------------------------------------------------------------
-# Loading runs
-
-
-def load_runs(out, experiment: str) -> list[dict]:
-    """Every PPO run folder of ``experiment`` under ``out``: ``{job, curve, result, dir}``
-    (``curve``/``result`` None while missing)."""
-    runs = []
-    for jf in sorted(Path(out, experiment).glob("*/*/job.json")):
-        job = _load(jf)
-        if not job or job.get("kind") != "ppo":
-            continue
-        d = jf.parent
-        runs.append({"job": job, "dir": d, "curve": _load(d / "curve.json"), "result": _load(d / "result.json")})
-    return runs
-
-
-def group(runs, key) -> dict:
-    out: dict = {}
-    for r in runs:
-        out.setdefault(key(r), []).append(r)
-    return out
-
-
-# --------------------------------------------------------------------------------------------
-# Statistics
-
-
-def aggregate_curves(curves: list[list[dict]], n: int = 50) -> dict | None:
-    """Mean and 95% CI over seeds of GS return vs wall-clock seconds.
-
-    ``curves``: per seed, the points (``wall_clock_seconds``, ``mean``) of its curve.json.
-    Returns ``{"seconds", "mean", "ci_low", "ci_high", "seeds"}`` on a common grid over the
-    span all seeds cover (a single point if they share one), or None without data."""
-    curves = [sorted(c, key=lambda p: p["wall_clock_seconds"]) for c in curves if c]
-    if not curves:
-        return None
-    lo = max(c[0]["wall_clock_seconds"] for c in curves)
-    hi = min(c[-1]["wall_clock_seconds"] for c in curves)
-    if hi <= lo:
-        grid = np.array([hi])
-    else:
-        grid = np.linspace(lo, hi, n)
-    ys = np.stack([np.interp(grid, [p["wall_clock_seconds"] for p in c], [p["mean"] for p in c])
-                   for c in curves])
-    stats = [mean_ci(ys[:, i]) for i in range(len(grid))]
-    return {"seconds": grid.tolist(), "mean": [s[0] for s in stats], "ci_low": [s[1] for s in stats],
-            "ci_high": [s[2] for s in stats], "seeds": len(curves)}
-
-
-def time_to_reach(agg: dict | None, target: float) -> float | None:
-    """First wall-clock second at which the mean curve reaches ``target`` (None: never)."""
-    if agg is None:
-        return None
-    for t, m in zip(agg["seconds"], agg["mean"]):
-        if m >= target:
-            return float(t)
-    return None
-
-
-def summarize_training(runs: list[dict]) -> dict:
-    """Per (env_id, agent): per simulator label, final GS scores over seeds, wall-clock,
-    PPO throughput, the aggregated curve, and the comparisons with the GS."""
-    out = {}
-    for (env_id, agent), rs in sorted(group(runs, lambda r: (r["job"]["params"]["env_id"],
-                                                            r["job"]["params"]["agent"])).items()):
-        sims = {}
-        for label, srs in group(rs, lambda r: r["job"]["label"]).items():
-            done = [r for r in srs if r["result"]]
-            finals = [r["result"]["score"]["mean"] for r in done]
-            totals = [r["result"]["training"]["wall_clock_seconds"] + r["result"]["training"]["aip_seconds"]
-                      for r in done]
-            aip_s = [r["result"]["training"]["aip_seconds"] for r in done]
-            steps_s = [r["result"]["training"]["env_steps"] / max(r["result"]["training"]["wall_clock_seconds"], 1e-9)
-                       for r in done]
-            m, lo, hi = mean_ci(finals) if finals else (None, None, None)
-            sims[label] = {
-                "planned": len(srs), "finished": len(done), "seeds": [r["job"]["params"]["seed"] for r in done],
-                "final_mean": m, "final_ci_low": lo, "final_ci_high": hi, "final_per_seed": finals,
-                "total_seconds": float(np.mean(totals)) if totals else None,
-                "aip_seconds": float(np.mean(aip_s)) if aip_s else None,
-                "ppo_steps_per_second": float(np.mean(steps_s)) if steps_s else None,
-                "env_steps": int(np.mean([r["result"]["training"]["env_steps"] for r in done])) if done else None,
-                "curve": aggregate_curves([r["curve"]["points"] for r in srs if r["curve"]]),
-            }
-        gs = sims.get("gs", {})
-        # The target is 95% of the end of the GS's own mean curve (the same evaluation protocol
-        # as the curves it is compared with), not of the final score over more episodes.
-        target = None
-        if gs.get("curve") and gs["curve"]["mean"][-1] > 0:
-            target = TARGET_SCORE_RATIO * gs["curve"]["mean"][-1]
-        t_gs = time_to_reach(gs.get("curve"), target) if target is not None else None
-        for label, s in sims.items():
-            s["score_ratio_to_gs"] = (s["final_mean"] / gs["final_mean"]
-                                      if s["final_mean"] is not None and gs.get("final_mean") else None)
-            s["seconds_to_95pct_gs"] = time_to_reach(s["curve"], target) if target is not None else None
-            s["time_ratio_to_gs"] = (s["seconds_to_95pct_gs"] / t_gs
-                                     if s["seconds_to_95pct_gs"] is not None and t_gs else None)
-        out[(env_id, agent)] = {"simulators": dict(sorted(sims.items(), key=lambda kv: _sim_order(kv[0]))),
-                                "target_95pct": target}
-    return out
-
-
-def _sim_order(label: str):
-    from ials_zoo.reproduce.plan import KNOWN_SIMULATORS
-
-    return (KNOWN_SIMULATORS.index(label) if label in KNOWN_SIMULATORS else len(KNOWN_SIMULATORS), label)
-
-
-def paper_steps_per_second(env_id: str) -> dict:
-    """PPO throughput implied by SPEC §4 (2M steps / reported hours)."""
-    p = PAPER[env_id]
-    return {"gs": 2e6 / (p["gs_hours"] * 3600), "ials": 2e6 / (p["ials_hours"] * 3600)}
-
-
-def reference_scores(leaderboard, env_id: str, agent: str) -> dict:
-    """Scores of the reference policies (entries without training) on the board."""
-    from ials_zoo.leaderboard import load_entries
-
-    refs = {}
-    try:
-        entries = load_entries(leaderboard)
-    except (OSError, ValueError):
-        return refs
-    for _, d in entries:
-        if d.get("env_id") == env_id and d.get("agent") == agent and d.get("training") is None:
-            refs[d["algorithm"]] = d["score"]["mean"]
-    return refs
-
 
 # --------------------------------------------------------------------------------------------
 # Figures
@@ -251,6 +98,36 @@ def _verdict(ok: bool | None) -> str:
     return {True: "holds", False: "does not hold", None: "not measured"}[ok]
 
 
+def format_claim(c: dict) -> str:
+    """One claim of :func:`~ials_zoo.reproduce.claims.training_claims` as a sentence."""
+    i = c["id"]
+    if i == "score":
+        return f"- {c['claim']}: ratio {_f(c['measured'], 2)} -> {_verdict(c['holds'])}."
+    if i == "time_to_95":
+        return (f"- {c['claim']}: {_f(c['ials_seconds'], 0)} s vs {_f(c['gs_seconds'], 0)} s, ratio "
+                f"{_f(c['measured'], 2)} -> {_verdict(c['holds'])}"
+                + (" (the IALS never reached it within the budget)" if c["never_reached"] else "") + ".")
+    if i == "total_time":
+        return (f"- {c['claim']}: {_f(c['ials_seconds'], 0)} s vs {_f(c['gs_seconds'], 0)} s, ratio "
+                f"{_f(c['measured'], 2)} -> <= 1/3 {_verdict(c['holds'])}"
+                + ("" if c["measured"] is None else f", <= 1/5 {_verdict(c['holds_one_fifth'])}") + ".")
+    if i == "untrained_worse":
+        un, ials = c["measured"]
+        answer = "undecided: a 95% CI needs >= 2 seeds" if c["undecided"] else ("yes" if c["holds"] else "no")
+        return f"- {c['claim']}: {un:.3f} vs {ials:.3f} -> {answer} (paper: {c['paper']})."
+    if i == "fixed_close":
+        return f"- {c['claim']}: ratio {c['measured']:.2f} -> {'yes' if c['holds'] else 'no'} (paper: {c['paper']})."
+    if i == "ce":
+        t, u = c["measured"]
+        return (f"- {c['claim']}: {t:.3f} vs {u:.3f} (ratio {c['ratio']:.2f}; paper {c['paper'][0] or '-'} vs "
+                f"{c['paper'][1] or '-'}).")
+    if i == "throughput":
+        return (f"- {c['claim']} here: {c['measured']:.2f}x ({c['ials']:.0f} vs {c['gs']:.0f} steps/s); paper, from "
+                f"its 2M-step wall-clocks: {c['paper']:.2f}x ({c['paper_ials']:.0f} vs {c['paper_gs']:.0f} steps/s). "
+                "The wall-clock ratio the paper reports is bounded by this throughput ratio plus the AIP's one-off cost.")
+    raise ValueError(f"unknown claim {i!r}")
+
+
 def training_section(key, summary, aip_report, refs, png_name, budget_note) -> list[str]:
     env_id, agent = key
     sims = summary["simulators"]
@@ -282,91 +159,38 @@ def training_section(key, summary, aip_report, refs, png_name, budget_note) -> l
         L.append("")
     else:
         L += ["AIP: not trained yet (no report.json).", ""]
-    # Claims, computed from the numbers above.
-    ials, gs = sims.get("ials", {}), sims.get("gs", {})
-    r = ials.get("score_ratio_to_gs")
-    tr = ials.get("time_ratio_to_gs")
     n_seeds = min([v["finished"] for v in sims.values() if v["finished"]] or [0])
     L += ["Claims (computed from the table; `-` = not measured"
           + ("; with a single seed there is no confidence interval, so one noisy run decides" if n_seeds < 2 else "")
           + "):", ""]
-    L.append(f"- IALS policy scores >= {TARGET_SCORE_RATIO:.0%} of the GS policy on the GS: ratio {_f(r, 2)} "
-             f"-> {_verdict(None if r is None else r >= TARGET_SCORE_RATIO)}.")
-    L.append(f"- IALS reaches 95% of the end of the GS's curve in <= 1/3 of the GS's wall-clock: "
-             f"{_f(ials.get('seconds_to_95pct_gs'), 0)} s vs {_f(gs.get('seconds_to_95pct_gs'), 0)} s, ratio {_f(tr, 2)} "
-             f"-> {_verdict(None if tr is None else tr <= TARGET_TIME_RATIO)}"
-             + (" (the IALS never reached it within the budget)" if gs.get("seconds_to_95pct_gs") and
-                ials.get("final_mean") is not None and ials.get("seconds_to_95pct_gs") is None else "") + ".")
-    total_ratio = (ials["total_seconds"] / gs["total_seconds"]
-                   if ials.get("total_seconds") and gs.get("total_seconds") else None)
-    L.append(f"- the paper's own measure (its bar charts): total training wall-clock for the same step budget, "
-             f"AIP included, IALS vs GS: {_f(ials.get('total_seconds'), 0)} s vs {_f(gs.get('total_seconds'), 0)} s, "
-             f"ratio {_f(total_ratio, 2)} -> <= 1/3 {_verdict(None if total_ratio is None else total_ratio <= TARGET_TIME_RATIO)}"
-             + ("" if total_ratio is None else f", <= 1/5 {_verdict(total_ratio <= 0.2)}") + ".")
-    un = sims.get("untrained-ials", {})
-    if un.get("final_mean") is not None and ials.get("final_mean") is not None:
-        if min(un["finished"], ials["finished"]) < 2:
-            answer = "undecided: a 95% CI needs >= 2 seeds"
-        else:
-            answer = "yes" if un["final_ci_high"] < ials["final_ci_low"] else "no"
-        L.append(f"- untrained-IALS clearly worse than IALS (95% CIs over seeds disjoint): {un['final_mean']:.3f} vs "
-                 f"{ials['final_mean']:.3f} -> {answer} (paper: yes in traffic).")
-    fx = sims.get("fixed:0.1", {})
-    if fx.get("score_ratio_to_gs") is not None:
-        L.append(f"- F-IALS 0.1 close to the GS (>= {TARGET_SCORE_RATIO:.0%}): ratio {fx['score_ratio_to_gs']:.2f} -> "
-                 f"{'yes' if fx['score_ratio_to_gs'] >= TARGET_SCORE_RATIO else 'no'} "
-                 f"(paper: yes in traffic, no in the warehouse).")
-    if aip_report:
-        ce = normalize_ce(aip_report["cross_entropy"])
-        L.append(f"- AIP test CE trained << untrained: {ce['trained']['test']:.3f} vs {ce['untrained']['test']:.3f} "
-                 f"(ratio {ce['trained']['test'] / max(ce['untrained']['test'], 1e-12):.2f}; paper "
-                 f"{paper.get('ce_trained', '-')} vs {paper.get('ce_untrained', '-')}).")
-    if gs.get("ppo_steps_per_second") and ials.get("ppo_steps_per_second") and paper:
-        ps = paper_steps_per_second(env_id)
-        L.append(f"- PPO throughput IALS / GS here: {ials['ppo_steps_per_second'] / gs['ppo_steps_per_second']:.2f}x "
-                 f"({ials['ppo_steps_per_second']:.0f} vs {gs['ppo_steps_per_second']:.0f} steps/s); paper, from its "
-                 f"2M-step wall-clocks: {paper['gs_hours'] / paper['ials_hours']:.2f}x ({ps['ials']:.0f} vs "
-                 f"{ps['gs']:.0f} steps/s). The wall-clock ratio the paper reports is bounded by this throughput "
-                 "ratio plus the AIP's one-off cost.")
+    L += [format_claim(c) for c in training_claims(env_id, summary, aip_report)]
     L += ["", f"Differences from the paper to keep in mind: {budget_note}", ""]
     return L
 
 
 def memory_section(out, leaderboard=None) -> list[str]:
     L = []
-    runs = load_runs(out, "memory")
-    for (env_id, agent), rs in sorted(group(runs, lambda r: (r["job"]["params"]["env_id"],
-                                                            r["job"]["params"]["agent"])).items()):
-        stats = {}
-        L += [f"### Memory (paper §5.4): {env_id} / {agent}, item_lifetime=8", "",
-              "| AIP | agent frame stack | runs done | final GS score (item_lifetime=8) |", "|---|---|---|---|"]
-        for label, srs in sorted(group(rs, lambda r: r["job"]["label"]).items()):
-            finals = [r["result"]["score"]["mean"] for r in srs if r["result"]]
-            name, fs = label.split(" ")
-            if finals:
-                m, lo, hi = mean_ci(finals)
-                score = f"{m:.3f}" + (f" [{lo:.3f}, {hi:.3f}]" if len(finals) > 1 else " (1 seed)")
-            else:
-                score = "-"
-            L.append(f"| {name} | {fs[2:]} | {len(finals)}/{len(srs)} | {score} |")
-            if len(finals) > 1:
-                stats[(name, fs)] = mean_ci(finals)
+    for (env_id, agent), rows in memory_stats(load_runs(out, "memory")).items():
+        L += [f"### Memory (paper §5.4): {env_id} / {agent}", "",
+              "| AIP | agent frame stack | runs done | final GS score (memory variant) |", "|---|---|---|---|"]
+        for (name, fs), row in rows.items():
+            m = row["stats"]
+            score = "-" if m is None else f"{m[0]:.3f}" + (f" [{m[1]:.3f}, {m[2]:.3f}]" if len(row["finals"]) > 1 else " (1 seed)")
+            L.append(f"| {name} | {fs[2:]} | {len(row['finals'])}/{row['planned']} | {score} |")
         L.append("")
-        budgets = sorted({r["job"]["params"]["total_timesteps"] for r in rs})
+        budgets = sorted({b for row in rows.values() for b in row["budgets"]})
         L.append(f"PPO budget {', '.join(f'{b:,}' for b in budgets)} steps per run. The paper's claim: an agent "
-                 "with memory (frame stack 8) needs the AIP with memory (M-IALS beats NM-IALS); an agent "
+                 "with memory (a frame stack) needs the AIP with memory (M-IALS beats NM-IALS); an agent "
                  "without memory (frame stack 1) does as well on either. Computed from the table "
                  "(95% CIs over seeds):")
         L.append("")
-        for fs, what in (("fs8", "agent with memory"), ("fs1", "agent without memory")):
-            m, nm = stats.get(("M-IALS", fs)), stats.get(("NM-IALS", fs))
-            if not (m and nm):
-                L.append(f"- {what}: not measured (needs >= 2 seeds on both simulators).")
-                continue
-            disjoint = m[1] > nm[2] or nm[1] > m[2]
-            L.append(f"- {what}: M-IALS {m[0]:.3f} vs NM-IALS {nm[0]:.3f} -> "
-                     + ("CIs disjoint: " + ("M-IALS better" if m[0] > nm[0] else "NM-IALS better")
-                        if disjoint else "CIs overlap: no clear difference") + ".")
+        stacked = next((fs for (_, fs) in rows if fs != "fs1"), "fs8")
+        for c in memory_claims(rows, stacked):
+            if c["measured"] is None:
+                L.append(f"- {c['claim']}: not measured (needs >= 2 seeds on both simulators).")
+            else:
+                L.append(f"- {c['claim']}: M-IALS {c['measured'][0]:.3f} vs NM-IALS {c['measured'][1]:.3f} -> "
+                         + (f"CIs disjoint: {c['better']} better" if c["disjoint"] else "CIs overlap: no clear difference") + ".")
         L.append("")
     for lf in sorted(Path(out, "memory").glob("*/lifetimes/lifetimes.json")):
         d = _load(lf)
@@ -400,19 +224,11 @@ def _dset_table(title: str, d: dict) -> list[str]:
         L.append(f"| {name} | {c['on_policy']:.3f} | " + " | ".join(f"{c['off_policy'][k]:.3f}" for k in offs)
                  + " | " + " | ".join(f"{c['increase'][k]:+.3f}" for k in offs) + " |")
     L.append("")
-    if "dset" in ce and "full" in ce:
-        for k in offs:
-            gap = ce["full"]["increase"][k] - ce["dset"]["increase"][k]
-            if abs(gap) < CLEAR_CE_GAP:
-                verdict = f"no clear difference (|gap| {abs(gap):.3f} < {CLEAR_CE_GAP} nats)"
-            elif gap > 0:
-                verdict = "the full-history AIP degrades more (consistent with spurious correlations)"
-            else:
-                verdict = "the d-set AIP degrades more (not what the paper predicts)"
-            L.append(f"- off-policy data `{k}` ({d['off_policy_data'][k]['policy']}, options "
-                     f"{d['off_policy_data'][k]['gs_options']}): the full-observation AIP's CE changes by "
-                     f"{ce['full']['increase'][k]:+.3f}, the d-set AIP's by {ce['dset']['increase'][k]:+.3f} "
-                     f"-> {verdict}.")
+    for v in dset_verdicts(d):
+        k = v["data"]
+        L.append(f"- off-policy data `{k}` ({d['off_policy_data'][k]['policy']}, options "
+                 f"{d['off_policy_data'][k]['gs_options']}): the full-observation AIP's CE changes by "
+                 f"{v['full']:+.3f}, the d-set AIP's by {v['dset']:+.3f} -> {v['verdict']}.")
     L.append("")
     return L
 
@@ -492,10 +308,10 @@ def submit_results(out, leaderboard, experiments=("training",)) -> dict:
     board never holds a partial merge; results already on the board are skipped.
 
     Returns ``{"submitted": [...], "already": [...], "rejected": [...], "incomplete": [...]}``."""
-    from ials_zoo.leaderboard import ResultError, content_hash, load_entries, merge_results, submit
-    from ials_zoo.utils import atomic_write_text
+    from ials_zoo.leaderboard import ResultError, identity, load_entries, merge_results, submit
 
-    have = {content_hash(d) for _, d in load_entries(leaderboard)}
+    (Path(leaderboard) / "results").mkdir(parents=True, exist_ok=True)  # the study's own board
+    have = {identity(d) for _, d in load_entries(leaderboard)[0]}
     done = {"submitted": [], "already": [], "rejected": [], "incomplete": []}
     for exp in experiments:
         runs = load_runs(out, exp)
@@ -515,7 +331,7 @@ def submit_results(out, leaderboard, experiments=("training",)) -> dict:
             except ResultError as exc:
                 done["rejected"].append(f"{name}: {exc}")
                 continue
-            if content_hash(result) in have:
+            if identity(result) in have:
                 done["already"].append(name)
                 continue
             # submit() reads a file: the merged result is written next to the runs first
@@ -529,6 +345,6 @@ def submit_results(out, leaderboard, experiments=("training",)) -> dict:
             except ResultError as exc:
                 done["rejected"].append(f"{name}: {exc}")
                 continue
-            have.add(content_hash(result))
+            have.add(identity(result))
             done["submitted"].append(str(dest))
     return done

@@ -16,8 +16,10 @@ def run_job(job) -> None:
     """Run ``job`` (a :class:`~ials_zoo.reproduce.plan.Job`) in this process."""
     import torch
 
+    from ials_zoo.processes import die_with_parent
     from ials_zoo.reproduce import experiments as X
 
+    die_with_parent()
     torch.set_num_threads(1)
     p = dict(job.params)
     if job.kind == "aip":
@@ -25,8 +27,17 @@ def run_job(job) -> None:
                     seed=p.get("seed", 0), options=p.get("options"), arch=p.get("arch"),
                     workers=p.get("workers", 1))
     elif job.kind == "ppo":
-        from ials_zoo.baselines.ppo_single import Args, main
+        from pathlib import Path
 
+        from ials_zoo.baselines.ppo_single import Args, main
+        from ials_zoo.baselines.runs import run_state
+
+        # a job killed earlier continues from its last checkpoint; one killed before its first
+        # checkpoint starts again
+        state = run_state(p["out_dir"])
+        if state is not None:
+            resumable = (Path(p["out_dir"]) / "checkpoint.pt").is_file() and state != "finished"
+            p["resume" if resumable else "overwrite"] = True
         main(Args(**p))
     elif job.kind == "lifetimes":
         X.run_lifetimes(p, job.dir)

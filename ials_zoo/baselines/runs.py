@@ -1,0 +1,212 @@
+"""A training run's folder: what is in it, whether it is finished, and how to resume it.
+
+Every baseline writes into one folder (``--out-dir``)::
+
+    status.json        {"state": "running" | "finished" | "failed" | "interrupted", ...}
+    progress.csv       training metrics (episode return, losses, entropy, ...) per update
+    curve.json         the GS learning curve (steps, wall-clock, score, CI)
+    checkpoint.pt      resumable training state: weights and optimiser state (tensors and
+                       plain containers only: read back with ``torch.load(weights_only=True)``)
+    checkpoint.json    the run's counters, curve and clock at that checkpoint
+    policy.safetensors the final policy (:mod:`ials_zoo.policy`): what results point to
+    result.json        the leaderboard result of the final policy
+
+A folder that already holds a run is refused, unless the caller asks to ``resume`` it (from
+its last checkpoint, same settings) or to ``overwrite`` it (everything in it is removed
+first). A run killed without a chance to write ``status.json`` stays ``"running"`` with a pid
+that no longer exists: :func:`run_state` reports it as ``"killed"``. Every file is written
+atomically, so a crash never leaves half a file.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import shutil
+import socket
+import sys
+import time
+from pathlib import Path
+
+from ials_zoo.utils import atomic_write_text, remove_stale_temporaries
+
+STATUS = "status.json"
+FINISHED, RUNNING, FAILED, INTERRUPTED, KILLED = "finished", "running", "failed", "interrupted", "killed"
+
+
+def _pid_alive(pid) -> bool:
+    try:
+        os.kill(int(pid), 0)
+    except (OSError, ValueError, TypeError):
+        return False
+    return True
+
+
+def run_state(folder) -> str | None:
+    """``None`` (no run here), ``finished``, ``running`` (a live process writes it),
+    ``killed`` (it says running, but its process is gone), ``failed`` or ``interrupted``."""
+    path = Path(folder) / STATUS
+    if not path.is_file():
+        return None
+    try:
+        status = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return FAILED
+    state = status.get("state")
+    if state == RUNNING and (status.get("host") != socket.gethostname() or not _pid_alive(status.get("pid"))):
+        return KILLED
+    return state
+
+
+class RunFolder:
+    """Claims ``path`` for a run (see the module docstring).
+
+    Args:
+        path: the folder.
+        resume: continue the run found there (its settings must equal ``settings``).
+        overwrite: remove whatever is there first.
+        settings: the run's settings (JSON-able), kept in ``status.json`` so that a resume with
+            other settings is refused.
+    """
+
+    def __init__(self, path, resume: bool = False, overwrite: bool = False, settings: dict | None = None):
+        if resume and overwrite:
+            raise ValueError("choose one of resume and overwrite")
+        self.path = Path(path)
+        self.settings = json.loads(json.dumps(settings or {}, default=str))
+        if self.path.exists() and not self.path.is_dir():
+            raise ValueError(f"--out-dir {str(self.path)!r} is a file, not a folder")
+        state = run_state(self.path)
+        used = self.path.is_dir() and any(not p.name.startswith(".") for p in self.path.iterdir())
+        self.resuming = False
+        if state == RUNNING:
+            raise ValueError(f"{self.path} is in use by a run that is still going (pid "
+                             f"{self._status().get('pid')}); use another --out-dir")
+        if resume:
+            if state is None:
+                raise ValueError(f"nothing to resume in {self.path}: it holds no run")
+            if state == FINISHED:
+                raise ValueError(f"{self.path} holds a finished run; nothing to resume")
+            old = self._status().get("settings", {})
+            if old != self.settings:
+                diff = sorted(k for k in set(old) | set(self.settings) if old.get(k) != self.settings.get(k))
+                raise ValueError(f"cannot resume {self.path} with other settings ({', '.join(diff)})")
+            self.resuming = True
+        elif used:
+            what = f"a {state} run" if state else "files"
+            if not overwrite:
+                raise ValueError(f"{self.path} already holds {what}; pass --resume to continue it or "
+                                 "--overwrite to replace it, or use another --out-dir")
+            shutil.rmtree(self.path)
+        self.path.mkdir(parents=True, exist_ok=True)
+        remove_stale_temporaries(self.path, max_age_seconds=0)
+        self._started = time.time()
+        self.set_state(RUNNING)
+
+    def _status(self) -> dict:
+        try:
+            return json.loads((self.path / STATUS).read_text())
+        except (OSError, ValueError):
+            return {}
+
+    def set_state(self, state: str, **extra) -> None:
+        status = {"state": state, "pid": os.getpid(), "host": socket.gethostname(),
+                  "command": " ".join(sys.argv), "started": self._started, "updated": time.time(),
+                  "settings": self.settings, **extra}
+        atomic_write_text(self.path / STATUS, json.dumps(status, indent=2, default=str) + "\n")
+
+    @contextlib.contextmanager
+    def running(self):
+        """Mark the run finished when the block ends normally, interrupted on Ctrl-C/SIGTERM,
+        failed on an error."""
+        try:
+            yield self
+        except KeyboardInterrupt:
+            self.set_state(INTERRUPTED)
+            raise
+        except BaseException as exc:
+            self.set_state(FAILED, error=f"{type(exc).__name__}: {exc}")
+            raise
+        else:
+            self.set_state(FINISHED)
+
+
+class Clock:
+    """Training wall-clock that excludes the time spent evaluating and checkpointing.
+
+    ``offset`` (the AIP's collection + training seconds, or the seconds of a resumed run) is
+    added; inside ``with clock.pause():`` the clock stands still."""
+
+    def __init__(self, offset: float = 0.0):
+        self.offset = float(offset)
+        self._start = time.perf_counter()
+        self._paused = 0.0
+        self._pause_start = None
+
+    @contextlib.contextmanager
+    def pause(self):
+        if self._pause_start is not None:  # nested: already stopped
+            yield
+            return
+        self._pause_start = time.perf_counter()
+        try:
+            yield
+        finally:
+            self._paused += time.perf_counter() - self._pause_start
+            self._pause_start = None
+
+    @property
+    def seconds(self) -> float:
+        now = self._pause_start if self._pause_start is not None else time.perf_counter()
+        return self.offset + now - self._start - self._paused
+
+
+def save_training_state(folder, state: dict, info: dict) -> None:
+    """``checkpoint.pt`` (tensors and plain containers) and ``checkpoint.json`` (``info``)."""
+    import torch
+
+    from ials_zoo.utils import atomic_path
+
+    folder = Path(folder)
+    with atomic_path(folder / "checkpoint.pt", suffix=".pt") as tmp:
+        torch.save(state, tmp)
+    atomic_write_text(folder / "checkpoint.json", json.dumps(info, indent=2, default=str) + "\n")
+
+
+def load_training_state(folder) -> tuple[dict, dict]:
+    """``(state, info)`` saved by :func:`save_training_state`, read without unpickling code."""
+    import torch
+
+    folder = Path(folder)
+    try:
+        state = torch.load(folder / "checkpoint.pt", map_location="cpu", weights_only=True)
+        info = json.loads((folder / "checkpoint.json").read_text())
+    except FileNotFoundError:
+        raise ValueError(f"{folder} has no checkpoint to resume from (it was killed before the first one)") from None
+    except Exception as exc:
+        raise ValueError(f"{folder}: the checkpoint cannot be read ({type(exc).__name__}: {exc})") from None
+    return state, info
+
+
+def training_logger(folder):
+    """SB3's logger writing ``progress.csv`` (and TensorBoard events when tensorboard is
+    installed) into ``folder``."""
+    from stable_baselines3.common.logger import configure
+
+    formats = ["csv"]
+    with contextlib.suppress(ImportError):
+        import tensorboard  # noqa: F401
+
+        formats.append("tensorboard")
+    return configure(str(folder), formats)
+
+
+__all__ = [
+    "Clock",
+    "RunFolder",
+    "load_training_state",
+    "run_state",
+    "save_training_state",
+    "training_logger",
+]

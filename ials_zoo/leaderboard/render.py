@@ -1,0 +1,201 @@
+"""Showing the board: a text table (``show``) and ``README.md`` with learning-curve plots
+(``render``), per track and domain, official entries apart from protocol variants and from the
+archive."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ials_zoo.leaderboard.build import MULTI, OFFICIAL, SINGLE
+from ials_zoo.leaderboard.store import ARCHIVE_SUBDIR, board_path, load_entries
+from ials_zoo.utils import atomic_path, atomic_write_text
+
+WRITEUP = "writeup.md"
+HEADER = ["policy / algorithm", "trained on", "GS score", "95% CI", "seeds", "episodes", "env steps",
+          "wall-clock (+AIP)", "date"]
+
+
+def _training_label(data: dict) -> str:
+    return "-" if data["training"] is None else data["training"]["simulator"]
+
+
+def _total_seconds(data: dict) -> float | None:
+    t = data["training"]
+    return None if t is None else float(t["wall_clock_seconds"]) + float(t["aip_seconds"])
+
+
+def format_duration(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.1f} min"
+    return f"{seconds / 3600:.2f} h"
+
+
+def _row(d: dict) -> list[str]:
+    s, t = d["score"], d["training"]
+    total = _total_seconds(d)
+    return [d["algorithm"], _training_label(d), f"{s['mean']:.2f}", f"[{s['ci_low']:.2f}, {s['ci_high']:.2f}]",
+            str(len(d["scores"])) if t else "-", str(d["evaluation"]["episodes"]),
+            f"{t['env_steps']:,}" if t else "-", format_duration(total) if total is not None else "-",
+            d["created"][:10]]
+
+
+def group_entries(entries) -> dict:
+    """``{(section, env_id, who): [entries best first]}``; section: ``single-agent``,
+    ``multi-agent`` or ``variants``; ``who``: the agent, or ``all agents``."""
+    groups: dict = {}
+    for p, d in entries:
+        section = d["track"] if d["evaluation"]["protocol"] == OFFICIAL else "variants"
+        who = d["agent"] if d["track"] == SINGLE else f"{len(d['agents'])} agents"
+        groups.setdefault((section, d["env_id"], who), []).append(dict(d, _file=p.name))
+    order = {SINGLE: 0, MULTI: 1, "variants": 2}
+    for rows in groups.values():
+        rows.sort(key=lambda d: -d["score"]["mean"])
+    return dict(sorted(groups.items(), key=lambda kv: (order[kv[0][0]], kv[0][1], kv[0][2])))
+
+
+def _text_table(rows: list[dict]) -> list[str]:
+    table = [HEADER] + [_row(d) for d in rows]
+    widths = [max(len(r[i]) for r in table) for i in range(len(HEADER))]
+    return ["  " + "  ".join(c.ljust(w) for c, w in zip(r, widths)) for r in table]
+
+
+def show(directory=None) -> str:
+    """A plain-text table of the board (where it is, then per track, domain and agent)."""
+    board = board_path(directory)
+    entries, problems = load_entries(board)
+    lines = [f"leaderboard: {board.resolve()}"]
+    for p, why in problems:
+        lines.append(f"  skipped {p.name}: {why}")
+    lines.append("")
+    for (section, env_id, who), rows in group_entries(entries).items():
+        lines.append(f"[{section}] {env_id} / {who}")
+        lines += _text_table(rows)
+        lines.append("")
+    if not entries:
+        lines.append("(no entries yet)")
+    archived, _ = load_entries(board, ARCHIVE_SUBDIR)
+    if archived:
+        lines.append(f"(+ {len(archived)} archived entries whose policies were not kept: see README.md)")
+    return "\n".join(lines)
+
+
+README_HEAD = """# ials_zoo leaderboard
+
+**Score** = mean episodic return on the global simulator over the fixed evaluation seeds
+10000..10019 (20 episodes). Single-agent track: one agent runs the policy, every other agent
+its scripted controller. Multi-agent track: every agent runs its own policy; an episode's
+score is the mean over agents of their returns, and each agent's mean is kept. 95% interval:
+BCa bootstrap over the episodes for one training seed, Student-t over the seeds for several.
+Protocol: `ials_zoo/evaluation.py`; format and checks: [SCHEMA.md](SCHEMA.md).
+
+**What an entry guarantees.** `ials-zoo leaderboard submit` accepts a result only if it is
+valid (schema, finite numbers, every mean and interval recomputed from the returns), follows
+the protocol or is listed as a variant below, scores policies that are files of weights plus
+JSON (no code: no pickle, no `module:function`) whose sha256 matches, and is not a duplicate
+of an entry (same policies, agents and protocol). The policy files are copied into
+[`policies/`](policies), so `ials-zoo leaderboard verify results/<file>.json` re-scores any
+entry from this folder alone and fails unless every episode's return is re-measured exactly.
+
+Regenerate this page with `ials-zoo leaderboard render` (do not edit it by hand; its write-up
+section is copied from [writeup.md](writeup.md)).
+"""
+
+
+def _plot(board: Path, key: tuple, rows: list[dict]) -> str | None:
+    curves = [d for d in rows if d["learning_curves"]]
+    if not curves:
+        return None
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    section, env_id, who = key
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    longest = max(p["wall_clock_seconds"] for d in curves for c in d["learning_curves"] for p in c["points"])
+    unit, scale = ("hours", 3600.0) if longest >= 7200 else ("minutes", 60.0)
+    kinds: dict = {}
+    for d in curves:
+        kinds.setdefault((d["algorithm"], _training_label(d), d["training"]["env_steps"]), []).append(d)
+    for i, ((algo, sim, steps), ds) in enumerate(kinds.items()):
+        color = f"C{i % 10}"
+        n = sum(len(d["learning_curves"]) for d in ds)
+        label = f"{algo} on {sim}, {steps:,} steps" + (f" ({n} seeds)" if n > 1 else "")
+        for d in ds:
+            for c in d["learning_curves"]:
+                xs = [p["wall_clock_seconds"] / scale for p in c["points"]]
+                ys = [p["mean"] for p in c["points"]]
+                ax.plot(xs, ys, marker="o", ms=2, lw=1, color=color, label=label)
+                if n == 1:
+                    ax.fill_between(xs, [p["ci_low"] for p in c["points"]], [p["ci_high"] for p in c["points"]],
+                                    alpha=0.2, color=color)
+                label = None
+    for d in rows:
+        if d["training"] is None:
+            ax.axhline(d["score"]["mean"], ls="--", lw=1, color="grey")
+            ax.text(ax.get_xlim()[0], d["score"]["mean"], f" {d['algorithm']}", va="bottom", fontsize=8)
+    ax.set_xlabel(f"wall-clock {unit} (training + AIP data collection and training)")
+    ax.set_ylabel("GS mean episodic return" + (" (mean over agents)" if section == MULTI else ""))
+    ax.set_title(f"{env_id} / {who}")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    name = f"{env_id}__{who.replace(' ', '-')}{'__multi' if section == MULTI else ''}.png"
+    with atomic_path(board / "plots" / name, suffix=".png") as tmp:
+        fig.savefig(tmp, dpi=100, format="png")
+    plt.close(fig)
+    return f"plots/{name}"
+
+
+def _md_table(rows, link: str | None = "results") -> list[str]:
+    head = HEADER + (["file"] if link else [])
+    out = ["| " + " | ".join(head) + " |\n", "|" + "---|" * len(head) + "\n"]
+    for d in rows:
+        cells = _row(d) + ([f"[json]({link}/{d['_file']})"] if link else [])
+        out.append("| " + " | ".join(cells) + " |\n")
+    return out
+
+
+def render(directory=None) -> Path:
+    """Regenerate ``<board>/README.md`` and ``<board>/plots/*.png``."""
+    board = board_path(directory)
+    entries, problems = load_entries(board)
+    if problems:
+        names = ", ".join(p.name for p, _ in problems)
+        raise ValueError(f"fix or remove these files first: {names} ({problems[0][1]})")
+    parts = [README_HEAD]
+    writeup = board / WRITEUP
+    if writeup.is_file():
+        parts.append("\n" + writeup.read_text().strip() + "\n")
+    titles = {SINGLE: "Single-agent track (one agent learns, the others are scripted)",
+              MULTI: "Multi-agent track (every agent learns)",
+              "variants": "Protocol variants (other seeds, options or agents: not comparable with the tracks)"}
+    current = None
+    for key, rows in group_entries(entries).items():
+        section, env_id, who = key
+        if section != current:
+            parts.append(f"\n## {titles[section]}\n")
+            current = section
+        parts.append(f"\n### {env_id} / {who}\n\n")
+        parts += _md_table(rows)
+        plot = _plot(board, key, rows)
+        if plot:
+            parts.append(f"\n![{env_id} {who}]({plot})\n")
+    if not entries:
+        parts.append("\n(no entries yet)\n")
+    archived, _ = load_entries(board, ARCHIVE_SUBDIR)
+    if archived:
+        parts.append("\n## Archive (policies not kept: these entries cannot be re-scored)\n\n"
+                     "The first single-agent study's merged 3-seed entries. Their numbers are as measured then, "
+                     "but their policy files were not kept, so `verify` cannot check them; they are not "
+                     "entries of the tracks above.\n\n")
+        for key, rows in group_entries(archived).items():
+            parts.append(f"\n### {key[1]} / {key[2]}\n\n")
+            parts += _md_table(rows, link=ARCHIVE_SUBDIR)
+    out = board / "README.md"
+    atomic_write_text(out, "".join(parts))
+    return out
+
+
+__all__ = ["format_duration", "group_entries", "render", "show"]

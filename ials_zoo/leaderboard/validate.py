@@ -1,0 +1,237 @@
+"""Validating results: the schema, then every number against the data it summarises.
+
+:func:`validate_result` checks the JSON Schema (``ials_zoo/leaderboard/schema.json``, draft
+2020-12) and then that the result means what it says:
+
+* every number is finite (``NaN``/``Infinity`` are refused: they are not JSON, and Python's
+  parser would otherwise accept them);
+* every per-seed mean and interval is recomputed from the episode scores, the overall score
+  from the per-seed scores, a multi-agent episode score from the agents' returns (relative
+  tolerance :data:`REL_TOL`: JSON floats round-trip exactly, this only absorbs summation
+  order);
+* the domain, its version and every agent exist; the track matches ``agent``/``agents``;
+* ``evaluation.protocol`` is what the seeds, options and agents make it (``official`` or
+  ``variant``: a result cannot claim to follow the protocol when it does not);
+* a model names the file and sha256 of each seed's policy; a reference policy names none; a
+  ``callable`` policy (code) is valid as a local result but is never accepted on the board.
+
+:func:`load_result` reads a file of at most :data:`MAX_RESULT_BYTES` bytes first.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from ials_zoo.leaderboard.build import MULTI, SCHEMA_VERSION, SINGLE, overall_score, protocol_of, split_env_id
+from ials_zoo.stats import bootstrap_interval
+
+REL_TOL = 1e-9
+ABS_TOL = 1e-12
+MAX_RESULT_BYTES = 4 * 2**20
+
+
+class ResultError(ValueError):
+    """A result file is malformed or inconsistent; ``field`` names the offending field."""
+
+    def __init__(self, field: str, message: str):
+        self.field = field
+        super().__init__(f"{field}: {message}")
+
+
+def load_schema() -> dict:
+    """The result JSON Schema shipped with the package."""
+    return json.loads(resources.files("ials_zoo.leaderboard").joinpath("schema.json").read_text())
+
+
+def _close(a: float, b: float) -> bool:
+    return math.isclose(a, b, rel_tol=REL_TOL, abs_tol=ABS_TOL)
+
+
+def _json_path(error) -> str:
+    parts = [str(p) for p in error.absolute_path]
+    return ".".join(parts) if parts else "(top level)"
+
+
+def check_finite(obj, where: str = "(top level)") -> None:
+    """A :class:`ResultError` naming the first non-finite number inside ``obj``."""
+    if isinstance(obj, float):
+        if not math.isfinite(obj):
+            raise ResultError(where, f"{obj!r} is not a finite number")
+    elif isinstance(obj, dict):
+        for k, v in obj.items():
+            check_finite(v, k if where == "(top level)" else f"{where}.{k}")
+    elif isinstance(obj, (list, tuple)):
+        for i, v in enumerate(obj):
+            check_finite(v, f"{where}.{i}")
+
+
+def _schema_check(data: dict) -> None:
+    import jsonschema
+
+    validator = jsonschema.Draft202012Validator(load_schema())
+    errors = sorted(validator.iter_errors(data), key=lambda e: (len(list(e.absolute_path)), str(e.absolute_path)))
+    if errors:
+        err = errors[0]
+        field = _json_path(err)
+        if err.validator == "required":
+            missing = err.message.split("'")[1] if "'" in err.message else err.message
+            field = f"{field}.{missing}" if field != "(top level)" else missing
+        if err.validator == "additionalProperties" and isinstance(err.instance, dict):
+            extra = sorted(set(err.instance) - set(err.schema.get("properties", {})))
+            names = ",".join(extra)
+            field = f"{field}.{names}" if field != "(top level)" else names
+        raise ResultError(field, f"schema violation: {err.message}")
+
+
+def validate_result(data) -> dict:
+    """Check ``data`` (module docstring); return it, or raise :class:`ResultError` naming the
+    offending field."""
+    from ials_zoo.core.domains import domain_ids, get_domain
+
+    if not isinstance(data, dict):
+        raise ResultError("(top level)", f"a result must be a JSON object, got {type(data).__name__}")
+    if data.get("schema_version") != SCHEMA_VERSION:
+        raise ResultError("schema_version", f"{data.get('schema_version')!r}; this ials_zoo reads version "
+                          f"{SCHEMA_VERSION} (re-evaluate the policy with `ials-zoo evaluate`)")
+    check_finite(data)
+    _schema_check(data)
+
+    env_id = data["env_id"]
+    if env_id not in domain_ids():
+        raise ResultError("env_id", f"unknown domain {env_id!r}; known: {', '.join(domain_ids())}")
+    domain_name, version = split_env_id(env_id)
+    if data["domain"] != domain_name:
+        raise ResultError("domain", f"{data['domain']!r} does not match env_id {env_id!r}")
+    if data["domain_version"] != version:
+        raise ResultError("domain_version", f"{data['domain_version']} does not match env_id {env_id!r}")
+    ev = data["evaluation"]
+    try:
+        agents_of_domain = get_domain(env_id).agents(**ev["options"])
+    except Exception as exc:  # the domain's package failed to import, or bad options
+        raise ResultError("env_id", f"domain {env_id!r} is not available with these options: {exc}") from None
+    for field in ("agents", "trained_agents"):
+        for i, a in enumerate(data[field]):
+            if a not in agents_of_domain:
+                raise ResultError(f"{field}.{i}", f"{a!r} is not an agent of {env_id}")
+    if len(set(data["agents"])) != len(data["agents"]):
+        raise ResultError("agents", "agents repeat")
+    track = data["track"]
+    if track == SINGLE and (data["agent"] is None or data["agents"] != [data["agent"]]):
+        raise ResultError("agent", "a single-agent result scores one agent: agent, and agents == [agent]")
+    if track == MULTI and data["agent"] is not None:
+        raise ResultError("agent", "a multi-agent result has agent null (its agents are in 'agents')")
+    if (track == MULTI) != ("per_agent_scores" in data):
+        raise ResultError("per_agent_scores", "present exactly on the multi-agent track")
+    if (track == SINGLE) != (ev["neighbours"] == "scripted"):
+        raise ResultError("evaluation.neighbours", "'scripted' on the single-agent track, 'learners' on the multi-agent one")
+
+    if len(ev["seeds"]) != ev["episodes"]:
+        raise ResultError("evaluation.seeds", f"{len(ev['seeds'])} seeds for {ev['episodes']} episodes")
+    if len(set(ev["seeds"])) != len(ev["seeds"]):
+        raise ResultError("evaluation.seeds", "evaluation seeds repeat")
+    want = protocol_of(track, env_id, data["agents"], ev["seeds"], ev["options"])
+    if ev["protocol"] != want:
+        raise ResultError("evaluation.protocol", f"{ev['protocol']!r}, but these seeds, options and agents make "
+                          f"it {want!r}")
+    kind = data["policy"]["kind"]
+    for i, s in enumerate(data["scores"]):
+        where = f"scores.{i}"
+        if len(s["returns"]) != ev["episodes"]:
+            raise ResultError(f"{where}.returns", f"{len(s['returns'])} returns for {ev['episodes']} episodes")
+        if track == MULTI:
+            per = s.get("per_agent_returns")
+            if per is None or list(per) != data["agents"]:
+                raise ResultError(f"{where}.per_agent_returns", "one list per agent, in the order of 'agents'")
+            for a, values in per.items():
+                if len(values) != ev["episodes"]:
+                    raise ResultError(f"{where}.per_agent_returns.{a}", f"{len(values)} returns for {ev['episodes']} episodes")
+            joint = np.mean(np.array([per[a] for a in data["agents"]], dtype=np.float64), axis=0)
+            for e, (x, y) in enumerate(zip(s["returns"], joint)):
+                if not _close(x, float(y)):
+                    raise ResultError(f"{where}.returns.{e}", f"{x!r} is not the mean of the agents' returns ({y!r})")
+        elif "per_agent_returns" in s:
+            raise ResultError(f"{where}.per_agent_returns", "only on the multi-agent track")
+        mean, lo, hi = bootstrap_interval(s["returns"])
+        for key, value in (("mean", mean), ("ci_low", lo), ("ci_high", hi)):
+            if not _close(s[key], value):
+                raise ResultError(f"{where}.{key}", f"{s[key]!r} does not match the returns ({value!r})")
+        if kind in ("random", "scripted") and (s["policy_sha256"] is not None or s["policy_file"] is not None):
+            raise ResultError(f"{where}.policy_sha256", f"must be null for the reference policy {kind!r}")
+        if kind == "model" and (s["policy_sha256"] is None or not s["policy_file"]):
+            raise ResultError(f"{where}.policy_sha256", "a model needs the file and the sha256 of its policy")
+    want_score = overall_score(data["scores"])
+    for key in ("mean", "ci_low", "ci_high"):
+        if not _close(data["score"][key], want_score[key]):
+            raise ResultError(f"score.{key}", f"{data['score'][key]!r} does not match the per-seed scores ({want_score[key]!r})")
+    if data["score"]["ci_over"] != want_score["ci_over"]:
+        raise ResultError("score.ci_over", f"{data['score']['ci_over']!r}, expected {want_score['ci_over']!r}")
+    if track == MULTI:
+        from ials_zoo.leaderboard.build import per_agent_scores
+
+        want_agents = per_agent_scores(data["scores"])
+        if list(data["per_agent_scores"]) != list(want_agents) or not all(
+                _close(data["per_agent_scores"][a], v) for a, v in want_agents.items()):
+            raise ResultError("per_agent_scores", "does not match the per-agent returns")
+
+    training = data["training"]
+    if training is None:
+        if kind == "model":
+            raise ResultError("training", "a trained model needs its training record")
+    else:
+        seeds = [s["seed"] for s in data["scores"]]
+        if seeds != training["seeds"]:
+            raise ResultError("scores", f"per-seed scores {seeds} do not match training.seeds {training['seeds']}")
+    for i, curve in enumerate(data["learning_curves"]):
+        steps = [p["env_steps"] for p in curve["points"]]
+        if steps != sorted(steps):
+            raise ResultError(f"learning_curves.{i}.points", "env_steps must not decrease")
+    return data
+
+
+def _refuse_constant(name):
+    raise ValueError(f"{name} is not a number JSON allows")
+
+
+def parse_result_text(text: str, where: str) -> dict:
+    try:
+        return json.loads(text, parse_constant=_refuse_constant)
+    except ValueError as exc:
+        raise ResultError("(file)", f"{where} is not valid JSON: {exc}") from None
+
+
+def load_result(path: str | os.PathLike) -> dict:
+    """Read and validate a result file (a :class:`ResultError` naming the file for malformed
+    JSON, a file over :data:`MAX_RESULT_BYTES`, or an inconsistent result)."""
+    path = Path(path)
+    try:
+        size = path.stat().st_size
+    except OSError as exc:
+        raise ResultError("(file)", f"cannot read {str(path)!r}: {exc}") from None
+    if path.is_dir():
+        raise ResultError("(file)", f"{str(path)!r} is a folder, not a result file")
+    if size > MAX_RESULT_BYTES:
+        raise ResultError("(file)", f"{str(path)!r} has {size:,} bytes; a result may have at most {MAX_RESULT_BYTES:,}")
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ResultError("(file)", f"cannot read {str(path)!r}: {exc}") from None
+    return validate_result(parse_result_text(text, repr(str(path))))
+
+
+def write_result(path: str | os.PathLike, data: dict) -> Path:
+    """Validate and write a result atomically (any path; not a leaderboard submission)."""
+    from ials_zoo.utils import atomic_write_text
+
+    validate_result(data)
+    atomic_write_text(path, json.dumps(data, indent=2, allow_nan=False) + "\n")
+    return Path(path)
+
+
+__all__ = ["MAX_RESULT_BYTES", "REL_TOL", "ResultError", "check_finite", "load_result", "load_schema",
+           "validate_result", "write_result"]

@@ -1,0 +1,366 @@
+"""Policies as weights plus plain JSON: what the evaluator and the leaderboard load.
+
+A policy file holds one or more agents' independent categorical MLP policies (the actor of
+PPO): per agent, layers ``x -> act(W1 x + b1) -> ... -> W_out h + b_out`` (logits), the input
+being the agent's last ``frame_stack`` observations concatenated (newest last, zeros before an
+episode's first, as SB3's ``VecFrameStack``). It is a safetensors file -- tensors and a JSON
+header, nothing else: loading it can never run code (no pickle). Weights of several agents are
+stacked on a leading agent axis::
+
+    tensors:  layer<i>.weight [A, in, out] float32, layer<i>.bias [A, out] float32
+    metadata: {"ials_zoo.policy": "<json>"} with format, format_version, agents, obs_size,
+              n_actions, hidden, activation, frame_stack, shared, env_id, and free provenance
+              (algorithm, training record, learning curve, package version, ...).
+
+A *shared* policy (parameter sharing) stores one set of weights (``A = 1``) used by every
+listed agent.
+
+Inference (:meth:`PolicyNetwork.act`) is numpy in float64 -- deterministic to ~1e-15 on any
+machine, so a score can be re-measured exactly: a stochastic policy draws one uniform number
+per agent and step from the generator it is given and takes the inverse CDF of its softmax;
+a deterministic one takes the most likely action.
+
+:func:`policy_from_sb3_zip` reads an SB3 PPO ``.zip`` *safely*: the weights from its
+``policy.pth`` with ``torch.load(weights_only=True)`` and its JSON ``data``, ignoring every
+``:serialized:`` (pickled) field -- so today's model zips can be scored without trusting them.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import re
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+FORMAT = "ials_zoo.policy"
+FORMAT_VERSION = 1
+HEADER_KEY = "ials_zoo.policy"
+SUFFIX = ".safetensors"
+ACTIVATIONS = ("tanh", "relu")
+MAX_FILE_BYTES = 256 * 2**20
+MAX_ZIP_MEMBER_BYTES = 256 * 2**20
+
+
+class PolicyFileError(ValueError):
+    """A policy file is malformed, foreign, or does not fit what it is used for."""
+
+
+def _activation(name: str):
+    if name == "tanh":
+        return np.tanh
+    if name == "relu":
+        return lambda x: np.maximum(x, 0.0)
+    raise PolicyFileError(f"unknown activation {name!r}; expected one of {ACTIVATIONS}")
+
+
+class PolicyNetwork:
+    """Independent MLP policies of ``agents`` (one set of weights each, stacked).
+
+    Args:
+        agents: the agents, in weight order.
+        obs_size: one observation's length; the input is ``obs_size * frame_stack``.
+        n_actions: ``Discrete`` action count.
+        layers: ``[(W [A, in, out], b [A, out]), ...]`` from input to logits.
+        activation: ``"tanh"`` (SB3's default) or ``"relu"``, after every hidden layer.
+        frame_stack: observations the policy reads.
+        metadata: JSON-able provenance (env_id, algorithm, training record, ...).
+        shared: one set of weights (leading axis 1) for every agent.
+    """
+
+    def __init__(self, agents, obs_size: int, n_actions: int, layers, activation: str = "tanh",
+                 frame_stack: int = 1, metadata: dict | None = None, shared: bool = False):
+        self.agents = tuple(agents)
+        if not self.agents or len(set(self.agents)) != len(self.agents):
+            raise PolicyFileError(f"a policy needs distinct agents, got {list(self.agents)}")
+        self.obs_size, self.n_actions = int(obs_size), int(n_actions)
+        self.frame_stack = int(frame_stack)
+        if self.obs_size < 1 or self.n_actions < 2 or self.frame_stack < 1:
+            raise PolicyFileError("obs_size, frame_stack must be >= 1 and n_actions >= 2")
+        self.activation = activation
+        self._act = _activation(activation)
+        # the header's own keys are the network's; provenance never overrides them
+        self.metadata = {k: v for k, v in dict(metadata or {}).items() if k not in _RESERVED}
+        self.shared = bool(shared) and len(self.agents) > 1
+        self.layers = []
+        width = self.obs_size * self.frame_stack
+        A = 1 if self.shared else len(self.agents)
+        for i, (w, b) in enumerate(layers):
+            w, b = np.asarray(w, dtype=np.float32), np.asarray(b, dtype=np.float32)
+            if w.ndim != 3 or w.shape[:2] != (A, width) or b.shape != (A, w.shape[2]):
+                raise PolicyFileError(f"layer {i}: weight {w.shape} / bias {b.shape} do not fit "
+                                      f"{A} agents with inputs of {width}")
+            if not (np.isfinite(w).all() and np.isfinite(b).all()):
+                raise PolicyFileError(f"layer {i} has non-finite weights")
+            self.layers.append((w, b))
+            width = w.shape[2]
+        if not self.layers or width != self.n_actions:
+            raise PolicyFileError(f"the last layer has {width} outputs, not n_actions={self.n_actions}")
+        # float64 copies for inference (see the module docstring)
+        self._layers64 = [(w.astype(np.float64), b.astype(np.float64)[:, None, :]) for w, b in self.layers]
+
+    @property
+    def hidden(self) -> list[int]:
+        return [w.shape[2] for w, _ in self.layers[:-1]]
+
+    @property
+    def input_size(self) -> int:
+        return self.obs_size * self.frame_stack
+
+    def index(self, agent: str) -> int:
+        try:
+            return self.agents.index(agent)
+        except ValueError:
+            raise PolicyFileError(f"the policy has no weights for agent {agent!r}; it is for "
+                                  f"{', '.join(self.agents)}") from None
+
+    def subset(self, agents) -> PolicyNetwork:
+        """The policies of ``agents`` only (in that order)."""
+        idx = [self.index(a) for a in agents]
+        if self.shared:
+            return PolicyNetwork(agents, self.obs_size, self.n_actions, self.layers, self.activation,
+                                 self.frame_stack, self.metadata, shared=True)
+        return PolicyNetwork(agents, self.obs_size, self.n_actions,
+                             [(w[idx], b[idx]) for w, b in self.layers], self.activation,
+                             self.frame_stack, self.metadata)
+
+    def logits(self, x) -> np.ndarray:
+        """``x [A, n, input]`` (or ``[A, input]``) -> logits ``[A, n, n_actions]`` (float64)."""
+        h = np.asarray(x, dtype=np.float64)
+        squeeze = h.ndim == 2
+        if squeeze:
+            h = h[:, None, :]
+        if h.shape[0] != len(self.agents) or h.shape[-1] != self.input_size:
+            raise ValueError(f"policy input must be [{len(self.agents)}, n, {self.input_size}], got {h.shape}")
+        last = len(self._layers64) - 1
+        for i, (w, b) in enumerate(self._layers64):
+            h = np.matmul(h, w) + b
+            if i < last:
+                h = self._act(h)
+        return h[:, 0] if squeeze else h
+
+    def probs(self, x) -> np.ndarray:
+        z = self.logits(x)
+        z = z - z.max(axis=-1, keepdims=True)
+        np.exp(z, out=z)
+        return z / z.sum(axis=-1, keepdims=True)
+
+    def act(self, x, rng: np.random.Generator | None = None, deterministic: bool = False) -> np.ndarray:
+        """One action per agent (and row) for inputs ``x`` (``[A, input]`` or ``[A, n, input]``):
+        the most likely one, or one draw from ``rng`` per agent and row (module docstring)."""
+        p = self.probs(x)
+        if deterministic:
+            return p.argmax(axis=-1)
+        if rng is None:
+            raise ValueError("a stochastic policy needs a random generator")
+        cum = np.cumsum(p, axis=-1)
+        u = rng.random(p.shape[:-1] + (1,))
+        return np.minimum((cum < u).sum(axis=-1), self.n_actions - 1)
+
+    def header(self) -> dict:
+        return {"format": FORMAT, "format_version": FORMAT_VERSION, "agents": list(self.agents),
+                "obs_size": self.obs_size, "n_actions": self.n_actions, "hidden": self.hidden,
+                "activation": self.activation, "frame_stack": self.frame_stack, "shared": self.shared,
+                **self.metadata}
+
+    def tensors(self) -> dict[str, np.ndarray]:
+        out = {}
+        for i, (w, b) in enumerate(self.layers):
+            out[f"layer{i}.weight"] = np.ascontiguousarray(w)
+            out[f"layer{i}.bias"] = np.ascontiguousarray(b)
+        return out
+
+    def __repr__(self):
+        return (f"<PolicyNetwork {len(self.agents)} agent(s), {self.input_size} -> {self.hidden} -> "
+                f"{self.n_actions} ({self.activation})>")
+
+
+_RESERVED = ("format", "format_version", "agents", "obs_size", "n_actions", "hidden", "activation", "frame_stack",
+             "shared")
+
+
+def save_policy(net: PolicyNetwork, path) -> Path:
+    """Write ``net`` to ``path`` (a ``.safetensors`` file), atomically."""
+    from safetensors.numpy import save
+
+    from ials_zoo.utils import atomic_path
+
+    path = Path(path)
+    header = json.dumps(net.header(), sort_keys=True, default=_json_default, allow_nan=False)
+    data = save(net.tensors(), metadata={HEADER_KEY: header})
+    with atomic_path(path, suffix=SUFFIX) as tmp:
+        tmp.write_bytes(data)
+    return path
+
+
+def _json_default(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+def load_policy_file(path) -> PolicyNetwork:
+    """Read a policy file (:func:`save_policy`); a :class:`PolicyFileError` naming the file
+    for anything that is not one."""
+    from safetensors import safe_open
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"policy file not found: {path}")
+    if path.stat().st_size > MAX_FILE_BYTES:
+        raise PolicyFileError(f"{path}: {path.stat().st_size} bytes is more than a policy file may hold")
+    try:
+        with safe_open(str(path), framework="np") as f:
+            meta = f.metadata() or {}
+            tensors = {k: f.get_tensor(k) for k in f.keys()}
+    except Exception as exc:  # safetensors raises its own error types for foreign files
+        raise PolicyFileError(f"not an ials_zoo policy file: {path} ({type(exc).__name__}: {exc})") from None
+    return _from_parts(meta, tensors, str(path))
+
+
+def _from_parts(meta: dict, tensors: dict, where: str) -> PolicyNetwork:
+    try:
+        header = json.loads(meta[HEADER_KEY], parse_constant=_no_constants)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise PolicyFileError(f"not an ials_zoo policy file: {where} (no readable {HEADER_KEY!r} header: {exc})") from None
+    if not isinstance(header, dict) or header.get("format") != FORMAT:
+        raise PolicyFileError(f"not an ials_zoo policy file: {where}")
+    if header.get("format_version") != FORMAT_VERSION:
+        raise PolicyFileError(f"{where}: policy format version {header.get('format_version')!r}; this "
+                              f"ials_zoo reads version {FORMAT_VERSION}")
+    n = len(header.get("hidden", [])) + 1
+    try:
+        layers = [(tensors[f"layer{i}.weight"], tensors[f"layer{i}.bias"]) for i in range(n)]
+        extra = set(tensors) - {f"layer{i}.{p}" for i in range(n) for p in ("weight", "bias")}
+        if extra:
+            raise PolicyFileError(f"{where}: unexpected tensors {sorted(extra)}")
+        return PolicyNetwork(header["agents"], header["obs_size"], header["n_actions"], layers,
+                             header.get("activation", "tanh"), header.get("frame_stack", 1),
+                             {k: v for k, v in header.items() if k not in _RESERVED},
+                             shared=bool(header.get("shared", False)))
+    except KeyError as exc:
+        raise PolicyFileError(f"{where}: missing {exc}") from None
+    except PolicyFileError as exc:
+        raise PolicyFileError(f"{where}: {exc}") from None
+
+
+def _no_constants(name):
+    raise ValueError(f"non-finite number {name} in a policy header")
+
+
+# --------------------------------------------------------------------------------------------
+# SB3 models, read without unpickling
+
+
+def _sb3_zip_parts(path: Path) -> tuple[dict, dict]:
+    """``(data JSON without serialized fields, policy state dict as numpy)`` of an SB3 zip."""
+    import torch
+
+    try:
+        with zipfile.ZipFile(path) as z:
+            members = {i.filename: i for i in z.infolist()}
+            for name in ("data", "policy.pth"):
+                if name not in members:
+                    raise PolicyFileError(f"{path}: not an SB3 model zip (no {name!r})")
+                if members[name].file_size > MAX_ZIP_MEMBER_BYTES:
+                    raise PolicyFileError(f"{path}: {name!r} is too large")
+            data = json.loads(z.read("data"), parse_constant=_no_constants)
+            raw = z.read("policy.pth")
+    except (zipfile.BadZipFile, OSError, ValueError) as exc:
+        if isinstance(exc, PolicyFileError):
+            raise
+        raise PolicyFileError(f"{path}: not a readable SB3 model zip ({type(exc).__name__}: {exc})") from None
+    # weights_only: torch's restricted unpickler admits tensors and plain containers only
+    try:
+        state = torch.load(io.BytesIO(raw), map_location="cpu", weights_only=True)
+    except Exception as exc:
+        raise PolicyFileError(f"{path}: policy.pth holds more than weights; refused ({type(exc).__name__}: {exc})") from None
+    if not isinstance(data, dict) or not isinstance(state, dict):
+        raise PolicyFileError(f"{path}: not an SB3 model zip")
+    clean = {k: v for k, v in data.items() if not (isinstance(v, dict) and ":serialized:" in v)}
+    return clean, {k: v.detach().cpu().numpy() for k, v in state.items() if hasattr(v, "detach")}
+
+
+def _sb3_activation(data: dict) -> str:
+    kwargs = data.get("policy_kwargs")
+    text = json.dumps(kwargs) if kwargs is not None else ""
+    if "activation_fn" not in text:
+        return "tanh"  # SB3's ActorCriticPolicy default
+    m = re.search(r"activation\.(\w+)", text)
+    name = (m.group(1) if m else "").lower()
+    if name in ACTIVATIONS:
+        return name
+    raise PolicyFileError(f"unsupported activation in policy_kwargs: {text}")
+
+
+def policy_from_state_dict(state: dict, agent: str, obs_size: int, frame_stack: int = 1,
+                           activation: str = "tanh", metadata: dict | None = None) -> PolicyNetwork:
+    """The actor of an SB3 ``ActorCriticPolicy`` (``MlpPolicy``) state dict, as a policy."""
+    idx = sorted({int(m.group(1)) for k in state
+                  if (m := re.fullmatch(r"mlp_extractor\.policy_net\.(\d+)\.weight", k))})
+    layers = []
+    try:
+        for i in idx:
+            w, b = np.asarray(state[f"mlp_extractor.policy_net.{i}.weight"]), np.asarray(state[f"mlp_extractor.policy_net.{i}.bias"])
+            layers.append((w.T[None], b[None]))
+        w, b = np.asarray(state["action_net.weight"]), np.asarray(state["action_net.bias"])
+    except KeyError as exc:
+        raise PolicyFileError(f"not an actor-critic MLP policy (missing {exc})") from None
+    layers.append((w.T[None], b[None]))
+    if layers[0][0].shape[1] != obs_size * frame_stack:
+        raise PolicyFileError(f"the policy reads {layers[0][0].shape[1]} inputs, not {obs_size} x {frame_stack} frames")
+    return PolicyNetwork([agent], obs_size, w.shape[0], layers, activation, frame_stack, metadata)
+
+
+def policy_from_sb3_zip(path, agent: str, obs_size: int, frame_stack: int = 1,
+                        metadata: dict | None = None) -> PolicyNetwork:
+    """The actor of an SB3 PPO model zip, read without unpickling (module docstring)."""
+    path = Path(path)
+    data, state = _sb3_zip_parts(path)
+    return policy_from_state_dict(state, agent, obs_size, frame_stack, _sb3_activation(data), metadata)
+
+
+def policy_from_sb3_model(model, agent: str, frame_stack: int = 1, metadata: dict | None = None) -> PolicyNetwork:
+    """The actor of a live SB3 PPO model (its observation space may be frame-stacked)."""
+    state = {k: v.detach().cpu().numpy() for k, v in model.policy.state_dict().items()}
+    width = int(np.prod(model.observation_space.shape))
+    if width % frame_stack:
+        raise ValueError(f"observation width {width} is not a multiple of frame_stack {frame_stack}")
+    act = model.policy.activation_fn.__name__.lower() if hasattr(model.policy, "activation_fn") else "tanh"
+    return policy_from_state_dict(state, agent, width // frame_stack, frame_stack, act, metadata)
+
+
+def stack_policies(nets: list[PolicyNetwork], metadata: dict | None = None) -> PolicyNetwork:
+    """One policy holding the weights of single-agent policies of the same architecture."""
+    first = nets[0]
+    for n in nets[1:]:
+        if (n.obs_size, n.n_actions, n.hidden, n.activation, n.frame_stack) != (
+                first.obs_size, first.n_actions, first.hidden, first.activation, first.frame_stack):
+            raise PolicyFileError("only policies of one architecture can be stacked")
+    layers = [(np.concatenate([n.layers[i][0] for n in nets]), np.concatenate([n.layers[i][1] for n in nets]))
+              for i in range(len(first.layers))]
+    return PolicyNetwork([a for n in nets for a in n.agents], first.obs_size, first.n_actions, layers,
+                         first.activation, first.frame_stack, metadata if metadata is not None else first.metadata)
+
+
+def is_policy_file(path) -> bool:
+    return os.fspath(path).endswith(SUFFIX)
+
+
+__all__ = [
+    "FORMAT",
+    "FORMAT_VERSION",
+    "PolicyFileError",
+    "PolicyNetwork",
+    "is_policy_file",
+    "load_policy_file",
+    "policy_from_sb3_model",
+    "policy_from_sb3_zip",
+    "save_policy",
+    "stack_policies",
+]
