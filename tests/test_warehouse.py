@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test
+from pettingzoo.test import api_test
 
 from ials_zoo.core.domains import get_domain
 from ials_zoo.warehouse import regions as R
@@ -15,20 +15,9 @@ NEIGHBOURS_OF_20 = {0: "robot_21", 1: "robot_26", 2: "robot_19", 3: "robot_14"}
 # ----------------------------------------------------------------------------- API
 
 
-def test_parallel_api_all_learners():
-    parallel_api_test(parallel_env(max_cycles=30), num_cycles=40)
-
-
-def test_parallel_api_one_learner():
-    parallel_api_test(parallel_env(learners=["robot_20"]), num_cycles=120)
-
-
-def test_aec_api():
+def test_aec_api_with_several_learners():
+    # the generic API, seed and render checks run for every domain in test_domain_contract.py
     api_test(env(learners=["robot_0", "robot_20"], max_cycles=20), num_cycles=30)
-
-
-def test_parallel_seed():
-    parallel_seed_test(lambda: parallel_env(max_cycles=25), num_cycles=30)
 
 
 def test_domain_registration_defaults():

@@ -1,0 +1,192 @@
+"""The domain contract, checked on every registered domain: the two real ones and ``relay_v0``,
+a toy domain that lives only in ``tests/toy_relay`` and is registered at run time."""
+
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+from pettingzoo.test import parallel_api_test, parallel_seed_test, render_test
+from pettingzoo.utils import parallel_to_aec
+
+import ials_zoo
+from ials_zoo.core.domains import Domain, domain_ids, get_domain, register_domain, unregister_domain
+from ials_zoo.core.region import DSET_KINDS, INFLUENCE_KEY
+
+TOY = "relay_v0"
+
+
+@pytest.fixture(scope="module", autouse=True)
+def toy_domain():
+    from toy_relay.domain import DOMAIN
+
+    register_domain(DOMAIN, replace=True)
+    yield DOMAIN
+    unregister_domain(TOY)
+
+
+def domains():
+    import toy_relay.domain  # noqa: F401 - the ids are listed before the fixture registers it
+
+    return ["traffic_grid_v0", "warehouse_v0", TOY]
+
+
+@pytest.fixture(params=domains())
+def domain(request) -> Domain:
+    return get_domain(request.param)
+
+
+def test_registration(toy_domain):
+    assert TOY in domain_ids() and get_domain(TOY) is toy_domain
+    with pytest.raises(ValueError, match="already registered"):
+        register_domain(toy_domain)
+    with pytest.raises(ValueError, match="unknown domain 'nope_v0'"):
+        get_domain("nope_v0")
+    # its IALS is a Gymnasium env at once
+    import gymnasium
+
+    env = gymnasium.make(f"ials_zoo/IALS-{TOY}", agent="node_2", predictor="uniform")
+    env.reset(seed=0)
+    env.close()
+
+
+def test_bare_gymnasium_make_with_the_module_prefix():
+    """Gymnasium 1.x has no plugin entry points: the module prefix imports the zoo."""
+    import subprocess
+    import sys
+
+    code = ("import gymnasium; e = gymnasium.make('ials_zoo:ials_zoo/IALS-warehouse_v0', agent='robot_20', "
+            "predictor='uniform'); print(e.reset(seed=0)[0].shape)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "(37,)"
+
+
+def _gs(domain, **kw):
+    return domain.parallel_env(**kw)
+
+
+def test_pettingzoo_api_and_seeding(domain):
+    agent = domain.default_agents[0]
+    for learners in (None, [agent]):
+        env = _gs(domain, learners=learners)
+        parallel_api_test(env, num_cycles=domain.episode_length + 5)
+        env.close()
+    parallel_seed_test(lambda: _gs(domain, learners=[agent]))
+
+
+def test_aec_raw_env_and_render_modes(domain):
+    env = _gs(domain, learners=[domain.default_agents[0]])
+    modes = env.metadata["render_modes"]
+    env.close()
+    assert "human" in modes
+
+    def make(render_mode=None):
+        return parallel_to_aec(_gs(domain, learners=[domain.default_agents[0]], render_mode=render_mode))
+
+    render_test(make)
+
+
+def test_infos_have_the_same_keys_shapes_and_dtypes_at_reset_and_step(domain):
+    agent = domain.default_agents[0]
+    env = _gs(domain, learners=[agent])
+    region = domain.region_spec(agent)
+    _, infos = env.reset(seed=0)
+    _, _, _, _, infos2 = env.step({agent: 0})
+    env.close()
+    for info in (infos[agent], infos2[agent]):
+        assert set(info) == {INFLUENCE_KEY, "dset", "dset_full"}
+        assert info[INFLUENCE_KEY].shape == (region.n_sources,) and info[INFLUENCE_KEY].dtype == np.int64
+        assert info["dset"].shape == (region.dset_size("dset"),) and info["dset"].dtype == np.uint8
+        assert info["dset_full"].shape == (region.dset_size("full"),)
+    assert {k: (v.shape, v.dtype) for k, v in infos[agent].items()} == {
+        k: (v.shape, v.dtype) for k, v in infos2[agent].items()}
+
+
+def test_state_matches_state_space(domain):
+    env = _gs(domain, learners=[domain.default_agents[0]])
+    env.reset(seed=1)
+    s = env.state()
+    assert env.state_space.contains(s) and s.dtype == np.float32
+    env.close()
+
+
+def test_region_spec_agrees_between_gs_ls_and_domain(domain):
+    for agent in (domain.default_agents[0], domain.agents()[0]):
+        env = _gs(domain, learners=[agent])
+        ls = domain.local_simulator(agent, n_envs=2)
+        try:
+            assert env.region_spec(agent) == domain.region_spec(agent) == ls.region
+            assert ls.observation_space == domain.observation_space == env.observation_space(agent)
+            assert ls.action_space == domain.action_space == env.action_space(agent)
+            obs, dsets = ls.reset(seed=0)
+            assert obs.shape == (2, *domain.observation_space.shape)
+            for kind in DSET_KINDS:
+                assert dsets[kind].shape == (2, ls.region.dset_size(kind))
+        finally:
+            env.close()
+            ls.close()
+    with pytest.raises(ValueError, match="unknown agent"):
+        domain.check_agent("nobody_99")
+
+
+def test_ls_replays_the_gs_given_its_influence_sources(domain):
+    """Fed the GS's own actions and influence sources, the LS tracks the GS's observations (a
+    domain declares how closely: exactly where its LS has no other randomness)."""
+    agent = domain.default_agents[0]
+    env = _gs(domain, learners=[agent])
+    ls = domain.local_simulator(agent, n_envs=1)
+    rng = np.random.default_rng(0)
+    agree, active = [], 0
+    try:
+        obs, _ = env.reset(seed=3)
+        ls_obs, _ = ls.reset(seed=3)
+        while env.agents:
+            a = int(rng.integers(domain.n_actions))
+            obs, _, _, _, infos = env.step({agent: a})
+            u = infos[agent][INFLUENCE_KEY]
+            active += int((u != domain.null_influence).sum())
+            ls_obs, _, _ = ls.step(np.array([a]), u[None])
+            agree.append(np.mean(ls_obs[0] == obs[agent]))
+    finally:
+        env.close()
+        ls.close()
+    assert active > 0  # the replay did exercise the influence sources
+    assert np.mean(agree) >= domain.replay_agreement, np.mean(agree)
+
+
+def test_the_ials_steps_and_passes_gymnasiums_checker(domain):
+    env = ials_zoo.make_ials(domain.env_id, domain.default_agents[0], predictor="uniform", seed=0)
+    try:
+        check_env(env, skip_render_check=True)
+        obs, _ = env.reset(seed=1)
+        total, steps, done = 0.0, 0, False
+        while not done:
+            obs, r, term, trunc, info = env.step(env.action_space.sample())
+            total += r
+            steps += 1
+            done = term or trunc
+        assert steps == domain.episode_length and np.isfinite(total)
+        assert info[INFLUENCE_KEY].shape == (domain.region_spec(domain.default_agents[0]).n_sources,)
+    finally:
+        env.close()
+
+
+def test_nothing_outside_a_domain_folder_names_a_domain():
+    """Generic code asks the Domain; domain ids appear only in their folders (and in the
+    paper's reference numbers, which document paper data)."""
+    import re
+    from pathlib import Path
+
+    root = Path(ials_zoo.__file__).parent
+    ids = [d for d in domain_ids() if d != TOY]
+    allowed = {"reproduce/claims.py"}  # PAPER: the paper's reference numbers per domain
+    offenders = []
+    for path in root.rglob("*.py"):
+        rel = path.relative_to(root).as_posix()
+        if rel.split("/")[0] in ("warehouse", "traffic") or rel.endswith(("_v0.py",)) or rel in allowed:
+            continue
+        code = re.sub(r'("""|\'\'\')(.|\n)*?\1', "", path.read_text())  # docstrings document, code decides
+        code = "\n".join(line.split("#", 1)[0] for line in code.splitlines())
+        for env_id in ids:
+            if re.search(rf"[\"']{env_id}[\"']", code):
+                offenders.append(f"{rel}: {env_id}")
+    assert not offenders, offenders
