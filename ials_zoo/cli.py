@@ -63,6 +63,24 @@ def build_parser(load: str | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+def threading_main() -> bool:
+    import threading
+
+    return threading.current_thread() is threading.main_thread()
+
+
+def _sigterm_interrupts() -> None:
+    """SIGTERM ends a command like Ctrl-C: cleanup runs (workers stopped, the run folder marked
+    interrupted) before the process exits."""
+    import signal
+
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt
+
+    if threading_main():
+        signal.signal(signal.SIGTERM, interrupt)
+
+
 def main(argv: list[str] | None = None) -> int:
     from ials_zoo.commands import CommandError
 
@@ -74,6 +92,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     module = importlib.import_module(_available()[args.command][0])
+    _sigterm_interrupts()
     try:
         return int(module.run(args) or 0)
     except KeyboardInterrupt:
@@ -84,6 +103,11 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"ials-zoo {args.command}: {exc}", file=sys.stderr)
         return 2
+    finally:
+        import signal
+
+        if threading_main():
+            signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 if __name__ == "__main__":

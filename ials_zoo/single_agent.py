@@ -114,15 +114,16 @@ class SingleAgentGS(gymnasium.Env):
         self._par.close()
 
 
-def _make_single_agent_gs(env_id: str, agent: str, options: dict) -> SingleAgentGS:
-    # Module-level (picklable) factory, run in each SubprocVecEnv worker: the worker dies
-    # with the training process and leaves Ctrl-C to it.
+def _make_single_agent_gs(env_id: str, agent: str, options: dict, in_worker: bool = False) -> SingleAgentGS:
+    # Module-level (picklable) factory. In a SubprocVecEnv worker, the worker dies with the
+    # training process and leaves Ctrl-C to it (never in the training process itself).
     import torch
 
-    from ials_zoo.processes import die_with_parent
+    if in_worker:
+        from ials_zoo.processes import die_with_parent
 
-    die_with_parent(ignore_sigint=True)
-    torch.set_num_threads(1)
+        die_with_parent(ignore_sigint=True)
+        torch.set_num_threads(1)
     return SingleAgentGS(env_id, agent, **options)
 
 
@@ -205,7 +206,8 @@ def make_gs_vec_env(
         raise ValueError(
             f"{env_id} holds one simulation per process (libsumo); use vec_env='subproc'"
         )
-    fns = [functools.partial(_make_single_agent_gs, env_id, agent, options) for _ in range(n_envs)]
-    if vec_env == "subproc" or (vec_env == "auto" and own):
+    subproc = vec_env == "subproc" or (vec_env == "auto" and own)
+    fns = [functools.partial(_make_single_agent_gs, env_id, agent, options, subproc) for _ in range(n_envs)]
+    if subproc:
         return _safe_subproc_vec_env_class()(fns, start_method=start_method)
     return DummyVecEnv(fns)

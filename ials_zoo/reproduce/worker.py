@@ -16,10 +16,8 @@ def run_job(job) -> None:
     """Run ``job`` (a :class:`~ials_zoo.reproduce.plan.Job`) in this process."""
     import torch
 
-    from ials_zoo.processes import die_with_parent
     from ials_zoo.reproduce import experiments as X
 
-    die_with_parent()
     torch.set_num_threads(1)
     p = dict(job.params)
     if job.kind == "aip":
@@ -48,8 +46,10 @@ def run_job(job) -> None:
 
 
 def main(argv=None) -> int:
+    from ials_zoo.processes import die_with_parent
     from ials_zoo.reproduce.plan import Job
 
+    die_with_parent()  # the study's runner started this process: it ends with it
     argv = sys.argv[1:] if argv is None else argv
     if len(argv) != 1:
         print("usage: python -m ials_zoo.reproduce.worker JOB.json", file=sys.stderr)

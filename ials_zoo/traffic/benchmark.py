@@ -42,7 +42,9 @@ def _gs(learners, episodes, backend, seed=0, raw=False):
         for ep in range(episodes):
             env.reset(seed=seed + ep)
             if raw:
-                import libsumo
+                from ials_zoo.traffic.lease import import_libsumo
+
+                libsumo = import_libsumo()
 
                 for _ in range(env.max_cycles):
                     libsumo.simulationStep()

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ials_zoo.traffic.lease import import_libsumo
 from ials_zoo.traffic.network import CELL_LENGTH, N_CELLS, SPEED_LIMIT
 
 # ----------------------------------------------------------------------------- shared reading
@@ -37,7 +38,7 @@ class _LaneReader:
         # once here, not at every read). Lane mean speed x count equals the sum of the
         # vehicles' speeds (checked against per-vehicle getSpeed in the tests) and saves one
         # call per vehicle.
-        from libsumo import _libsumo as L
+        L = import_libsumo()._libsumo
 
         self._getters = (
             L.lane_getLastStepVehicleIDs, L.vehicle_getLanePosition, L.lane_getLastStepMeanSpeed,
@@ -190,8 +191,7 @@ class GridCore:
 
     def __init__(self, net, routes, tls_add, observed, lanes, controlled, states, all_tls=(),
                  all_lanes=()):
-        import libsumo
-
+        libsumo = import_libsumo()
         self.ls = libsumo
         # the raw call: libsumo.simulationStep also runs TraCI step listeners (never used)
         self._sim_step = libsumo._libsumo.simulation_step
@@ -298,8 +298,7 @@ class LocalCore:
     """
 
     def __init__(self, net, routes, n, states, route_ids):
-        import libsumo
-
+        libsumo = import_libsumo()
         self.ls = libsumo
         self._sim_step = libsumo._libsumo.simulation_step
         self.files = (net, routes)

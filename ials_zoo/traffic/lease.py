@@ -60,6 +60,31 @@ class WorkerUnresponsiveError(WorkerDiedError):
     """The worker process stopped answering (stopped, hung, or too slow); it was killed."""
 
 
+# ----------------------------------------------------------------------------- libsumo
+
+
+def import_libsumo():
+    """``libsumo``, imported without its pyarrow version warning: libsumo prints it whenever a
+    pyarrow is installed (Ray installs one) that differs from the one SUMO was built against,
+    but only SUMO's Parquet outputs use arrow, and the zoo writes none. The switch it reads
+    (``LIBSUMO_AS_TRACI=quiet``) also makes ``import traci`` use libsumo, so it is set only
+    while libsumo is imported."""
+    import sys
+
+    if "libsumo" in sys.modules:
+        return sys.modules["libsumo"]
+    before = os.environ.get("LIBSUMO_AS_TRACI")
+    os.environ["LIBSUMO_AS_TRACI"] = "quiet"
+    try:
+        import libsumo
+    finally:
+        if before is None:
+            del os.environ["LIBSUMO_AS_TRACI"]
+        else:
+            os.environ["LIBSUMO_AS_TRACI"] = before
+    return libsumo
+
+
 # ----------------------------------------------------------------------------- the lease
 
 _lease_lock = threading.Lock()
@@ -70,9 +95,7 @@ def inprocess_available() -> bool:
     """True when this process could start an in-process libsumo simulation now."""
     if _lease_owner is not None:
         return False
-    import libsumo
-
-    return not libsumo.simulation.isLoaded()
+    return not import_libsumo().simulation.isLoaded()
 
 
 def _acquire(owner: int) -> None:
@@ -83,9 +106,7 @@ def _acquire(owner: int) -> None:
                 "this process already holds a live libsumo simulation (libsumo allows one "
                 "per process); close the other env first or use backend='worker' or 'auto'"
             )
-        import libsumo
-
-        if _lease_owner is None and libsumo.simulation.isLoaded():
+        if _lease_owner is None and import_libsumo().simulation.isLoaded():
             raise SimulationBusyError(
                 "a libsumo simulation started outside ials_zoo is live in this process; "
                 "use backend='worker' or 'auto'"

@@ -1,0 +1,196 @@
+"""Processes: every child dies with its parent however the parent dies; Ctrl-C ends a run
+promptly; a stopped SUMO worker is detected in seconds."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ials_zoo.traffic.env import TrafficGridEnv
+from ials_zoo.traffic.lease import WorkerDiedError, WorkerUnresponsiveError
+
+
+def _children(pid: int) -> set[int]:
+    """Every live descendant of ``pid`` (from /proc)."""
+    parents = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                stat = (entry / "stat").read_text()
+            except OSError:
+                continue
+            parents[int(entry.name)] = int(stat.rsplit(")", 1)[1].split()[1])
+    out, todo = set(), [pid]
+    while todo:
+        p = todo.pop()
+        for c, pp in parents.items():
+            if pp == p and c not in out:
+                out.add(c)
+                todo.append(c)
+    return out
+
+
+def _alive(pids) -> set[int]:
+    alive = set()
+    for p in pids:
+        try:
+            state = Path(f"/proc/{p}/stat").read_text().rsplit(")", 1)[1].split()[0]
+        except OSError:
+            continue
+        if state != "Z":
+            alive.add(p)
+    return alive
+
+
+def _start(args, tmp_path):
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    return subprocess.Popen([sys.executable, "-m", "ials_zoo.cli", *args], cwd=tmp_path, env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
+
+
+def _wait_for_children(proc, n, timeout=90):
+    deadline = time.time() + timeout
+    seen = set()
+    while time.time() < deadline:
+        seen |= _children(proc.pid)
+        if len(_alive(seen)) >= n:
+            time.sleep(1.0)  # let the evaluator pool start too
+            return seen | _children(proc.pid)
+        if proc.poll() is not None:
+            pytest.fail(f"the command ended early: {proc.stderr.read().decode()[-2000:]}")
+        time.sleep(0.2)
+    pytest.fail(f"only {len(_alive(seen))} children appeared")
+
+
+def _gone_within(pids, seconds=10):
+    deadline = time.time() + seconds
+    while _alive(pids) and time.time() < deadline:
+        time.sleep(0.2)
+    return not _alive(pids)
+
+
+TRAIN = ["train", "ppo_single", "--env", "traffic_grid_v0", "--simulator", "gs", "--n-envs", "2",
+         "--total-timesteps", "200000", "--n-steps", "64", "--batch-size", "64", "--net-arch", "8",
+         "--eval-every", "128", "--eval-episodes", "50", "--no-progress", "--out-dir", "run"]
+
+
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
+def test_training_children_die_with_the_parent(tmp_path, sig):
+    proc = _start(TRAIN, tmp_path)
+    try:
+        kids = _wait_for_children(proc, 3)  # two GS workers and the evaluation worker
+        os.kill(proc.pid, sig)
+        proc.wait(timeout=30)
+        assert _gone_within(kids), f"left behind: {_alive(kids)}"
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    if sig == signal.SIGTERM:
+        from ials_zoo.baselines.runs import run_state
+
+        assert run_state(tmp_path / "run") == "interrupted"
+    else:
+        from ials_zoo.baselines.runs import run_state
+
+        assert run_state(tmp_path / "run") == "killed"
+
+
+def test_ctrl_c_ends_a_traffic_run_promptly(tmp_path):
+    proc = _start(TRAIN, tmp_path)
+    try:
+        kids = _wait_for_children(proc, 3)
+        t0 = time.time()
+        os.kill(proc.pid, signal.SIGINT)
+        rc = proc.wait(timeout=30)
+        assert rc == 130 and time.time() - t0 < 15
+        assert _gone_within(kids), f"left behind: {_alive(kids)}"
+        assert "interrupted" in proc.stderr.read().decode()
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+
+
+def test_collection_workers_die_with_the_parent(tmp_path):
+    proc = _start(["collect", "--env", "traffic_grid_v0", "--agent", "tls_12", "--steps", "100000",
+                   "--workers", "2", "--no-progress", "--out", "d.npz"], tmp_path)
+    try:
+        kids = _wait_for_children(proc, 2)
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=30)
+        assert _gone_within(kids), f"left behind: {_alive(kids)}"
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert not list(tmp_path.glob("*.npz"))
+
+
+def test_a_stopped_sumo_worker_is_detected_in_seconds():
+    env = TrafficGridEnv(grid=(2, 2), backend="worker", max_cycles=50)
+    try:
+        env.reset(seed=0)
+        pid = env._sim.worker_pid
+        os.kill(pid, signal.SIGSTOP)
+        t0 = time.time()
+        with pytest.raises(WorkerUnresponsiveError, match="heartbeat"):
+            env.step({a: 0 for a in env.agents})
+        assert time.time() - t0 < 10
+        assert _gone_within({pid}, 5)  # it was killed
+        env.reset(seed=0)  # a new worker
+        env.step({a: 0 for a in env.agents})
+        os.kill(env._sim.worker_pid, signal.SIGKILL)
+        with pytest.raises(WorkerDiedError):
+            env.step({a: 0 for a in env.agents})
+    finally:
+        env.close()
+
+
+def test_sumo_workers_die_with_their_parent(tmp_path):
+    code = ("from ials_zoo.traffic.env import TrafficGridEnv; import time; "
+            "e = TrafficGridEnv(grid=(2, 2), backend='worker'); e.reset(seed=0); print(e._sim.worker_pid, flush=True); "
+            "time.sleep(60)")
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    worker = int(proc.stdout.readline())
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert _gone_within({worker}, 5)
+
+
+def test_seeds_are_checked_and_never_alias():
+    import ials_zoo
+    from ials_zoo.warehouse.env import parallel_env
+
+    with pytest.raises(ValueError, match="seed must be an int"):
+        parallel_env().reset(seed=-1)
+    env = TrafficGridEnv(grid=(2, 2))
+    try:
+        a = env.reset(seed=5)[0]
+        with pytest.raises(ValueError, match="seed must be an int in \\[0, 2147483646\\]"):
+            env.reset(seed=5 + 2**31 - 1)
+        np.testing.assert_array_equal(env.reset(seed=5)[0]["tls_0"], a["tls_0"])
+    finally:
+        env.close()
+    # Gymnasium's semantics: the constructor's seed stands for the first reset only
+    ials = ials_zoo.make_ials("warehouse_v0", "robot_20", predictor="uniform", seed=7)
+    ials.reset(seed=100)
+    second = [ials.step(t % 4)[0] for t in range(30)]
+    ials.reset()
+    third = [ials.step(t % 4)[0] for t in range(30)]
+    fresh = ials_zoo.make_ials("warehouse_v0", "robot_20", predictor="uniform", seed=7)
+    fresh.reset()
+    seven = [fresh.step(t % 4)[0] for t in range(30)]
+    assert not all(np.array_equal(x, y) for x, y in zip(third, seven))
+    assert not all(np.array_equal(x, y) for x, y in zip(third, second))
+
+
+def test_training_in_this_process_keeps_ctrl_c():
+    """Only worker processes hand Ctrl-C to their parent; the training process keeps it."""
+    from ials_zoo.single_agent import make_gs_vec_env
+
+    venv = make_gs_vec_env("warehouse_v0", "robot_20", n_envs=2)  # DummyVecEnv: in this process
+    venv.close()
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
