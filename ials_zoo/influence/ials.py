@@ -207,7 +207,6 @@ class IALSVecEnv(_VecEnvBase):
         self._actions = None
         self._returns = np.zeros(n)
         self._t_start = time.perf_counter()
-        self._empty_infos = [{} for _ in range(n)]
 
     def reset(self):
         seed = self._seeds[0] if self._seeds[0] is not None else self._next_seed

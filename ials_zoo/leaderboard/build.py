@@ -22,7 +22,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ials_zoo.stats import EPISODES_METHOD, SEEDS_METHOD, bootstrap_interval, t_interval
+from ials_zoo.stats import EPISODES_METHOD, SEEDS_METHOD, t_interval
 
 SCHEMA_VERSION = 2
 SINGLE, MULTI = "single-agent", "multi-agent"
@@ -65,11 +65,6 @@ def split_env_id(env_id: str) -> tuple[str, int]:
 
 def now_iso() -> str:
     return _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
-
-
-def seed_interval(returns: Sequence[float]) -> tuple[float, float, float]:
-    """``(mean, low, high)`` of one seed's episode scores (bootstrap over episodes)."""
-    return bootstrap_interval(returns)
 
 
 def overall_score(scores: Sequence[dict]) -> dict:

@@ -179,10 +179,6 @@ class WarehouseEnv(ParallelEnv):
         for s, (dr, dc) in enumerate(R.SIDE_DELTAS):
             ok = (0 <= rr + dr) & (rr + dr < rows) & (0 <= cc + dc) & (cc + dc < cols)
             nb[ok, s] = ((rr + dr) * cols + cc + dc)[ok]
-        self._neighbours = nb
-        self._arange_n = np.arange(n)
-        self._arange_l = np.arange(self._n_learners)
-        self._sides = np.arange(R.N_SOURCES)
         self._learner_cells = self._region_cells[self._learner_idx]
         self._learner_nb = nb[self._learner_idx]
         # _cell_of[25*n + p]: the shelf cell robot n stands on at local position p, or the

@@ -56,9 +56,7 @@ N_SOURCES = 4
 NONE = 3  # influence class "the neighbour is not on a shared shelf cell of this side"
 CENTRE = 2 * SIZE + 2  # local position of the region centre, where robots start
 OBS_SIZE = N_CELLS + N_ITEMS  # 37
-DSET_SIZE = 2 * N_ITEMS  # 24
 
-ACTION_NAMES = ("up", "down", "left", "right")
 SIDE_NAMES = ("right", "below", "left", "above")
 ACTION_DELTAS = ((-1, 0), (1, 0), (0, -1), (0, 1))
 SIDE_DELTAS = ((0, 1), (1, 0), (0, -1), (-1, 0))  # offset (dr, dc) of the neighbour robot
@@ -200,11 +198,6 @@ def _build_influence_class() -> np.ndarray:
 INFLUENCE_CLASS = _build_influence_class()
 """``INFLUENCE_CLASS[s, p]``: the class of source ``s`` when the neighbour on side ``s`` stands
 at *its own* local position ``p``."""
-
-def influence_cell_mask(influences: np.ndarray) -> np.ndarray:
-    """Item cells occupied by neighbours: ``(n, 4)`` classes -> ``(n, 12)`` bool."""
-    return INFLUENCE_MASK[influences @ INFLUENCE_CODE]
-
 
 INFLUENCE_CODE = 4 ** np.arange(N_SOURCES - 1, -1, -1, dtype=np.int64)
 """Weights that turn a u vector (4 classes in 0..3) into one code in 0..255."""
