@@ -6,10 +6,12 @@ import numpy as np
 from gymnasium import spaces
 
 from ials_zoo.core.local import LocalSimulator, agent_list, check_n_envs
+from ials_zoo.core.streams import CopyStreams
 from ials_zoo.traffic import network
 from ials_zoo.traffic.cores import observation
 from ials_zoo.traffic.env import OBS_SIZE, agent_index, region_spec
 from ials_zoo.traffic.lease import SimHandle
+from ials_zoo.utils import check_seed
 
 
 class TrafficLocalSimulator(LocalSimulator):
@@ -107,7 +109,9 @@ class TrafficLocalSimulator(LocalSimulator):
         }
         self._sim = SimHandle("LocalCore", config, backend)
         self.backend = self._sim.mode
-        self._rng = np.random.default_rng()
+        # turn draws: one uniform per (agent, copy) and lane each step (ials_zoo.core.streams)
+        self._streams = CopyStreams(self.agents, self.n_envs, 4)
+        self._sumo_seeds = np.random.default_rng()
         self._started = False
         self.last_entries = np.zeros((n, 4), np.uint8)
 
@@ -122,11 +126,12 @@ class TrafficLocalSimulator(LocalSimulator):
         return agent_index(self.agent, self.grid)
 
     def reset(self, seed: int | None = None):
+        seed = check_seed(seed)
         if seed is not None:
-            if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
-                raise TypeError(f"seed must be an int, got {seed!r}")
-            self._rng = np.random.default_rng(int(seed))
-        sumo_seed = int(self._rng.integers(2**31 - 1))
+            self._streams.seed(seed)
+            self._sumo_seeds = np.random.default_rng(seed)
+        # nothing in the LS draws from SUMO's random numbers (see LocalCore.reset); seeded anyway
+        sumo_seed = int(self._sumo_seeds.integers(2**31 - 1))
         occ, phases = self._sim.call("reset", sumo_seed)
         self._started = True
         obs = observation(occ, phases)
@@ -156,11 +161,12 @@ class TrafficLocalSimulator(LocalSimulator):
                 f"influences must be an int array of shape ({n}, 4), got shape "
                 f"{influences.shape} dtype {influences.dtype}"
             )
+        draws = self._streams.next()  # one per copy and lane, used or not: streams stay aligned
         ks, lanes = np.nonzero(influences)
         if len(ks):
             if len(ks) != influences.sum():
                 raise ValueError(f"influence bits must be 0 or 1, got {influences!r}")
-            u = self._rng.random(len(ks))
+            u = draws[ks, lanes]
             turns = (u[:, None] >= self._cum[ks, lanes]).sum(axis=1)
             inserts = list(zip(ks.tolist(), lanes.tolist(), turns.tolist()))
         else:

@@ -6,6 +6,7 @@ import numpy as np
 from gymnasium import spaces
 
 from ials_zoo.core.local import LocalSimulator, agent_list, check_n_envs
+from ials_zoo.core.streams import BLOCK, CopyStreams
 from ials_zoo.warehouse import regions as R
 
 _MOVE_FLAT = R.MOVE.ravel()
@@ -16,7 +17,7 @@ _BITS = R.BIT_INDICES
 _ITEM_U8 = R.ITEM_BITS_U8
 _POW2 = 1 << np.arange(R.N_ITEMS, dtype=np.int64)
 _ALL_ITEMS = (1 << R.N_ITEMS) - 1
-_DRAW_STEPS = 64  # appearance draws fetched per rng call by the single-copy path
+_DRAW_STEPS = BLOCK  # appearance draws fetched per rng call by the single-copy path (as CopyStreams)
 
 # (position, item bitmask) -> read-only (obs float32 (37,), {"dset": (1, 24), "full": (1, 37)}).
 # Filled on demand by the single-copy path; emptied when it reaches _VIEW_CACHE_SIZE entries
@@ -66,6 +67,10 @@ class WarehouseLocalSimulator(LocalSimulator):
     per-call overhead on 12-element arrays dominates a single copy's step. It draws the same
     random numbers in the same order (fetched ``64`` steps at a time) and gives the same
     results as the array path.
+
+    Randomness (the item appearances) comes from one stream per (agent, copy)
+    (:class:`ials_zoo.core.streams.CopyStreams`): a copy of ``robot_20`` behaves the same in a
+    batch of every robot's regions as alone.
     """
 
     def __init__(
@@ -90,7 +95,8 @@ class WarehouseLocalSimulator(LocalSimulator):
         self.max_cycles = params["max_cycles"]
         self.observation_space = spaces.Box(0.0, 1.0, (R.OBS_SIZE,), np.float32)
         self.action_space = spaces.Discrete(4)
-        self._rng = np.random.default_rng()
+        # item-appearance draws: one stream per (agent, copy) (ials_zoo.core.streams)
+        self._streams = CopyStreams(self.agents, self.n_envs, R.N_ITEMS)
         n = self.n_copies
         self._pos = np.full(n, R.CENTRE, dtype=np.int64)
         self._ages = np.zeros((n, R.N_ITEMS), dtype=np.int64)
@@ -108,15 +114,13 @@ class WarehouseLocalSimulator(LocalSimulator):
 
     def reset(self, seed: int | None = None):
         if seed is not None:
-            self._rng = np.random.default_rng(seed)
+            self._streams.seed(seed)
             self._draws = []
         if self._scalar:
             self._set_single(R.CENTRE, self._next_draw())
             return self.observe()
         self._pos = np.full(self.n_copies, R.CENTRE, dtype=np.int64)
-        self._ages = (self._rng.random((self.n_copies, R.N_ITEMS)) < self.item_probability).astype(
-            np.int64
-        )
+        self._ages = (self._streams.next() < self.item_probability).astype(np.int64)
         return self._views()
 
     # ------------------------------------------------------------------ single copy
@@ -134,7 +138,7 @@ class WarehouseLocalSimulator(LocalSimulator):
         """
         draws = self._draws
         if not draws:
-            hits = self._rng.random((_DRAW_STEPS, R.N_ITEMS)) < self.item_probability
+            hits = self._streams.generator(0).random((_DRAW_STEPS, R.N_ITEMS)) < self.item_probability
             draws.extend((hits @ _POW2)[::-1].tolist())
         return draws.pop()
 
@@ -217,7 +221,7 @@ class WarehouseLocalSimulator(LocalSimulator):
         if self._scalar:
             return self._step_single_arrays(int(actions[0]), influences[0], new_items)
         if new_items is None:
-            appear = self._rng.random((n, R.N_ITEMS)) < self.item_probability
+            appear = self._streams.next() < self.item_probability
         ages = self._ages
         max_age = ages.max(axis=1)
         pos = _MOVE_FLAT[self._pos * 4 + actions]

@@ -23,6 +23,7 @@ from pettingzoo import ParallelEnv
 from ials_zoo.core.domains import Domain, StudySettings
 from ials_zoo.core.local import LocalSimulator, agent_list, check_n_envs
 from ials_zoo.core.region import INFLUENCE_KEY, RegionSpec
+from ials_zoo.core.streams import CopyStreams
 
 ENV_ID = "relay_v0"
 
@@ -142,14 +143,15 @@ class RelayLocalSimulator(LocalSimulator):
         self.observation_space = spaces.Box(0.0, 1.0, (capacity + 1,), np.float32)
         self.action_space = spaces.Discrete(2)
         self._first = np.repeat([_index(a, nodes) == 0 for a in self.agents], self.n_envs)
-        self._rng, self._q = np.random.default_rng(), np.zeros(self.n_copies, np.int64)
+        self._streams, self._q = CopyStreams(self.agents, self.n_envs, 1), np.zeros(self.n_copies, np.int64)
 
     def _views(self):
         onehot = np.eye(self.capacity + 1, dtype=np.uint8)[self._q]
         return onehot.astype(np.float32), {"dset": onehot, "full": onehot.copy()}
 
     def reset(self, seed=None):
-        self._rng = np.random.default_rng(seed)
+        if seed is not None:
+            self._streams.seed(seed)
         self._q[:] = 0
         return self._views()
 
@@ -159,7 +161,7 @@ class RelayLocalSimulator(LocalSimulator):
         if not np.isin(actions, (0, 1)).all() or not np.isin(influences, (0, 1)).all():
             raise ValueError("actions and influences must be 0 or 1")
         forward = np.where(self._q > 0, actions, 0)
-        arrival = (self._rng.random(self.n_copies) < self.p) & self._first
+        arrival = (self._streams.next()[:, 0] < self.p) & self._first
         self._q = np.minimum(self._q - forward + arrival + influences[:, 0], self.capacity)
         obs, dsets = self._views()
         return obs, (-self._q / self.capacity).astype(np.float64), dsets
