@@ -25,6 +25,7 @@ from ials_zoo.influence.constant import FixedPredictor, MarginalPredictor, Unifo
 from ials_zoo.influence.networks import ARCHS, GRUPredictor, MLPPredictor
 
 FORMAT = "ials_zoo.influence_predictor"
+SET_FORMAT = "ials_zoo.influence_predictor_set"
 FORMAT_VERSION = 1
 
 _CLASSES = {
@@ -39,11 +40,8 @@ def _package_version() -> str:
     return __version__
 
 
-def save_predictor(predictor: InfluencePredictor, path) -> Path:
-    """Save ``predictor`` to one file (atomic), see the module docstring for the format."""
+def _payload(predictor: InfluencePredictor) -> dict:
     import torch
-
-    from ials_zoo.utils import atomic_path
 
     if not isinstance(predictor, InfluencePredictor):
         raise TypeError(f"expected an InfluencePredictor, got {type(predictor).__name__}")
@@ -63,13 +61,42 @@ def save_predictor(predictor: InfluencePredictor, path) -> Path:
             "config": predictor._config(),
         }
     )
-    payload = {
+    return {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
         "class": cls_name,
         "metadata_json": json.dumps(meta, sort_keys=True, default=_json_default),
         "arrays": {k: torch.from_numpy(np.ascontiguousarray(v)) for k, v in predictor._arrays().items()},
     }
+
+
+def save_predictor(predictor: InfluencePredictor, path) -> Path:
+    """Save ``predictor`` to one file (atomic), see the module docstring for the format."""
+    import torch
+
+    from ials_zoo.utils import atomic_path
+
+    payload = _payload(predictor)
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        torch.save(payload, tmp)
+    return path
+
+
+def save_predictor_set(predictors, path, metadata: dict | None = None) -> Path:
+    """Save the predictors of several agents to one file (atomic)::
+
+        {"format": "ials_zoo.influence_predictor_set", "format_version": 1,
+         "metadata_json": "<json>", "members": [<one predictor payload per agent>]}
+    """
+    import torch
+
+    from ials_zoo.utils import atomic_path
+
+    predictors = list(predictors)
+    payload = {"format": SET_FORMAT, "format_version": FORMAT_VERSION,
+               "metadata_json": json.dumps(dict(metadata or {}), sort_keys=True, default=_json_default),
+               "members": [_payload(p) for p in predictors]}
     path = Path(path)
     with atomic_path(path) as tmp:
         torch.save(payload, tmp)
@@ -84,27 +111,12 @@ def _json_default(o):
     raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
 
-def load_predictor(path, env_id: str | None = None, agent: str | None = None) -> InfluencePredictor:
-    """Load a predictor saved by :func:`save_predictor`.
-
-    ``env_id``/``agent``, when given, must match the ones it was trained for (a clear
-    ``ValueError`` naming both otherwise). A file that is not a predictor file (corrupt,
-    truncated, something else) raises ``ValueError("not an ials_zoo influence predictor: ...")``.
-    """
-    import torch
-
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"influence predictor file not found: {path}")
-    try:
-        payload = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:  # torch raises many kinds for a corrupt/foreign file
-        raise ValueError(f"not an ials_zoo influence predictor: {path} ({type(exc).__name__}: {exc})") from None
+def _from_payload(payload, where) -> InfluencePredictor:
     if not isinstance(payload, dict) or payload.get("format") != FORMAT:
-        raise ValueError(f"not an ials_zoo influence predictor: {path} (no {FORMAT!r} header)")
+        raise ValueError(f"not an ials_zoo influence predictor: {where} (no {FORMAT!r} header)")
     if payload.get("format_version") != FORMAT_VERSION:
         raise ValueError(
-            f"{path}: influence predictor format version {payload.get('format_version')!r}, this "
+            f"{where}: influence predictor format version {payload.get('format_version')!r}, this "
             f"ials_zoo reads version {FORMAT_VERSION}"
         )
     try:
@@ -114,11 +126,49 @@ def load_predictor(path, env_id: str | None = None, agent: str | None = None) ->
         arrays = {k: v.numpy() for k, v in payload["arrays"].items()}
         kwargs = dict(meta.get("config", {}))
         if cls in ARCHS.values():
-            pred = cls(region, dset_kind=meta["dset_kind"], arrays=arrays, metadata=meta, **kwargs)
-        else:
-            pred = cls(region, dset_kind=meta["dset_kind"], metadata=meta, table=arrays["table"], **kwargs)
+            return cls(region, dset_kind=meta["dset_kind"], arrays=arrays, metadata=meta, **kwargs)
+        return cls(region, dset_kind=meta["dset_kind"], metadata=meta, table=arrays["table"], **kwargs)
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
-        raise ValueError(f"not an ials_zoo influence predictor: {path} (bad content: {exc})") from None
+        raise ValueError(f"not an ials_zoo influence predictor: {where} (bad content: {exc})") from None
+
+
+def _torch_load(path):
+    import torch
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"influence predictor file not found: {path}")
+    try:
+        return torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # torch raises many kinds for a corrupt/foreign file
+        raise ValueError(f"not an ials_zoo influence predictor: {path} ({type(exc).__name__}: {exc})") from None
+
+
+def load_predictor_set(path, env_id: str | None = None) -> dict:
+    """``{agent: predictor}`` from a file of :func:`save_predictor_set` (weights only: no
+    pickle)."""
+    payload = _torch_load(path)
+    if not isinstance(payload, dict) or payload.get("format") != SET_FORMAT:
+        raise ValueError(f"not an ials_zoo influence predictor set: {path}")
+    out = {}
+    for i, member in enumerate(payload.get("members", [])):
+        pred = _from_payload(member, f"{path} (member {i})")
+        if env_id is not None and pred.region.domain != env_id:
+            raise ValueError(f"{path} holds predictors of {pred.region.domain!r}, not {env_id!r}")
+        out[pred.region.agent] = pred
+    return out
+
+
+def load_predictor(path, env_id: str | None = None, agent: str | None = None) -> InfluencePredictor:
+    """Load a predictor saved by :func:`save_predictor`.
+
+    ``env_id``/``agent``, when given, must match the ones it was trained for (a clear
+    ``ValueError`` naming both otherwise). A file that is not a predictor file (corrupt,
+    truncated, something else) raises ``ValueError("not an ials_zoo influence predictor: ...")``.
+    """
+    path = Path(path)
+    pred = _from_payload(_torch_load(path), path)
+    region = pred.region
     if env_id is not None and region.domain != env_id:
         raise ValueError(
             f"{path} is an influence predictor for domain {region.domain!r}, not {env_id!r}"
@@ -131,4 +181,5 @@ def load_predictor(path, env_id: str | None = None, agent: str | None = None) ->
     return pred
 
 
-__all__ = ["FORMAT", "FORMAT_VERSION", "load_predictor", "save_predictor"]
+__all__ = ["FORMAT", "FORMAT_VERSION", "SET_FORMAT", "load_predictor", "load_predictor_set", "save_predictor",
+           "save_predictor_set"]

@@ -292,4 +292,172 @@ def format_report(report: dict) -> str:
     return "\n".join(lines)
 
 
-__all__ = ["DEFAULTS", "format_report", "train_predictor"]
+
+
+# --------------------------------------------------------------------------------------------
+# Many agents at once
+
+
+def _stacked_modules():
+    import torch
+    from torch import nn
+
+    class StackedMLP(nn.Module):
+        def __init__(self, arrays: list[dict]):
+            super().__init__()
+            st = lambda k: nn.Parameter(torch.from_numpy(np.stack([a[k] for a in arrays]).astype(np.float32)))
+            self.w1, self.b1, self.w_out, self.b_out = st("w1"), st("b1"), st("w_out"), st("b_out")
+
+        def forward(self, x):  # x [G, B, D]
+            h = torch.relu(torch.bmm(x, self.w1) + self.b1[:, None])
+            return torch.bmm(h, self.w_out) + self.b_out[:, None]
+
+        def arrays(self, g):
+            return {k: getattr(self, k)[g].detach().numpy().copy() for k in ("w1", "b1", "w_out", "b_out")}
+
+    class StackedGRU(nn.Module):
+        def __init__(self, arrays: list[dict]):
+            super().__init__()
+            st = lambda k: nn.Parameter(torch.from_numpy(np.stack([a[k] for a in arrays]).astype(np.float32)))
+            for k in ("w_ih", "w_hh", "b_ih", "b_hh", "w_out", "b_out"):
+                setattr(self, k, st(k))
+            self.hidden = arrays[0]["w_hh"].shape[0]
+
+        def forward(self, x):  # x [G, B, T, D]; torch.nn.GRU's equations and gate order (r, z, n)
+            G, B, T, _ = x.shape
+            H = self.hidden
+            h = x.new_zeros(G, B, H)
+            gi_all = torch.matmul(x, self.w_ih[:, None]) + self.b_ih[:, None, None]  # [G, B, T, 3H]
+            outs = []
+            for t in range(T):
+                gi = gi_all[:, :, t]
+                gh = torch.bmm(h, self.w_hh) + self.b_hh[:, None]
+                r = torch.sigmoid(gi[..., :H] + gh[..., :H])
+                z = torch.sigmoid(gi[..., H:2 * H] + gh[..., H:2 * H])
+                n = torch.tanh(gi[..., 2 * H:] + r * gh[..., 2 * H:])
+                h = (1 - z) * n + z * h
+                outs.append(h)
+            hs = torch.stack(outs, dim=2)  # [G, B, T, H]
+            return torch.matmul(hs, self.w_out[:, None]) + self.b_out[:, None, None]
+
+        def arrays(self, g):
+            return {k: getattr(self, k)[g].detach().numpy().copy()
+                    for k in ("w_ih", "w_hh", "b_ih", "b_hh", "w_out", "b_out")}
+
+    return {"mlp": StackedMLP, "gru": StackedGRU}
+
+
+def train_predictors(datasets: dict, arch: str, hidden: int | None = None, lr: float | None = None,
+                     epochs: int | None = None, batch_size: int | None = None, seed: int = 0,
+                     init: dict | None = None, dset_kind: str = "dset", test_fraction: float = 0.1,
+                     progress: bool = False) -> tuple[dict, dict]:
+    """Train one AIP per agent on its own data, all in one stacked torch program.
+
+    Every agent's network is a slice of stacked weights; the loss is the sum of the agents'
+    losses and Adam works element-wise, so this is exactly training each network alone on its
+    own data, in one batched computation per update (the agents' data sets come from one GS
+    run: same episodes, same length). ``init`` (``{agent: predictor}``) warm-starts from those
+    networks (DIALS retrains its AIPs), else each starts from ``init_arrays`` seeded from
+    ``seed`` and the agent's name. Returns ``({agent: predictor}, report)`` with each agent's
+    train/test cross-entropy and the training seconds.
+    """
+    import torch
+
+    from ials_zoo.core.streams import agent_key
+
+    if arch not in ARCHS:
+        raise ValueError(f"unknown AIP architecture {arch!r}; expected one of {sorted(ARCHS)}")
+    agents = list(datasets)
+    if not agents:
+        raise ValueError("no data sets to train on")
+    first = datasets[agents[0]]
+    for a in agents:
+        if datasets[a].influences.shape != first.influences.shape:
+            raise ValueError(f"the data sets differ in shape ({a}: {datasets[a].influences.shape} vs "
+                             f"{first.influences.shape}); collect them in one GS run")
+    hp = dict(DEFAULTS[arch])
+    for k, v in (("epochs", epochs), ("lr", lr), ("hidden", hidden)):
+        if v is not None:
+            hp[k] = v
+    if batch_size is not None:
+        hp["batch_episodes" if arch == "gru" else "batch_size"] = int(batch_size)
+    if int(hp["epochs"]) < 1:
+        raise ValueError(f"epochs must be >= 1, got {hp['epochs']}")
+    region = first.region
+    offsets = [int(x) for x in np.concatenate([[0], np.cumsum(region.influence_classes)])]
+    n_logits, H = offsets[-1], int(hp["hidden"])
+    D = first.dsets[dset_kind].shape[2]
+    train_idx, test_idx = first.split(test_fraction, seed=seed)
+    arrays = []
+    for a in agents:
+        if init and a in init:
+            old = init[a]
+            if old.name != arch or old.hidden != H or old.dset_kind != dset_kind:
+                raise ValueError(f"cannot warm-start a {arch} AIP (hidden {H}) from {old!r}")
+            arrays.append({k: np.asarray(v, np.float32) for k, v in old._arrays().items()})
+        else:
+            arrays.append(init_arrays(arch, D, H, n_logits, seed=(seed * 1_000_003 + agent_key(a)) % 2**32))
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        torch.manual_seed(seed)
+        net = _stacked_modules()[arch](arrays)
+        opt = torch.optim.Adam(net.parameters(), lr=float(hp["lr"]))
+        X = torch.from_numpy(np.stack([datasets[a].dsets[dset_kind][train_idx] for a in agents]).astype(np.float32))
+        U = torch.from_numpy(np.stack([datasets[a].influences[train_idx] for a in agents]))
+        G = len(agents)
+        if arch == "mlp":
+            X, U = X.reshape(G, -1, D), U.reshape(G, -1, U.shape[-1])
+            batch = int(hp["batch_size"])
+        else:
+            batch = int(hp["batch_episodes"])
+        n_items = X.shape[1]
+        rngs = [np.random.default_rng([seed, agent_key(a)]) for a in agents]
+        bar = None
+        if progress:
+            from tqdm.auto import tqdm
+
+            bar = tqdm(total=int(hp["epochs"]), desc=f"train {G} {arch} AIPs", unit="epoch")
+        t0 = time.perf_counter()
+        gi = torch.arange(G)[:, None]
+        for _ in range(int(hp["epochs"])):
+            perm = torch.from_numpy(np.stack([r.permutation(n_items) for r in rngs]))
+            for start in range(0, n_items, batch):
+                idx = perm[:, start:start + batch]
+                logits = net(X[gi, idx])
+                flat = logits.reshape(G, -1, n_logits)
+                u = U[gi, idx].reshape(G, -1, U.shape[-1])
+                loss = 0.0
+                for m in range(len(offsets) - 1):
+                    lm = flat[:, :, offsets[m]:offsets[m + 1]]
+                    ce = torch.nn.functional.cross_entropy(lm.reshape(-1, lm.shape[-1]), u[:, :, m].reshape(-1),
+                                                           reduction="none").reshape(G, -1).mean(dim=1)
+                    loss = loss + ce
+                loss = (loss / (len(offsets) - 1)).sum()  # the agents' losses are independent
+                opt.zero_grad(set_to_none=True)
+                loss.backward()
+                opt.step()
+            if bar is not None:
+                bar.update(1)
+        if bar is not None:
+            bar.close()
+        seconds = time.perf_counter() - t0
+    finally:
+        torch.set_num_threads(threads)
+    out, ce = {}, {}
+    for g, a in enumerate(agents):
+        pred = ARCHS[arch](datasets[a].region, dset_kind=dset_kind, hidden=H, arrays=net.arrays(g))
+        test = cross_entropy_per_source(pred, datasets[a], test_idx if len(test_idx) else train_idx)
+        pred.metadata.update({"variant": "trained", "arch": arch, "hyperparameters": {**hp, "seed": int(seed)},
+                              "dataset": {"steps": datasets[a].n_steps,
+                                          "collect_seconds": datasets[a].metadata.get("collect_seconds"),
+                                          "policy": datasets[a].metadata.get("policy")},
+                              "train_seconds": round(seconds, 3), "test_cross_entropy": float(np.mean(test))})
+        out[a] = pred
+        ce[a] = float(np.mean(test))
+    return out, {"arch": arch, "hyperparameters": hp, "agents": len(agents), "train_seconds": round(seconds, 3),
+                 "test_cross_entropy": ce, "mean_test_cross_entropy": float(np.mean(list(ce.values()))),
+                 "warm_start": bool(init)}
+
+
+__all__ = ["DEFAULTS", "format_report", "train_predictor", "train_predictors"]
