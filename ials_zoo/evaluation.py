@@ -253,6 +253,8 @@ def load_policy(spec, env_id: str | None = None, agent: str | None = None,
     repeat a model's own."""
     if frame_stack is not None and (isinstance(frame_stack, bool) or int(frame_stack) < 1):
         raise ValueError(f"frame_stack must be >= 1, got {frame_stack}")
+    if isinstance(spec, PolicyNetwork):
+        spec = NetworkPolicy(spec, deterministic=deterministic, name="policy network")
     if isinstance(spec, Policy):
         pol = spec
     elif callable(spec):

@@ -190,3 +190,53 @@ def test_nothing_outside_a_domain_folder_names_a_domain():
             if re.search(rf"[\"']{env_id}[\"']", code):
                 offenders.append(f"{rel}: {env_id}")
     assert not offenders, offenders
+
+
+def _two_agents(domain):
+    agents = domain.agents()
+    return [domain.default_agents[0], next(a for a in agents if a != domain.default_agents[0])]
+
+
+def test_a_copy_behaves_the_same_in_any_batch(domain):
+    """Fed the same actions and influences, an agent's copies in a local simulator of several
+    agents follow those of a local simulator of that agent alone (per-copy random streams):
+    what DIALS computes does not depend on how its agents are split over workers."""
+    pair = _two_agents(domain)
+    both = domain.local_simulator(pair, n_envs=2)
+    alone = domain.local_simulator([pair[1]], n_envs=2)
+    rng = np.random.default_rng(0)
+    region = domain.region_spec(pair[1])
+    try:
+        o_both, d_both = both.reset(seed=5)
+        o_alone, d_alone = alone.reset(seed=5)
+        np.testing.assert_array_equal(o_both[2:], o_alone)
+        for _ in range(domain.episode_length // 2):
+            acts = rng.integers(domain.n_actions, size=4)
+            u = np.stack([rng.integers(k, size=4) for k in region.influence_classes], axis=1)
+            o_both, r_both, d_both = both.step(acts, u)
+            o_alone, r_alone, d_alone = alone.step(acts[2:], u[2:])
+            np.testing.assert_array_equal(o_both[2:], o_alone)
+            np.testing.assert_array_equal(np.asarray(r_both)[2:], r_alone)
+            np.testing.assert_array_equal(d_both["dset"][2:], d_alone["dset"])
+    finally:
+        both.close()
+        alone.close()
+
+
+def test_the_multi_agent_ials_is_a_pettingzoo_parallel_env(domain):
+    pair = _two_agents(domain)
+
+    def make():
+        return ials_zoo.make_ials_parallel_env(domain.env_id, pair, predictor="untrained", seed=0)
+
+    env = make()
+    parallel_api_test(env, num_cycles=domain.episode_length + 5)
+    env.close()
+    parallel_seed_test(make)
+    env = make()
+    obs, infos = env.reset(seed=2)
+    assert sorted(obs) == sorted(pair) and env.state_space.contains(env.state())
+    assert {k: v.shape for k, v in infos[pair[0]].items()} == {
+        INFLUENCE_KEY: (domain.region_spec(pair[0]).n_sources,), "dset": (domain.region_spec(pair[0]).dset_size("dset"),),
+        "dset_full": (domain.region_spec(pair[0]).dset_size("full"),)}
+    env.close()

@@ -1,5 +1,6 @@
-"""PPO baselines (SB3): one agent on a GS or an IALS (:mod:`.ppo_single`), and all agents with
-shared parameters on the GS (:mod:`.ppo_shared`).
+"""Baselines: PPO for one agent on a GS or an IALS (:mod:`.ppo_single`), all agents with shared
+parameters on the GS (:mod:`.ppo_shared`), every agent with its own policy on the GS
+(:mod:`.ippo`) or each on its own IALS (:mod:`.dials`).
 
 The implementations live in the installed package so that ``ials-zoo train`` works from any
 folder; ``baselines/*.py`` at the repository root are thin runners
@@ -9,4 +10,6 @@ folder; ``baselines/*.py`` at the repository root are thin runners
 BASELINES = {
     "ppo_single": "ials_zoo.baselines.ppo_single",
     "ppo_shared": "ials_zoo.baselines.ppo_shared",
+    "dials": "ials_zoo.baselines.dials",
+    "ippo": "ials_zoo.baselines.ippo",
 }

@@ -1,14 +1,15 @@
-"""``ials-zoo train BASELINE [options]``: train a PPO baseline (see ``ials_zoo.baselines``).
+"""``ials-zoo train BASELINE [options]``: train a baseline (see ``ials_zoo.baselines``).
 
     ials-zoo train ppo_single --env warehouse_v0 --simulator ials --total-timesteps 200000
     ials-zoo train ppo_shared --env warehouse_v0 --total-timesteps 200000
-    ials-zoo train ppo_single --help
+    ials-zoo train ippo --env traffic_grid_v0 --simulator gs
+    ials-zoo train dials --env traffic_grid_v0 [--workers 2] [--backend ray]
+    ials-zoo train dials --help
 """
 
 from __future__ import annotations
 
 import importlib
-import sys
 
 
 def configure(parser):
@@ -28,9 +29,5 @@ def run(args) -> int:
     from ials_zoo.baselines.common import dataclass_from_namespace
 
     module = importlib.import_module(BASELINES[args.baseline])
-    try:
-        module.main(dataclass_from_namespace(module.Args, args))
-    except (ValueError, TypeError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    module.main(dataclass_from_namespace(module.Args, args))
     return 0

@@ -8,7 +8,7 @@ and the copy's index, read in blocks of :data:`BLOCK` steps (one generator call 
 share the batch, how many copies there are of them, or which process holds it: agent
 ``a``'s copy ``j`` in a batch of all agents draws what a single-agent simulator of ``a`` would
 (the multi-agent IALS equals the single-agent IALS given the same seed and influence sources,
-and DIALS gives the same result with any number of workers).
+and DIALS's simulators draw the same with any number of workers).
 """
 
 from __future__ import annotations

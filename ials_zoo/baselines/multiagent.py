@@ -1,0 +1,162 @@
+"""Pieces shared by the multi-agent baselines (DIALS, IPPO): their PPO settings, the joint
+policy (one actor per agent) and its GS evaluation, the training log, checkpoints and the
+multi-agent result."""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ials_zoo.baselines.common import arg
+from ials_zoo.utils import atomic_path, atomic_write_text
+
+
+@dataclass
+class MultiPPOSettings:
+    """PPO settings of every agent (SPEC §3/§6: lr 2.5e-4 decayed linearly, clip 0.1, entropy
+    0.01, 3 epochs, gamma 0.99, lambda 0.95; value coefficient 1, as in §3).
+
+    Chosen here: ``samples_per_update`` samples of each agent per update (the authors' buffer
+    of 128), split into ``batch_size`` minibatches; the rollout length per copy is
+    ``samples_per_update / copies``. Policies are MLPs of ``hidden`` units (64-64: with 25-36
+    learners PPO's own computation dominates a 2-core machine; SPEC §6 used 256-128)."""
+
+    samples_per_update: int = arg(128, "samples of each agent per PPO update")
+    batch_size: int = arg(64, "minibatch size (samples of one agent)")
+    n_epochs: int = arg(3, "epochs per update")
+    learning_rate: float = arg(2.5e-4, "initial learning rate")
+    anneal_lr: bool = arg(True, "decay the learning rate linearly to 0")
+    clip_range: float = arg(0.1, "PPO clip range")
+    ent_coef: float = arg(0.01, "entropy coefficient")
+    vf_coef: float = arg(1.0, "value loss coefficient")
+    gamma: float = arg(0.99, "discount")
+    gae_lambda: float = arg(0.95, "GAE lambda")
+    max_grad_norm: float = arg(0.5, "gradient clipping (per agent)")
+    hidden: str = arg("64,64", "hidden layers of every actor and critic, comma-separated")
+
+
+def check_multi_ppo(args) -> list[int]:
+    """Clear errors for the PPO settings; returns the hidden sizes."""
+    from ials_zoo.baselines.ppo_single import _hidden
+
+    for name in ("samples_per_update", "batch_size", "n_epochs"):
+        if getattr(args, name) < 1:
+            raise ValueError(f"{name} must be >= 1, got {getattr(args, name)}")
+    for name in ("learning_rate", "clip_range", "max_grad_norm"):
+        v = getattr(args, name)
+        if not (math.isfinite(v) and v > 0):
+            raise ValueError(f"{name} must be a finite number > 0, got {v}")
+    for name in ("gamma", "gae_lambda"):
+        if not 0.0 <= getattr(args, name) <= 1.0:
+            raise ValueError(f"{name} must be in [0, 1], got {getattr(args, name)}")
+    return _hidden(args.hidden)
+
+
+def ppo_config(args, copies: int) -> dict:
+    """:class:`~ials_zoo.learners.batched_ppo.PPOConfig` fields for ``copies`` per agent."""
+    if args.samples_per_update % copies:
+        raise ValueError(f"samples_per_update ({args.samples_per_update}) must be a multiple of the copies per "
+                         f"agent ({copies})")
+    return {"n_steps": args.samples_per_update // copies, "n_envs": copies, "batch_size": args.batch_size,
+            "n_epochs": args.n_epochs, "learning_rate": args.learning_rate, "anneal_lr": args.anneal_lr,
+            "clip_range": args.clip_range, "ent_coef": args.ent_coef, "vf_coef": args.vf_coef, "gamma": args.gamma,
+            "gae_lambda": args.gae_lambda, "max_grad_norm": args.max_grad_norm,
+            "hidden": tuple(int(x) for x in args.hidden.split(","))}
+
+
+def joint_policy(agents, layers, obs_size: int, n_actions: int, frame_stack: int, metadata: dict):
+    """The agents' actors as one :class:`~ials_zoo.policy.PolicyNetwork`."""
+    from ials_zoo.policy import PolicyNetwork
+
+    return PolicyNetwork(agents, obs_size, n_actions, layers, "tanh", frame_stack, metadata)
+
+
+class JointActor:
+    """A joint policy as :func:`ials_zoo.influence.dataset.collect_all` drives it: every agent
+    samples from its own actor, reading its last ``frame_stack`` observations."""
+
+    def __init__(self, net, seed: int):
+        self.net, self.seed, self.name = net, int(seed), "joint policy"
+        self._episode = 0
+        self._buf = None
+
+    def reset(self):
+        self._rng = np.random.default_rng([self.seed, self._episode])
+        self._episode += 1
+        self._buf = None
+
+    def joint_act(self, observations: dict) -> dict:
+        obs = np.stack([observations[a] for a in self.net.agents]).astype(np.float32)
+        k = self.net.frame_stack
+        if self._buf is None:
+            self._buf = np.zeros((len(obs), obs.shape[1] * k), np.float32)
+        w = obs.shape[1]
+        self._buf[:, :-w] = self._buf[:, w:]
+        self._buf[:, -w:] = obs
+        acts = self.net.act(self._buf, self._rng)
+        return {a: int(u) for a, u in zip(self.net.agents, acts)}
+
+
+class TrainingLog:
+    """``progress.csv``: one row per stretch of training (steps per agent, wall-clock, the
+    agents' mean episode return, PPO statistics)."""
+
+    COLUMNS = ("steps_per_agent", "wall_clock_seconds", "mean_episode_return", "policy_loss", "value_loss",
+               "entropy", "clip_fraction", "approx_kl", "learning_rate", "aip_refreshes")
+
+    def __init__(self, path: Path):
+        self.path = Path(path)
+        if not self.path.exists():
+            with open(self.path, "w", newline="") as f:
+                csv.writer(f).writerow(self.COLUMNS)
+
+    def add(self, row: dict) -> None:
+        with open(self.path, "a", newline="") as f:
+            csv.writer(f).writerow(["" if row.get(c) is None else row[c] for c in self.COLUMNS])
+
+
+def merge_shard_stats(stats: list[dict], agents_per_shard: list[int]) -> dict:
+    """One row from the shards' statistics (weighted by their agents)."""
+    out, total = {}, sum(agents_per_shard)
+    for key in ("policy_loss", "value_loss", "entropy", "clip_fraction", "approx_kl", "learning_rate"):
+        vals = [(s[key], n) for s, n in zip(stats, agents_per_shard) if key in s]
+        if vals:
+            out[key] = sum(v * n for v, n in vals) / sum(n for _, n in vals)
+    returns = [r for s in stats if s.get("episode_returns") is not None for r in s["episode_returns"]]
+    finite = [r for r in returns if r == r]
+    out["mean_episode_return"] = float(np.mean(finite)) if finite else None
+    out["agents"] = total
+    return out
+
+
+def write_curve(out: Path, header: dict, points: list) -> None:
+    atomic_write_text(Path(out) / "curve.json", json.dumps(dict(header, points=points), indent=2) + "\n")
+
+
+def save_aips(path: Path, predictors: dict) -> None:
+    from ials_zoo.influence.files import save_predictor_set
+
+    save_predictor_set(predictors.values(), path)
+
+
+def policy_file(out: Path, net) -> Path:
+    from ials_zoo.policy import save_policy
+
+    return save_policy(net, Path(out) / "policy.safetensors")
+
+
+def settings_of(args, skip=("resume", "overwrite", "progress", "out_dir", "submitter", "notes", "workers",
+                            "backend", "ray_address")) -> dict:
+    """The settings that shape a run's numbers (a resume must repeat them). The workers and
+    backend do not: a run may resume with others (the results do not depend on them)."""
+    return {k: v for k, v in dataclasses.asdict(args).items() if k not in skip}
+
+
+__all__ = ["JointActor", "MultiPPOSettings", "TrainingLog", "atomic_path", "check_multi_ppo", "joint_policy",
+           "merge_shard_stats", "policy_file", "ppo_config", "save_aips", "settings_of", "write_curve"]

@@ -1,0 +1,250 @@
+"""Where DIALS's shards run: this process, worker processes, or Ray actors.
+
+Every backend runs one :class:`~ials_zoo.dials.shard.AgentShard` per worker and answers
+``call(method, args)`` -- the method run on every shard at once, the results in shard order:
+
+* :class:`InProcessBackend` (``workers=0``): the shards in this process, one after the other;
+* :class:`ProcessBackend` (default): one fresh interpreter per shard (no extra dependency),
+  dying with this process; a worker that dies, is stopped, or stops sending its heartbeat for
+  :data:`UNRESPONSIVE_SECONDS` raises :class:`~ials_zoo.processes.WorkerError` naming it;
+* :class:`RayBackend`: one Ray actor per shard, on a local Ray (``ray.init()``) or an existing
+  cluster (``address``; an address where nothing answers is refused within seconds, before
+  Ray would wait for it). Needs ``pip install "ials-zoo[ray]"``.
+"""
+
+from __future__ import annotations
+
+import socket
+import threading
+import time
+import traceback
+from urllib.parse import urlparse
+
+from ials_zoo.dials.shard import AgentShard, ShardSpec
+from ials_zoo.processes import WorkerError, die_with_parent, process_state
+
+BACKENDS = ("process", "ray")
+UNRESPONSIVE_SECONDS = 20.0
+HEARTBEAT_SECONDS = 0.5
+
+
+class InProcessBackend:
+    """Every shard in this process (no parallelism; for tests and debugging)."""
+
+    name = "inprocess"
+
+    def __init__(self, specs: list[ShardSpec]):
+        self.shards = []
+        try:
+            for spec in specs:
+                self.shards.append(AgentShard(spec))
+        except BaseException:
+            self.close()
+            raise
+
+    def call(self, method: str, args: list | None = None) -> list:
+        args = args or [()] * len(self.shards)
+        return [getattr(s, method)(*a) for s, a in zip(self.shards, args)]
+
+    def close(self):
+        for s in self.shards:
+            s.close()
+        self.shards = []
+
+
+def _heartbeat(conn, stop):
+    while not stop.is_set():
+        try:
+            conn.send(b".")
+        except (OSError, BrokenPipeError):
+            return
+        time.sleep(HEARTBEAT_SECONDS)
+
+
+def _process_worker(conn, beat, spec):
+    die_with_parent(ignore_sigint=True)
+    stop = threading.Event()
+    threading.Thread(target=_heartbeat, args=(beat, stop), daemon=True).start()
+    try:
+        shard = AgentShard(spec)
+        conn.send(("ok", None))
+    except Exception as exc:
+        conn.send(("err", f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}"))
+        return
+    while True:
+        try:
+            method, args = conn.recv()
+        except EOFError:
+            break
+        if method == "__close__":
+            break
+        try:
+            conn.send(("ok", getattr(shard, method)(*args)))
+        except Exception as exc:
+            conn.send(("err", f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}"))
+    stop.set()
+    shard.close()
+
+
+class ProcessBackend:
+    """One worker process per shard (module docstring)."""
+
+    name = "process"
+
+    def __init__(self, specs: list[ShardSpec], unresponsive_after: float = UNRESPONSIVE_SECONDS):
+        import multiprocessing
+
+        ctx = multiprocessing.get_context("spawn")
+        self.unresponsive_after = float(unresponsive_after)
+        self.workers = []
+        try:
+            for spec in specs:
+                conn, child = ctx.Pipe()
+                beat_r, beat_w = ctx.Pipe(duplex=False)
+                proc = ctx.Process(target=_process_worker, args=(child, beat_w, spec), daemon=True)
+                proc.start()
+                child.close()
+                beat_w.close()
+                self.workers.append((conn, beat_r, proc, spec))
+            self._collect()  # each worker built its shard
+        except BaseException:
+            self.close(kill=True)
+            raise
+
+    def _wait(self, i):
+        conn, beat, proc, spec = self.workers[i]
+        last = time.monotonic()
+        while not conn.poll(0.1):
+            now = time.monotonic()
+            while beat.poll():
+                try:
+                    beat.recv_bytes()
+                except (EOFError, OSError):
+                    break
+                last = now
+            what = f"DIALS worker {i} (pid {proc.pid}, agents {spec.agents[0]}..{spec.agents[-1]})"
+            if not proc.is_alive():
+                if conn.poll(0):
+                    break
+                raise WorkerError(f"{what} died (exit code {proc.exitcode})")
+            if process_state(proc.pid) in ("T", "t") or now - last > self.unresponsive_after:
+                raise WorkerError(f"{what} stopped answering (no heartbeat for {now - last:.0f} s)")
+        what = f"DIALS worker {i} (pid {proc.pid}, agents {spec.agents[0]}..{spec.agents[-1]})"
+        try:
+            status, payload = conn.recv()
+        except (EOFError, OSError) as exc:
+            proc.join(timeout=2)
+            if proc.exitcode is not None:
+                raise WorkerError(f"{what} died (exit code {proc.exitcode})") from None
+            raise WorkerError(f"{what} closed its pipe ({exc})") from None
+        if status == "err":
+            raise WorkerError(f"{what} failed: {payload}")
+        return payload
+
+    def _collect(self):
+        return [self._wait(i) for i in range(len(self.workers))]
+
+    def call(self, method: str, args: list | None = None) -> list:
+        args = args or [()] * len(self.workers)
+        try:
+            for (conn, _, _, _), a in zip(self.workers, args):
+                conn.send((method, tuple(a)))
+            return self._collect()
+        except BaseException:
+            self.close(kill=True)
+            raise
+
+    def close(self, kill: bool = False):
+        for conn, beat, proc, _ in self.workers:
+            if not kill:
+                try:
+                    conn.send(("__close__", ()))
+                except (OSError, BrokenPipeError):
+                    pass
+        for conn, beat, proc, _ in self.workers:
+            proc.join(timeout=0.1 if kill else 10)
+            if proc.is_alive():
+                proc.kill()
+                proc.join(timeout=5)
+            conn.close()
+            beat.close()
+        self.workers = []
+
+
+def check_ray_address(address: str, timeout: float = 5.0) -> None:
+    """A ValueError unless something accepts TCP connections at ``address`` (``host:port``
+    or ``ray://host:port``) within ``timeout`` seconds (Ray itself would wait for minutes)."""
+    if address == "auto":
+        return
+    parsed = urlparse(address if "://" in address else f"tcp://{address}")
+    if not parsed.hostname or not parsed.port:
+        raise ValueError(f"--ray-address {address!r}: expected host:port or ray://host:port")
+    try:
+        socket.create_connection((parsed.hostname, parsed.port), timeout=timeout).close()
+    except OSError as exc:
+        raise ValueError(f"--ray-address {address!r}: nothing answers there ({exc}); start the cluster "
+                         "with `ray start --head` or leave --ray-address out for a local Ray") from None
+
+
+class RayBackend:
+    """One Ray actor per shard (module docstring)."""
+
+    name = "ray"
+
+    def __init__(self, specs: list[ShardSpec], address: str | None = None):
+        try:
+            import ray
+        except ImportError:
+            raise ValueError('the Ray backend needs Ray: pip install "ials-zoo[ray]"') from None
+        if address is not None:
+            check_ray_address(address)
+        self.ray = ray
+        self._own = not ray.is_initialized()
+        if self._own:
+            kwargs = {"include_dashboard": False, "log_to_driver": False}
+            if address is None:
+                kwargs["num_cpus"] = max(len(specs), 1)
+            ray.init(address=address, **kwargs)
+        actor = ray.remote(num_cpus=1)(AgentShard)
+        try:
+            self.actors = [actor.remote(spec) for spec in specs]
+            ray.get([a.__ray_ready__.remote() for a in self.actors])
+        except BaseException:
+            self.close()
+            raise
+
+    def call(self, method: str, args: list | None = None) -> list:
+        args = args or [()] * len(self.actors)
+        try:
+            return self.ray.get([getattr(a, method).remote(*x) for a, x in zip(self.actors, args)])
+        except self.ray.exceptions.RayError as exc:
+            self.close()
+            raise WorkerError(f"a DIALS Ray actor failed: {exc}") from None
+
+    def close(self):
+        for a in getattr(self, "actors", []):
+            try:
+                self.ray.get(a.close.remote(), timeout=10)
+            except Exception:
+                pass
+            try:
+                self.ray.kill(a)
+            except Exception:
+                pass
+        self.actors = []
+        if getattr(self, "_own", False) and self.ray.is_initialized():
+            self.ray.shutdown()
+
+
+def make_backend(name: str, specs: list[ShardSpec], address: str | None = None):
+    """The backend ``name`` (``process`` or ``ray``) over ``specs``; no spec: in this process."""
+    if name == "ray":
+        return RayBackend(specs, address)
+    if address is not None:
+        raise ValueError("--ray-address needs --backend ray")
+    if name != "process":
+        raise ValueError(f"unknown backend {name!r}; expected one of {BACKENDS}")
+    return ProcessBackend(specs)
+
+
+__all__ = ["BACKENDS", "InProcessBackend", "ProcessBackend", "RayBackend", "check_ray_address", "make_backend"]

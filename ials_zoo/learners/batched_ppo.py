@@ -1,0 +1,241 @@
+"""Independent PPO for many agents in one batched torch program.
+
+Every agent has its own actor and critic (separate MLPs with tanh, as SB3's ``MlpPolicy`` with
+``net_arch={"pi": hidden, "vf": hidden}``) and its own PPO update; their weights are stacked on
+a leading agent axis, so a forward pass or an update of all agents is one ``torch.bmm`` per
+layer instead of one small model call per agent. Nothing is shared:
+
+* the loss is the sum of the agents' PPO losses and Adam works element-wise, so each agent's
+  parameters follow exactly the updates its own optimiser would make;
+* gradients are clipped per agent (SB3 clips each model's global norm);
+* advantages are normalised per agent and minibatch; minibatches are each agent's own random
+  permutation; actions are sampled from each (agent, copy)'s own random stream
+  (:class:`ials_zoo.core.streams.CopyStreams`); initial weights come from a generator seeded
+  with the run seed and the agent's name.
+
+So an agent's training does not depend on which other agents share the batch (or the process):
+DIALS computes the same thing with any number of workers. Bitwise, only with the same number:
+torch's batched kernels may round a sum differently for a different number of agents in the
+batch (weights then differ by ~1e-8 after an update; over a long run such differences can flip
+a sampled action, so two worker counts give statistically, not bitwise, equal runs). The update follows
+SB3's PPO (clipped surrogate, value loss ``vf_coef * MSE`` without clipping, entropy bonus,
+``n_epochs`` passes over ``batch_size`` minibatches, linear learning-rate decay, time-limit
+bootstrapping ``r_T += gamma V(s_T)``); ``compare_with_sb3`` in the tests and the study's
+learner comparison check that it learns alike.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ials_zoo.core.streams import CopyStreams, agent_key
+
+ACTION_STREAM_SALT = 2
+
+
+@dataclass
+class PPOConfig:
+    """PPO settings (SPEC §3/§6)."""
+
+    n_steps: int = 16
+    n_envs: int = 8
+    batch_size: int = 64
+    n_epochs: int = 3
+    learning_rate: float = 2.5e-4
+    anneal_lr: bool = True
+    clip_range: float = 0.1
+    ent_coef: float = 0.01
+    vf_coef: float = 1.0
+    gamma: float = 0.99
+    gae_lambda: float = 0.95
+    max_grad_norm: float = 0.5
+    hidden: tuple = (256, 128)
+
+
+def _orthogonal(rng: np.random.Generator, rows: int, cols: int, gain: float) -> np.ndarray:
+    """torch's orthogonal initialisation (QR of a Gaussian matrix, sign-corrected), numpy."""
+    a = rng.standard_normal((max(rows, cols), min(rows, cols)))
+    q, r = np.linalg.qr(a)
+    q *= np.sign(np.diag(r))
+    if rows < cols:
+        q = q.T
+    return (gain * q[:rows, :cols]).astype(np.float32)
+
+
+class BatchedPPO:
+    """Independent PPO learners of ``agents`` (module docstring).
+
+    Args:
+        agents: the agents (rows of every array, in this order).
+        input_size: what a policy reads (observation width x frame stack).
+        n_actions: ``Discrete`` actions.
+        cfg: :class:`PPOConfig`.
+        seed: the run seed (with each agent's name: its weights, minibatches and actions).
+        total_updates: updates over the whole run, for the learning-rate decay.
+    """
+
+    def __init__(self, agents, input_size: int, n_actions: int, cfg: PPOConfig, seed: int = 0,
+                 total_updates: int = 1):
+        import torch
+
+        self.agents = list(agents)
+        self.cfg, self.seed = cfg, int(seed)
+        self.input_size, self.n_actions = int(input_size), int(n_actions)
+        self.total_updates, self.updates = max(1, int(total_updates)), 0
+        A = len(self.agents)
+        params = {}
+        for head, out, gain_out in (("pi", n_actions, 0.01), ("vf", 1, 1.0)):
+            sizes = [self.input_size, *cfg.hidden, out]
+            for i, (a, b) in enumerate(zip(sizes[:-1], sizes[1:])):
+                gain = gain_out if i == len(sizes) - 2 else math.sqrt(2)
+                w = np.stack([_orthogonal(self._rng(ag, f"{head}{i}"), b, a, gain).T for ag in self.agents])
+                params[f"{head}.{i}.weight"] = torch.from_numpy(np.ascontiguousarray(w))
+                params[f"{head}.{i}.bias"] = torch.zeros(A, b)
+        self.params = {k: torch.nn.Parameter(v) for k, v in params.items()}
+        self.n_layers = len(cfg.hidden) + 1
+        self.opt = torch.optim.Adam(self.params.values(), lr=cfg.learning_rate, eps=1e-5)
+        self.streams = CopyStreams(self.agents, cfg.n_envs, 1, salt=ACTION_STREAM_SALT)
+        self.streams.seed(self.seed)
+        self._perm_rngs = [self._rng(a, "minibatches") for a in self.agents]
+
+    def _rng(self, agent: str, what: str) -> np.random.Generator:
+        return np.random.default_rng([self.seed, agent_key(agent), agent_key(what)])
+
+    # -- networks
+    def _mlp(self, head: str, x):
+        import torch
+
+        for i in range(self.n_layers):
+            x = torch.baddbmm(self.params[f"{head}.{i}.bias"][:, None], x, self.params[f"{head}.{i}.weight"])
+            if i < self.n_layers - 1:
+                x = torch.tanh(x)
+        return x
+
+    def forward(self, x):
+        """``x [A, B, input]`` -> ``(logits [A, B, n_actions], values [A, B])``."""
+        return self._mlp("pi", x), self._mlp("vf", x)[..., 0]
+
+    def act(self, obs: np.ndarray):
+        """``obs [A, n_envs, input]`` -> ``(actions, values, log-probabilities)``, each ``[A, n_envs]``."""
+        import torch
+
+        with torch.no_grad():
+            logits, values = self.forward(torch.from_numpy(np.asarray(obs, np.float32)))
+            logp_all = torch.log_softmax(logits, dim=-1)
+            probs = logp_all.exp().numpy().astype(np.float64)
+        cum = np.cumsum(probs, axis=-1)
+        u = self.streams.next().reshape(cum.shape[0], cum.shape[1], 1)
+        actions = np.minimum((cum < u * cum[..., -1:]).sum(axis=-1), self.n_actions - 1)
+        logp = np.take_along_axis(logp_all.numpy(), actions[..., None], axis=-1)[..., 0]
+        return actions, values.numpy(), logp
+
+    def values(self, obs: np.ndarray) -> np.ndarray:
+        import torch
+
+        with torch.no_grad():
+            return self._mlp("vf", torch.from_numpy(np.asarray(obs, np.float32)))[..., 0].numpy()
+
+    # -- update
+    def update(self, obs, actions, logp_old, returns, advantages, values_old) -> dict:
+        """One PPO update of every agent from its batch (arrays ``[A, N, ...]``)."""
+        import torch
+
+        cfg = self.cfg
+        lr = cfg.learning_rate * (1.0 - self.updates / self.total_updates) if cfg.anneal_lr else cfg.learning_rate
+        for g in self.opt.param_groups:
+            g["lr"] = lr
+        A, N = actions.shape
+        obs_t = torch.from_numpy(np.asarray(obs, np.float32))
+        act_t = torch.from_numpy(np.asarray(actions, np.int64))
+        logp_t = torch.from_numpy(np.asarray(logp_old, np.float32))
+        ret_t = torch.from_numpy(np.asarray(returns, np.float32))
+        adv_t = torch.from_numpy(np.asarray(advantages, np.float32))
+        rows = torch.arange(A)[:, None]
+        stats = {"policy_loss": 0.0, "value_loss": 0.0, "entropy": 0.0, "clip_fraction": 0.0, "approx_kl": 0.0}
+        count = 0
+        bs = min(cfg.batch_size, N)
+        for _ in range(cfg.n_epochs):
+            perm = torch.from_numpy(np.stack([r.permutation(N) for r in self._perm_rngs]))
+            for start in range(0, N, bs):
+                idx = perm[:, start:start + bs]
+                logits, values = self.forward(obs_t[rows, idx])
+                logp_all = torch.log_softmax(logits, dim=-1)
+                logp = logp_all.gather(-1, act_t[rows, idx][..., None])[..., 0]
+                adv = adv_t[rows, idx]
+                if adv.shape[1] > 1:
+                    adv = (adv - adv.mean(dim=1, keepdim=True)) / (adv.std(dim=1, keepdim=True) + 1e-8)
+                ratio = torch.exp(logp - logp_t[rows, idx])
+                surrogate = torch.min(adv * ratio, adv * torch.clamp(ratio, 1 - cfg.clip_range, 1 + cfg.clip_range))
+                policy_loss = -surrogate.mean(dim=1)
+                value_loss = ((ret_t[rows, idx] - values) ** 2).mean(dim=1)
+                entropy = -(logp_all.exp() * logp_all).sum(dim=-1).mean(dim=1)
+                loss = (policy_loss + cfg.vf_coef * value_loss - cfg.ent_coef * entropy).sum()
+                self.opt.zero_grad(set_to_none=True)
+                loss.backward()
+                # per-agent global gradient norm, clipped as each agent's own optimiser would
+                with torch.no_grad():
+                    sq = sum(p.grad.reshape(A, -1).pow(2).sum(dim=1) for p in self.params.values())
+                    scale = torch.clamp(cfg.max_grad_norm / (sq.sqrt() + 1e-6), max=1.0)
+                    for p in self.params.values():
+                        p.grad.mul_(scale.reshape(A, *([1] * (p.grad.dim() - 1))))
+                self.opt.step()
+                with torch.no_grad():
+                    stats["policy_loss"] += policy_loss.mean().item()
+                    stats["value_loss"] += value_loss.mean().item()
+                    stats["entropy"] += entropy.mean().item()
+                    stats["clip_fraction"] += ((ratio - 1).abs() > cfg.clip_range).float().mean().item()
+                    stats["approx_kl"] += ((ratio - 1) - (logp - logp_t[rows, idx])).mean().item()
+                count += 1
+        self.updates += 1
+        out = {k: v / max(count, 1) for k, v in stats.items()}
+        out["learning_rate"] = lr
+        return out
+
+    # -- state and policies
+    def state_dict(self) -> dict:
+        """Weights, optimiser and counters: tensors and plain containers (``weights_only``)."""
+        return {"params": {k: v.detach().clone() for k, v in self.params.items()},
+                "optimizer": self.opt.state_dict(), "updates": self.updates}
+
+    def load_state_dict(self, state: dict) -> None:
+        import torch
+
+        with torch.no_grad():
+            for k, v in state["params"].items():
+                self.params[k].copy_(v)
+        self.opt.load_state_dict(state["optimizer"])
+        self.updates = int(state["updates"])
+
+    def agent_state(self, agent: str) -> dict:
+        """One agent's weights and optimiser moments (to move it between learners)."""
+        i = self.agents.index(agent)
+        opt = self.opt.state_dict()["state"]
+        return {"params": {k: v.detach()[i].clone() for k, v in self.params.items()},
+                "moments": {j: {m: (t[i].clone() if t.dim() > 0 else t.clone()) for m, t in s.items()}
+                            for j, s in opt.items()}, "updates": self.updates}
+
+    def actor_layers(self) -> list:
+        """The actors' ``[(W [A, in, out], b [A, out]), ...]`` as float32 numpy arrays."""
+        return [(self.params[f"pi.{i}.weight"].detach().numpy().copy(),
+                 self.params[f"pi.{i}.bias"].detach().numpy().copy()) for i in range(self.n_layers)]
+
+
+def gae(rewards, values, dones, last_values, gamma: float, lam: float):
+    """Generalised advantage estimates for arrays ``[T, A, n]`` (``dones[t]``: the episode
+    ended after step t; truncation is bootstrapped in ``rewards`` beforehand)."""
+    T = rewards.shape[0]
+    adv = np.zeros_like(rewards)
+    last = np.zeros_like(last_values)
+    for t in reversed(range(T)):
+        next_values = last_values if t == T - 1 else values[t + 1]
+        nonterminal = 1.0 - dones[t]
+        delta = rewards[t] + gamma * next_values * nonterminal - values[t]
+        last = delta + gamma * lam * nonterminal * last
+        adv[t] = last
+    return adv, adv + values
+
+
+__all__ = ["BatchedPPO", "PPOConfig", "gae"]

@@ -1,0 +1,150 @@
+"""``n_envs`` copies of a GS with every agent learning, as a multi-agent vector env (IPPO).
+
+Copies run in this process (``processes=0``) or spread over ``processes`` worker processes
+(fresh interpreters that die with this one), which step their copies while the others do
+theirs. A domain whose GS holds a process-wide resource (SUMO) puts at most one copy in this
+process and the others in workers of its own lease, which step one after the other; use
+``processes`` to step them at once. Copy ``j`` is first reset with seed ``seed + j``; later
+resets continue each copy's own random stream.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ials_zoo.processes import WorkerError, die_with_parent, recv_from
+
+
+class _Copies:
+    """Some copies of the GS, stepped in turn (in this process or in a worker)."""
+
+    def __init__(self, env_id, agents, options, seeds):
+        from ials_zoo.core.domains import get_domain
+
+        self.envs = [get_domain(env_id).parallel_env(learners=agents, **options) for _ in seeds]
+        self.agents, self.seeds = list(agents), list(seeds)
+
+    def reset(self):
+        obs = []
+        for env, seed in zip(self.envs, self.seeds):
+            o, _ = env.reset(seed=seed)
+            obs.append(np.stack([o[a] for a in self.agents]))
+        self.seeds = [None] * len(self.envs)
+        return np.stack(obs, axis=1)  # [A, copies, obs]
+
+    def step(self, actions):  # actions [A, copies]
+        obs, rew, done = [], [], False
+        for j, env in enumerate(self.envs):
+            o, r, _, trunc, _ = env.step({a: int(actions[i, j]) for i, a in enumerate(self.agents)})
+            obs.append(np.stack([o[a] for a in self.agents]))
+            rew.append([r[a] for a in self.agents])
+            done = all(trunc.values())
+        return np.stack(obs, axis=1), np.array(rew).T, done
+
+    def close(self):
+        for env in self.envs:
+            env.close()
+
+
+def _worker(conn, env_id, agents, options, seeds):
+    die_with_parent(ignore_sigint=True)
+    import torch
+
+    torch.set_num_threads(1)
+    copies = _Copies(env_id, agents, options, seeds)
+    conn.send(("ready", None))
+    while True:
+        try:
+            cmd, arg = conn.recv()
+        except EOFError:
+            break
+        try:
+            if cmd == "reset":
+                conn.send(("ok", copies.reset()))
+            elif cmd == "step":
+                conn.send(("ok", copies.step(arg)))
+            elif cmd == "close":
+                break
+        except Exception as exc:  # report, keep the protocol in step
+            conn.send(("err", f"{type(exc).__name__}: {exc}"))
+    copies.close()
+
+
+class GSVecEnv:
+    """``n_envs`` GS copies of ``agents`` (default: every agent) (module docstring)."""
+
+    def __init__(self, env_id: str, agents=None, n_envs: int = 1, processes: int = 0, seed: int = 0, **options):
+        import multiprocessing
+
+        from ials_zoo.core.domains import get_domain
+
+        domain = get_domain(env_id)
+        self.agents = domain.check_agents(agents, **options)
+        self.n_envs, self.processes = int(n_envs), int(processes)
+        if self.n_envs < 1 or self.processes < 0:
+            raise ValueError("n_envs must be >= 1 and processes >= 0")
+        self.observation_space, self.action_space = domain.observation_space, domain.action_space
+        seeds = [seed + j for j in range(self.n_envs)]
+        self._local, self._workers = None, []
+        if self.processes == 0:
+            self._local = _Copies(env_id, self.agents, options, seeds)
+            return
+        ctx = multiprocessing.get_context("spawn")
+        shares = [list(s) for s in np.array_split(seeds, min(self.processes, self.n_envs)) if len(s)]
+        try:
+            for share in shares:
+                parent, child = ctx.Pipe()
+                proc = ctx.Process(target=_worker, args=(child, env_id, self.agents, options, [int(x) for x in share]),
+                                   daemon=True)
+                proc.start()
+                child.close()
+                self._workers.append((parent, proc, len(share)))
+            for conn, proc, _ in self._workers:
+                recv_from(conn, proc, "GS worker", timeout=300)
+        except BaseException:
+            self.close()
+            raise
+
+    def _gather(self, cmd, args):
+        for (conn, _, _), arg in zip(self._workers, args):
+            conn.send((cmd, arg))
+        out = []
+        for conn, proc, _ in self._workers:
+            status, payload = recv_from(conn, proc, "GS worker")
+            if status == "err":
+                raise WorkerError(f"a GS worker failed: {payload}")
+            out.append(payload)
+        return out
+
+    def reset(self, seed=None):
+        if self._local is not None:
+            return self._local.reset()
+        return np.concatenate(self._gather("reset", [None] * len(self._workers)), axis=1)
+
+    def step(self, actions):
+        actions = np.asarray(actions)
+        if self._local is not None:
+            return self._local.step(actions)
+        bounds = np.cumsum([0] + [k for _, _, k in self._workers])
+        parts = self._gather("step", [actions[:, a:b] for a, b in zip(bounds[:-1], bounds[1:])])
+        return (np.concatenate([p[0] for p in parts], axis=1), np.concatenate([p[1] for p in parts], axis=1),
+                parts[0][2])
+
+    def close(self):
+        if self._local is not None:
+            self._local.close()
+        for conn, proc, _ in self._workers:
+            try:
+                conn.send(("close", None))
+            except (OSError, BrokenPipeError):
+                pass
+        for conn, proc, _ in self._workers:
+            proc.join(timeout=5)
+            if proc.is_alive():
+                proc.kill()
+                proc.join(timeout=5)
+            conn.close()
+        self._workers = []
+
+
+__all__ = ["GSVecEnv"]

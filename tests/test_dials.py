@@ -1,0 +1,349 @@
+"""DIALS's pieces and runs: stacked AIPs and their training, the batched PPO learner, the
+distributed training loop on every backend, and its errors.
+
+Runs use warehouse_v0 with a 2x2 grid of robots (4 learners), tiny networks and budgets."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ENV = "warehouse_v0"
+OPTIONS = {"robots": [2, 2]}
+AGENTS = ["robot_0", "robot_1", "robot_2", "robot_3"]
+TINY = dict(env_id=ENV, agents=",".join(AGENTS), env_options=json.dumps(OPTIONS), total_timesteps=256, n_envs=2,
+            collect_steps=200, aip_epochs=1, eval_episodes=1, final_eval_episodes=2, progress=False)
+
+
+# -- stacked AIPs ---------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def datasets():
+    from ials_zoo.influence.dataset import collect_all
+
+    return collect_all(ENV, AGENTS, steps=300, seed=1, gs_options=OPTIONS, progress=False)
+
+
+def test_stacked_predictor_rows_do_not_depend_on_the_batch(datasets):
+    from ials_zoo.influence.multi import resolve_predictor_set
+    from ials_zoo.influence.stacked import StackedPredictor
+
+    preds = resolve_predictor_set("untrained", ENV, AGENTS[:2], seed=3, options=OPTIONS)
+    both, alone = StackedPredictor(preds, n_envs=3), StackedPredictor(preds[1:], n_envs=3)
+    both.seed(7)
+    alone.seed(7)
+    single = preds[1]
+    single.reset(3)
+    d = {a: datasets[a].dsets["dset"][0] for a in AGENTS[:2]}  # [T, D] of episode 0
+    for t in range(20):
+        rows = np.stack([np.repeat(d[a][t][None], 3, axis=0) for a in AGENTS[:2]]).reshape(6, -1)
+        p_both = both.probs_padded(rows)
+        p_alone = alone.probs_padded(rows[3:])
+        np.testing.assert_allclose(p_both[3:], p_alone, rtol=1e-6)
+        np.testing.assert_allclose(p_alone, single.probs_padded(rows[3:]), rtol=1e-5, atol=1e-7)
+    both.reset()
+    alone.reset()
+    for t in range(20):
+        rows = np.stack([np.repeat(d[a][t][None], 3, axis=0) for a in AGENTS[:2]]).reshape(6, -1)
+        np.testing.assert_array_equal(both.sample(rows)[3:], alone.sample(rows[3:]))
+
+
+def test_training_every_aip_at_once_is_training_each_alone(datasets):
+    from ials_zoo.influence.train import train_predictors
+
+    all_four, _ = train_predictors(datasets, "gru", hidden=8, epochs=2, seed=4)
+    one, report = train_predictors({"robot_2": datasets["robot_2"]}, "gru", hidden=8, epochs=2, seed=4)
+    for k, v in one["robot_2"]._arrays().items():
+        np.testing.assert_allclose(all_four["robot_2"]._arrays()[k], v, rtol=1e-5, atol=1e-6)
+    assert np.isfinite(report["mean_test_cross_entropy"])
+    # a warm start continues from the given networks: one more epoch equals three from scratch
+    again, rep = train_predictors(datasets, "gru", hidden=8, epochs=1, seed=4, init=all_four)
+    assert rep["warm_start"]
+    moved = again["robot_0"]._arrays()["w_out"] - all_four["robot_0"]._arrays()["w_out"]
+    assert 0 < np.abs(moved).max() < 0.1
+
+
+def test_predictor_sets_round_trip_and_name_their_domain(tmp_path):
+    from ials_zoo.influence.files import load_predictor_set, save_predictor_set
+    from ials_zoo.influence.multi import resolve_predictor_set
+
+    preds = resolve_predictor_set("untrained", ENV, AGENTS, seed=0, options=OPTIONS)
+    path = save_predictor_set(preds, tmp_path / "set.pt", {"note": "test"})
+    back = load_predictor_set(path, env_id=ENV)
+    assert list(back) == AGENTS
+    for p in preds:
+        for k, v in p._arrays().items():
+            np.testing.assert_array_equal(back[p.region.agent]._arrays()[k], v)
+    with pytest.raises(ValueError, match="holds predictors of 'warehouse_v0'"):
+        load_predictor_set(path, env_id="traffic_grid_v0")
+    (tmp_path / "junk.pt").write_bytes(b"not a torch file")
+    with pytest.raises(ValueError):
+        load_predictor_set(tmp_path / "junk.pt")
+
+
+# -- the batched learner --------------------------------------------------------------------
+
+def _ppo(agents, **kw):
+    from ials_zoo.learners.batched_ppo import BatchedPPO, PPOConfig
+
+    cfg = PPOConfig(**{"n_steps": 16, "n_envs": 4, "batch_size": 32, "hidden": (16, 16), **kw})
+    return BatchedPPO(agents, 6, 3, cfg, seed=5, total_updates=10)
+
+
+def test_batched_ppo_agents_do_not_depend_on_each_other():
+    """An agent's weights, actions and updates are the same alone or beside others."""
+    rng = np.random.default_rng(0)
+    both, alone = _ppo(["a", "b"]), _ppo(["b"])
+    for _ in range(3):
+        obs = rng.standard_normal((2, 4, 6)).astype(np.float32)
+        act_both, v_both, lp_both = both.act(obs)
+        act_alone, v_alone, lp_alone = alone.act(obs[1:])
+        np.testing.assert_array_equal(act_both[1:], act_alone)
+        np.testing.assert_allclose(v_both[1:], v_alone, rtol=1e-6)
+        N = 64
+        batch = (rng.standard_normal((2, N, 6)), rng.integers(3, size=(2, N)), rng.standard_normal((2, N)) - 1.1,
+                 rng.standard_normal((2, N)), rng.standard_normal((2, N)), rng.standard_normal((2, N)))
+        both.update(*batch)
+        alone.update(*(x[1:] for x in batch))
+    for (wb, bb), (wa, ba) in zip(both.actor_layers(), alone.actor_layers()):
+        np.testing.assert_allclose(wb[1:], wa, rtol=1e-5, atol=1e-7)
+        np.testing.assert_allclose(bb[1:], ba, rtol=1e-5, atol=1e-7)
+
+
+class _Bandit:
+    """A multi-agent vector env where agent i is rewarded for choosing the action its
+    observation points to (episodes of 8 steps)."""
+
+    def __init__(self, agents, n_envs, seed=0):
+        self.agents, self.n_envs = agents, n_envs
+        self.rng = np.random.default_rng(seed)
+        self.t = 0
+
+    def _obs(self):
+        self.target = self.rng.integers(3, size=(len(self.agents), self.n_envs))
+        obs = np.zeros((len(self.agents), self.n_envs, 6), np.float32)
+        np.put_along_axis(obs, self.target[..., None], 1.0, axis=-1)
+        return obs
+
+    def reset(self, seed=None):
+        self.t = 0
+        return self._obs()
+
+    def step(self, actions):
+        reward = (actions == self.target).astype(np.float64)
+        self.t += 1
+        return self._obs(), reward, self.t % 8 == 0
+
+
+def test_batched_ppo_learns_a_contextual_bandit():
+    from ials_zoo.learners.rollout import RolloutTrainer
+
+    learner = _ppo(["a", "b"], learning_rate=3e-3, ent_coef=0.0, n_epochs=4, anneal_lr=False)
+    trainer = RolloutTrainer(learner, _Bandit(["a", "b"], 4), frame_stack=1, seed=0)
+    for _ in range(60):
+        trainer.collect_and_update()
+    trainer.episode_returns()
+    for _ in range(5):
+        trainer.collect_and_update()
+    returns = trainer.episode_returns()
+    assert returns is not None and np.all(returns > 7.0), returns  # of 8; chance is 8/3
+
+
+# -- DIALS runs -----------------------------------------------------------------------------
+
+def _dials(tmp_path, name, **kw):
+    from ials_zoo.baselines import dials
+
+    args = dials.Args(**{**TINY, "out_dir": str(tmp_path / name), **kw})
+    return dials.main(args), tmp_path / name
+
+
+def _weights(folder: Path) -> dict:
+    from safetensors.numpy import load_file
+
+    return load_file(folder / "policy.safetensors")
+
+
+def _assert_same_run(a, b, exact=True):
+    """Same weights (bitwise, or up to float rounding of batched kernels), curve and score."""
+    (ra, fa), (rb, fb) = a, b
+    wa, wb = _weights(fa), _weights(fb)
+    assert wa.keys() == wb.keys()
+    for k in wa:
+        if exact:
+            np.testing.assert_array_equal(wa[k], wb[k], err_msg=k)
+        else:
+            np.testing.assert_allclose(wa[k], wb[k], rtol=1e-4, atol=1e-6, err_msg=k)
+    assert [p["mean"] for p in ra["learning_curves"][0]["points"]] == [p["mean"] for p in rb["learning_curves"][0]["points"]]
+    assert ra["score"] == rb["score"]
+
+
+def test_dials_gives_the_same_result_with_any_number_of_workers(tmp_path):
+    in_process = _dials(tmp_path, "w0", workers=0)
+    one = _dials(tmp_path, "w1", workers=1)
+    two = _dials(tmp_path, "w2", workers=2)
+    _assert_same_run(in_process, one)  # one shard of every agent, here or in a worker: bitwise
+    _assert_same_run(in_process, two, exact=False)
+    result, folder = two
+    # it trained: the policies moved away from their initial weights, the AIPs were trained once
+    assert result["track"] == "multi-agent" and result["trained_agents"] == AGENTS
+    training = result["training"]
+    assert training["simulator"] == "dials-once" and training["aip"]["refreshes"] == 1
+    assert training["env_steps"] == 256 and training["workers"] == 2 and training["aip_seconds"] > 0
+    assert json.loads((folder / "status.json").read_text())["state"] == "finished"
+    assert {"aips.pt", "checkpoint.pt", "curve.json", "progress.csv"} <= {p.name for p in folder.iterdir()}
+
+
+def test_dials_on_ray_matches_the_process_backend(tmp_path):
+    pytest.importorskip("ray")
+    _assert_same_run(_dials(tmp_path, "proc", workers=2), _dials(tmp_path, "ray", workers=2, backend="ray"))
+
+
+def test_periodic_refresh_retrains_every_n_steps_and_sb3_learner_runs(tmp_path):
+    result, folder = _dials(tmp_path, "refresh", refresh="128", learner="sb3", workers=0)
+    aip = result["training"]["aip"]
+    assert result["training"]["simulator"] == "dials"
+    assert aip["refreshes"] == 2 and aip["last"]["at_steps_per_agent"] == 128 and aip["last"]["warm_start"]
+    from ials_zoo.influence.files import load_predictor_set
+
+    assert list(load_predictor_set(folder / "aips.pt", env_id=ENV)) == AGENTS
+
+
+def test_a_dials_result_is_accepted_and_verified_by_the_leaderboard(tmp_path):
+    from ials_zoo.leaderboard import submit, validate_result, verify
+
+    result, folder = _dials(tmp_path, "board", aip="untrained", refresh="never", workers=0)
+    validate_result(result)
+    assert result["training"]["simulator"] == "untrained-dials" and result["training"]["aip"]["variant"] == "untrained"
+    (tmp_path / "lb" / "results").mkdir(parents=True)
+    entry = submit(folder / "result.json", directory=tmp_path / "lb")
+    (report,) = verify(entry, directory=tmp_path / "lb")
+    assert report["ok"], report
+
+
+def test_ippo_on_the_gs_is_the_same_with_or_without_worker_processes(tmp_path):
+    from ials_zoo.baselines import ippo
+
+    def run(name, processes):
+        args = ippo.Args(env_id=ENV, agents=",".join(AGENTS), env_options=json.dumps(OPTIONS), total_timesteps=256,
+                         n_envs=2, gs_processes=processes, eval_episodes=1, final_eval_episodes=2, progress=False,
+                         out_dir=str(tmp_path / name))
+        return ippo.main(args), tmp_path / name
+
+    local, workers = run("p0", 0), run("p2", 2)
+    _assert_same_run(local, workers)
+    assert local[0]["training"]["simulator"] == "gs" and local[0]["track"] == "multi-agent"
+
+
+@pytest.mark.parametrize("kw, message", [
+    ({"refresh": "0"}, "--refresh '0'"),
+    ({"agents": "robot_0,robot_99"}, "robot_99"),
+    ({"aip": "uniform"}, "use --refresh never"),
+    ({"aip": "nowhere.pt", "refresh": "never"}, "file not found"),
+    ({"learner": "jax"}, "unknown learner"),
+    ({"backend": "mpi"}, "unknown backend"),
+    ({"workers": -1}, "workers must be >= 0"),
+    ({"samples_per_update": 100, "n_envs": 3}, "multiple of the copies"),
+    ({"ray_address": "127.0.0.1:1"}, "needs --backend ray"),
+])
+def test_bad_arguments_are_refused_before_anything_starts(tmp_path, kw, message):
+    with pytest.raises(ValueError, match=message.replace("(", r"\(").replace("[", r"\[")):
+        _dials(tmp_path, "bad", **kw)
+    assert not (tmp_path / "bad").exists()
+
+
+def test_a_dead_ray_address_is_refused_in_seconds(tmp_path):
+    from ials_zoo.dials.backends import check_ray_address
+
+    t0 = time.monotonic()
+    with pytest.raises(ValueError, match="nothing answers there"):
+        check_ray_address("127.0.0.1:9", timeout=2.0)
+    with pytest.raises(ValueError, match="expected host:port"):
+        check_ray_address("localhost")
+    assert time.monotonic() - t0 < 10
+
+
+# -- worker failures ------------------------------------------------------------------------
+
+def _specs(n_shards=2):
+    from ials_zoo.baselines import dials
+    from ials_zoo.baselines.multiagent import ppo_config
+    from ials_zoo.dials.shard import ShardSpec
+    from ials_zoo.influence.multi import resolve_predictor_set
+
+    preds = dict(zip(AGENTS, resolve_predictor_set("untrained", ENV, AGENTS, seed=0, options=OPTIONS)))
+    ppo = ppo_config(dials.Args(**{**TINY, "hidden": "8"}), 2)
+    from ials_zoo.dials.shard import split_agents
+
+    chunks = split_agents(AGENTS, n_shards)
+    return [ShardSpec(ENV, c, OPTIONS, 0, 2, 1, "batched", ppo, 4, {a: preds[a] for a in c}) for c in chunks]
+
+
+def _gone(pid, within=10.0):
+    deadline = time.monotonic() + within
+    while time.monotonic() < deadline:
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return True
+        try:
+            with open(f"/proc/{pid}/stat") as f:
+                if f.read().split(")")[-1].split()[0] == "Z":
+                    return True
+        except OSError:
+            return True
+        time.sleep(0.1)
+    return False
+
+
+@pytest.mark.parametrize("how", ["kill", "stop"])
+def test_a_dead_or_stopped_worker_is_named_within_seconds_and_nothing_is_left(how):
+    from ials_zoo.dials.backends import ProcessBackend
+    from ials_zoo.processes import WorkerError
+
+    backend = ProcessBackend(_specs(), unresponsive_after=3.0)
+    pids = [proc.pid for _, _, proc, _ in backend.workers]
+    os.kill(pids[1], signal.SIGKILL if how == "kill" else signal.SIGSTOP)
+    t0 = time.monotonic()
+    with pytest.raises(WorkerError, match=f"DIALS worker 1 \\(pid {pids[1]}.*(died|stopped answering)"):
+        backend.call("train", [(128,), (128,)])
+    assert time.monotonic() - t0 < 15
+    assert all(_gone(p) for p in pids)
+
+
+def test_killing_a_dials_run_leaves_no_worker_and_resume_finishes_it(tmp_path):
+    """kill -9 of the training process: its workers die with it; --resume continues from the
+    last checkpoint to the full budget."""
+    out = tmp_path / "run"
+    cmd = [sys.executable, "-m", "baselines.dials", "--env", ENV, "--agents", ",".join(AGENTS), "--env-options",
+           json.dumps(OPTIONS), "--total-timesteps", "4096", "--eval-every", "256", "--n-envs", "2",
+           "--collect-steps", "200", "--aip-epochs", "1", "--eval-episodes", "1", "--final-eval-episodes", "1",
+           "--workers", "2", "--no-progress", "--out-dir", str(out)]
+    root = Path(__file__).resolve().parents[1]
+    proc = subprocess.Popen(cmd, cwd=root, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and not (out / "checkpoint.json").exists():
+            time.sleep(0.2)
+        assert (out / "checkpoint.json").exists(), "no checkpoint within 120 s"
+        time.sleep(1.0)
+        children = [int(p) for p in subprocess.run(["pgrep", "-P", str(proc.pid)], capture_output=True,
+                                                     text=True).stdout.split()]
+        assert len(children) >= 2
+        proc.kill()
+        proc.wait(timeout=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert all(_gone(p) for p in children), "a DIALS worker outlived its parent"
+    done = subprocess.run(cmd + ["--resume"], cwd=root, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    result = json.loads((out / "result.json").read_text())
+    assert result["training"]["env_steps"] == 4096
+    assert json.loads((out / "status.json").read_text())["state"] == "finished"
