@@ -31,9 +31,8 @@ recorded collection and training time is charged) or a predictor-set file.
 **Learners**: ``--learner batched`` (default: every agent's PPO in one torch program,
 :mod:`ials_zoo.learners.batched_ppo`) or ``sb3`` (one stable-baselines3 PPO per agent, the
 reference). **Determinism**: everything an agent does depends only on the run seed and its
-name, not on its worker: the same seed and ``--workers`` give bitwise the same run on either
-backend; another ``--workers`` computes the same thing up to float rounding of torch's batched
-kernels (``--learner sb3``: bitwise the same).
+name, not on its worker: the same seed gives the same run on either backend and with any
+``--workers`` (bitwise on this CPU and torch build; see :mod:`ials_zoo.learners.batched_ppo`).
 
 **Wall-clock** (``training.wall_clock_seconds``): training, plus the AIPs' data collection and
 training (``training.aip_seconds``, included in the curve as in the paper's plots); GS

@@ -10,8 +10,8 @@ batch, :class:`~ials_zoo.influence.multi.MultiAgentIALS`) and their learners:
 
 Everything an agent does depends on the run seed and its name only (per-agent random
 streams, per-agent weights and minibatches), not on which shard holds it: the same seed gives
-the same run with any number of workers (bitwise with the same number; otherwise up to the
-float rounding of batched kernels, :mod:`ials_zoo.learners.batched_ppo`).
+the same run with any number of workers (:mod:`ials_zoo.learners.batched_ppo` on bitwise
+equality).
 """
 
 from __future__ import annotations

@@ -14,10 +14,11 @@ layer instead of one small model call per agent. Nothing is shared:
   with the run seed and the agent's name.
 
 So an agent's training does not depend on which other agents share the batch (or the process):
-DIALS computes the same thing with any number of workers. Bitwise, only with the same number:
-torch's batched kernels may round a sum differently for a different number of agents in the
-batch (weights then differ by ~1e-8 after an update; over a long run such differences can flip
-a sampled action, so two worker counts give statistically, not bitwise, equal runs). The update follows
+DIALS gives the same run with any number of workers. Bitwise, too: every matrix dimension is
+zero-padded to a multiple of 8 (:func:`_padded`), with which torch's CPU batched products give
+an agent's slice the same bits for any number of agents (checked by the tests; odd widths and
+single-column outputs do not, and a different CPU or torch build may round differently, so
+the same worker count is the safe way to repeat a run bit for bit). The update follows
 SB3's PPO (clipped surrogate, value loss ``vf_coef * MSE`` without clipping, entropy bonus,
 ``n_epochs`` passes over ``batch_size`` minibatches, linear learning-rate decay, time-limit
 bootstrapping ``r_T += gamma V(s_T)``); ``compare_with_sb3`` in the tests and the study's
@@ -55,6 +56,17 @@ class PPOConfig:
     hidden: tuple = (256, 128)
 
 
+PAD = 8
+
+
+def _padded(n: int) -> int:
+    """``n`` rounded up to a multiple of :data:`PAD`. With every matrix dimension a multiple of
+    8, torch's batched matrix products give each agent's slice bitwise the same result for any
+    number of agents in the batch (measured: odd widths such as 5 actions or 37 inputs, and
+    single-column outputs, round differently with the batch size)."""
+    return -(-int(n) // PAD) * PAD
+
+
 def _orthogonal(rng: np.random.Generator, rows: int, cols: int, gain: float) -> np.ndarray:
     """torch's orthogonal initialisation (QR of a Gaussian matrix, sign-corrected), numpy."""
     a = rng.standard_normal((max(rows, cols), min(rows, cols)))
@@ -87,13 +99,18 @@ class BatchedPPO:
         self.total_updates, self.updates = max(1, int(total_updates)), 0
         A = len(self.agents)
         params = {}
+        self._sizes = {}
         for head, out, gain_out in (("pi", n_actions, 0.01), ("vf", 1, 1.0)):
             sizes = [self.input_size, *cfg.hidden, out]
+            self._sizes[head] = sizes
             for i, (a, b) in enumerate(zip(sizes[:-1], sizes[1:])):
                 gain = gain_out if i == len(sizes) - 2 else math.sqrt(2)
-                w = np.stack([_orthogonal(self._rng(ag, f"{head}{i}"), b, a, gain).T for ag in self.agents])
-                params[f"{head}.{i}.weight"] = torch.from_numpy(np.ascontiguousarray(w))
-                params[f"{head}.{i}.bias"] = torch.zeros(A, b)
+                # zero-padded to multiples of PAD: the padding stays zero (its gradients are zero)
+                w = np.zeros((A, _padded(a), _padded(b)), np.float32)
+                for k, ag in enumerate(self.agents):
+                    w[k, :a, :b] = _orthogonal(self._rng(ag, f"{head}{i}"), b, a, gain).T
+                params[f"{head}.{i}.weight"] = torch.from_numpy(w)
+                params[f"{head}.{i}.bias"] = torch.zeros(A, _padded(b))
         self.params = {k: torch.nn.Parameter(v) for k, v in params.items()}
         self.n_layers = len(cfg.hidden) + 1
         self.opt = torch.optim.Adam(self.params.values(), lr=cfg.learning_rate, eps=1e-5)
@@ -114,16 +131,23 @@ class BatchedPPO:
                 x = torch.tanh(x)
         return x
 
+    def _input(self, obs):
+        import torch
+
+        x = torch.from_numpy(np.asarray(obs, np.float32))
+        pad = _padded(self.input_size) - self.input_size
+        return torch.nn.functional.pad(x, (0, pad)) if pad else x
+
     def forward(self, x):
-        """``x [A, B, input]`` -> ``(logits [A, B, n_actions], values [A, B])``."""
-        return self._mlp("pi", x), self._mlp("vf", x)[..., 0]
+        """``x [A, B, padded input]`` -> ``(logits [A, B, n_actions], values [A, B])``."""
+        return self._mlp("pi", x)[..., :self.n_actions], self._mlp("vf", x)[..., 0]
 
     def act(self, obs: np.ndarray):
         """``obs [A, n_envs, input]`` -> ``(actions, values, log-probabilities)``, each ``[A, n_envs]``."""
         import torch
 
         with torch.no_grad():
-            logits, values = self.forward(torch.from_numpy(np.asarray(obs, np.float32)))
+            logits, values = self.forward(self._input(obs))
             logp_all = torch.log_softmax(logits, dim=-1)
             probs = logp_all.exp().numpy().astype(np.float64)
         cum = np.cumsum(probs, axis=-1)
@@ -136,7 +160,7 @@ class BatchedPPO:
         import torch
 
         with torch.no_grad():
-            return self._mlp("vf", torch.from_numpy(np.asarray(obs, np.float32)))[..., 0].numpy()
+            return self._mlp("vf", self._input(obs))[..., 0].numpy()
 
     # -- update
     def update(self, obs, actions, logp_old, returns, advantages, values_old) -> dict:
@@ -148,7 +172,7 @@ class BatchedPPO:
         for g in self.opt.param_groups:
             g["lr"] = lr
         A, N = actions.shape
-        obs_t = torch.from_numpy(np.asarray(obs, np.float32))
+        obs_t = self._input(obs)
         act_t = torch.from_numpy(np.asarray(actions, np.int64))
         logp_t = torch.from_numpy(np.asarray(logp_old, np.float32))
         ret_t = torch.from_numpy(np.asarray(returns, np.float32))
@@ -209,18 +233,12 @@ class BatchedPPO:
         self.opt.load_state_dict(state["optimizer"])
         self.updates = int(state["updates"])
 
-    def agent_state(self, agent: str) -> dict:
-        """One agent's weights and optimiser moments (to move it between learners)."""
-        i = self.agents.index(agent)
-        opt = self.opt.state_dict()["state"]
-        return {"params": {k: v.detach()[i].clone() for k, v in self.params.items()},
-                "moments": {j: {m: (t[i].clone() if t.dim() > 0 else t.clone()) for m, t in s.items()}
-                            for j, s in opt.items()}, "updates": self.updates}
-
     def actor_layers(self) -> list:
         """The actors' ``[(W [A, in, out], b [A, out]), ...]`` as float32 numpy arrays."""
-        return [(self.params[f"pi.{i}.weight"].detach().numpy().copy(),
-                 self.params[f"pi.{i}.bias"].detach().numpy().copy()) for i in range(self.n_layers)]
+        sizes = self._sizes["pi"]
+        return [(self.params[f"pi.{i}.weight"].detach().numpy()[:, :a, :b].copy(),
+                 self.params[f"pi.{i}.bias"].detach().numpy()[:, :b].copy())
+                for i, (a, b) in enumerate(zip(sizes[:-1], sizes[1:]))]
 
 
 def gae(rewards, values, dones, last_values, gamma: float, lam: float):
