@@ -24,6 +24,26 @@ import signal
 import sys
 
 _PR_SET_PDEATHSIG = 1
+_M_TRIM_THRESHOLD, _M_MMAP_MAX = -1, -4  # glibc <malloc.h>
+
+
+def keep_freed_memory(trim_bytes: int = 1 << 30) -> bool:
+    """Let glibc serve every block from its heap (no ``mmap`` per large block) and keep up to
+    ``trim_bytes`` of freed heap for reuse instead of returning it to the kernel (``mallopt``;
+    no-op elsewhere). Torch frees and reallocates the same
+    few-hundred-kB tensors thousands of times per second when it trains a recurrent AIP; by
+    default each goes back to the kernel and returns as fresh zeroed pages, and the page
+    faults cost more than the arithmetic (measured: 36 stacked GRU AIPs trained 2.7x faster,
+    system time 17 s -> 0.6 s). Memory stays at its peak while the process lives.
+    Returns whether the allocator took the setting."""
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        libc = ctypes.CDLL(None)
+        ok = libc.mallopt(_M_MMAP_MAX, 0) == 1
+        return bool(libc.mallopt(_M_TRIM_THRESHOLD, int(trim_bytes)) == 1 and ok)
+    except (OSError, AttributeError):  # pragma: no cover - not glibc
+        return False
 
 
 def die_with_parent(sig: int = signal.SIGKILL, ignore_sigint: bool = False) -> None:
@@ -114,4 +134,4 @@ def process_state(pid: int) -> str | None:
         return None
 
 
-__all__ = ["WorkerError", "die_with_parent", "process_state", "recv_from", "shutdown_pool", "spawn_pool"]
+__all__ = ["WorkerError", "die_with_parent", "keep_freed_memory", "process_state", "recv_from", "shutdown_pool", "spawn_pool"]

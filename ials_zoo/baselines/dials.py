@@ -70,7 +70,7 @@ class Args(MultiPPOSettings):
     aip: str = arg("trained", "initial AIPs: trained | untrained | uniform | fixed:P | shipped | FILE.pt")
     collect_steps: int | None = arg(None, "GS steps per data collection (default: the domain's, 10000)")
     aip_epochs: int | None = arg(None, "epochs per AIP (re)training (default: the domain's)")
-    n_envs: int = arg(8, "IALS copies per agent")
+    n_envs: int | None = arg(None, "IALS copies per agent (default: the domain's, traffic 2, warehouse 16)")
     learner: str = arg("batched", "batched (one torch program) | sb3 (one SB3 PPO per agent)")
     workers: int | None = arg(None, "worker processes (default: one per core; 0: this process)")
     backend: str = arg("process", "process | ray")
@@ -106,7 +106,7 @@ def parse_refresh(text: str, default: int) -> int | None:
 
 
 def check_args(args: Args):
-    """Clear errors before anything starts; returns (domain, agents, options, refresh, hidden)."""
+    """Clear errors before anything starts; returns (domain, agents, options, refresh, copies)."""
     from ials_zoo.baselines.multiagent import check_multi_ppo, ppo_config
     from ials_zoo.core.domains import domain_ids, get_domain
     from ials_zoo.dials.backends import BACKENDS, check_ray_address
@@ -120,22 +120,30 @@ def check_args(args: Args):
     options = parse_env_options(args.env_options)
     agents = domain.check_agents(None if args.agents == "all" else args.agents, **options)
     check_seed(args.seed, "seed")
-    hidden = check_multi_ppo(args)
+    check_multi_ppo(args)
     refresh = parse_refresh(args.refresh, domain.dials.refresh)
-    if args.aip != "shipped":
+    if args.aip == "shipped":
+        from ials_zoo.influence.multi import shipped_set_path
+
+        if not shipped_set_path(args.env_id).is_file():
+            raise ValueError(f"--aip shipped: no AIPs ship for {args.env_id}")
+        if refresh is not None:
+            raise ValueError("--aip shipped is a fixed AIP set: use --refresh never (retraining would replace it)")
+    else:
         spec = parse_predictor(args.aip)
         if spec.kind == "file" and not os.path.isfile(spec.path):
             raise ValueError(f"--aip {args.aip!r}: file not found")
         if spec.kind not in ("trained", "file") and refresh is not None:
             raise ValueError(f"--aip {args.aip} is a fixed AIP: use --refresh never (retraining would replace it)")
-    for name in ("n_envs", "eval_episodes", "final_eval_episodes"):
+    for name in ("eval_episodes", "final_eval_episodes"):
         if getattr(args, name) < 1:
             raise ValueError(f"{name} must be >= 1, got {getattr(args, name)}")
-    for name in ("total_timesteps", "collect_steps", "aip_epochs", "eval_every"):
+    for name in ("n_envs", "total_timesteps", "collect_steps", "aip_epochs", "eval_every"):
         v = getattr(args, name)
         if v is not None and v < 1:
             raise ValueError(f"{name} must be >= 1, got {v}")
-    ppo_config(args, args.n_envs)
+    copies = int(args.n_envs or domain.dials.copies)
+    ppo_config(args, copies)
     if args.workers is not None and args.workers < 0:
         raise ValueError(f"workers must be >= 0, got {args.workers}")
     if args.learner not in LEARNERS:
@@ -146,7 +154,7 @@ def check_args(args: Args):
         if args.backend != "ray":
             raise ValueError("--ray-address needs --backend ray")
         check_ray_address(args.ray_address)
-    return domain, agents, options, refresh, hidden
+    return domain, agents, options, refresh, copies
 
 
 def default_workers(n_agents: int) -> int:
@@ -188,7 +196,7 @@ def refresh_aips(env_id, agents, options, net, seed, steps, domain, epochs, old,
             and p.metadata.get("variant") == "trained"}
     t0 = time.perf_counter()
     preds, report = train_predictors(data, d.aip_arch, hidden=d.aip_hidden, lr=d.aip_lr, epochs=epochs,
-                                     seed=seed, init=warm or None, progress=progress)
+                                     batch_size=d.aip_batch, seed=seed, init=warm or None, progress=progress)
     train_seconds = time.perf_counter() - t0
     return preds, {"collect_seconds": collect_seconds, "train_seconds": train_seconds,
                    "mean_test_cross_entropy": report["mean_test_cross_entropy"], "warm_start": bool(warm)}
@@ -217,7 +225,7 @@ def main(args: Args | None = None) -> dict:
     from ials_zoo.leaderboard import make_result, now_iso, write_result
 
     args = args or Args()
-    domain, agents, options, refresh, _ = check_args(args)
+    domain, agents, options, refresh, copies = check_args(args)
     torch.set_num_threads(1)
     total = int(args.total_timesteps or domain.study.multi_agent_budget)
     per_update = args.samples_per_update
@@ -230,7 +238,7 @@ def main(args: Args | None = None) -> dict:
     obs_size = int(np.prod(domain.observation_space.shape))
     out = Path(args.out_dir or f"runs/{args.env_id}__dials__s{args.seed}")
     run = RunFolder(out, resume=args.resume, overwrite=args.overwrite, settings=settings_of(args))
-    ppo = ppo_config(args, args.n_envs)
+    ppo = ppo_config(args, copies)
     refresh_text = {None: "never", 0: "once, at the start"}.get(refresh) or f"every {refresh:,} steps"
     print(f"dials: {len(agents)} agents of {args.env_id} learn at once, each on its own IALS "
           f"({args.learner} PPO, {workers} worker{'s' if workers != 1 else ''}, {args.backend} backend); AIPs: "
@@ -265,7 +273,7 @@ def main(args: Args | None = None) -> dict:
         # AIP time spent in this process is on the clock as it runs; a shipped set's is charged
         clock = Clock(offset=clock_offset if run.resuming else aip_seconds)
         chunks = split_agents(agents, workers)
-        specs = [ShardSpec(args.env_id, chunk, options, args.seed, args.n_envs, frame_stack, args.learner, ppo,
+        specs = [ShardSpec(args.env_id, chunk, options, args.seed, copies, frame_stack, args.learner, ppo,
                            total // per_update, {a: aips[a] for a in chunk}) for chunk in chunks]
         backend = InProcessBackend(specs) if workers == 0 else make_backend(args.backend, specs, args.ray_address)
         try:

@@ -63,7 +63,9 @@ class DIALSSettings:
 
     Attributes:
         aip_arch, aip_hidden, aip_lr, aip_epochs: the AIPs retrained by DIALS.
-        rollout_steps: PPO rollout length per agent and update.
+        aip_batch: minibatch of the AIP training (episodes for a GRU, samples for an MLP).
+        copies: IALS copies per agent (the default ``--n-envs``; the PPO rollout per copy is
+            the samples per update divided by this).
         collect_steps: GS steps per data collection (all regions at once).
         refresh: default steps per agent between AIP refreshes (0 = train once, at the start).
     """
@@ -71,8 +73,9 @@ class DIALSSettings:
     aip_arch: str = "mlp"
     aip_hidden: int = 64
     aip_lr: float = 1e-3
-    aip_epochs: int = 30
-    rollout_steps: int = 16
+    aip_epochs: int = 10
+    aip_batch: int = 256
+    copies: int = 8
     collect_steps: int = 10_000
     refresh: int = 0
 

@@ -29,6 +29,7 @@ from ials_zoo.influence.predictors import (
     cross_entropy_per_source,
     init_arrays,
 )
+from ials_zoo.processes import keep_freed_memory
 
 DEFAULTS = {
     "gru": {"epochs": 120, "lr": 2e-3, "batch_episodes": 16, "hidden": 64},
@@ -140,6 +141,7 @@ def train_predictor(
     import torch
 
     # Tiny networks: more threads only add synchronisation (and fight other processes).
+    keep_freed_memory()
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
@@ -397,6 +399,7 @@ def train_predictors(datasets: dict, arch: str, hidden: int | None = None, lr: f
             arrays.append({k: np.asarray(v, np.float32) for k, v in old._arrays().items()})
         else:
             arrays.append(init_arrays(arch, D, H, n_logits, seed=(seed * 1_000_003 + agent_key(a)) % 2**32))
+    keep_freed_memory()
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     try:

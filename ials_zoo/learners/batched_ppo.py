@@ -113,7 +113,7 @@ class BatchedPPO:
                 params[f"{head}.{i}.bias"] = torch.zeros(A, _padded(b))
         self.params = {k: torch.nn.Parameter(v) for k, v in params.items()}
         self.n_layers = len(cfg.hidden) + 1
-        self.opt = torch.optim.Adam(self.params.values(), lr=cfg.learning_rate, eps=1e-5)
+        self.opt = torch.optim.Adam(self.params.values(), lr=cfg.learning_rate, eps=1e-5, fused=True)
         self.streams = CopyStreams(self.agents, cfg.n_envs, 1, salt=ACTION_STREAM_SALT)
         self.streams.seed(self.seed)
         self._perm_rngs = [self._rng(a, "minibatches") for a in self.agents]
@@ -128,7 +128,9 @@ class BatchedPPO:
         for i in range(self.n_layers):
             x = torch.baddbmm(self.params[f"{head}.{i}.bias"][:, None], x, self.params[f"{head}.{i}.weight"])
             if i < self.n_layers - 1:
-                x = torch.tanh(x)
+                # tanh(x) = 2 sigmoid(2x) - 1: torch's CPU tanh costs ~10x its sigmoid here
+                # (115 vs 12 us on [13, 64, 64]) and was a fifth of a whole PPO update
+                x = torch.sigmoid(x * 2.0) * 2.0 - 1.0
         return x
 
     def _input(self, obs):

@@ -60,7 +60,10 @@ DOMAIN = Domain(
     study=StudySettings(budget=2_000_000, ppo_steps_per_second={"gs": 4900.0, "ials": 6300.0},
                         memory_variant={"item_lifetime": 8}, lifetime_probes=(gs_item_ages, ls_item_ages),
                         multi_agent_budget=500_000),
-    # SPEC §6: the warehouse AIP is a GRU (hidden 64, lr 1e-3) trained once, at the start.
-    dials=DIALSSettings(aip_arch="gru", aip_hidden=64, aip_lr=1e-3, aip_epochs=40, rollout_steps=8,
+    # SPEC §6: the warehouse AIP is a GRU (hidden 64, lr 1e-3) trained once, at the start, and
+    # rollouts are 8 steps (16 copies x 8 = 128 samples per update). 10 epochs of 8-episode
+    # minibatches: mean test cross-entropy 0.486 in 34 s for all 36 AIPs (20 epochs: 0.470 in
+    # 70 s; 40 epochs of 16: 0.476; untrained 1.09), measured on 10,000 steps.
+    dials=DIALSSettings(aip_arch="gru", aip_hidden=64, aip_lr=1e-3, aip_epochs=10, aip_batch=8, copies=16,
                         collect_steps=10_000, refresh=0),
 )
