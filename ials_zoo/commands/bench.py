@@ -1,28 +1,31 @@
-"""``ials-zoo bench``: measure global-simulator (GS) and IALS speed in one run.
+"""``ials-zoo bench``: how fast the simulators are, measured in one run on this machine.
 
-For each domain it prints, on this machine, in one process:
+Default: for each domain, in one process, repeated ``--repeats`` times (interleaved, so a
+noisy neighbour hits every measurement alike) and reported as median [min, max]:
 
-* GS steps/s with one learner (the paper's setting: the others scripted) and with every agent
-  learning (random actions);
-* IALS steps/s for one agent (one local simulator + one AIP call per step);
-* IALS agent-steps/s batched: ``--batch`` local simulators advanced together with one
-  batched AIP call per step;
-* the ratios IALS / GS.
+* **single agent** (the paper's setting: one learner, its neighbours scripted): GS steps/s,
+  IALS steps/s (one local simulator + one AIP call per step) and the batched IALS
+  (``--batch`` copies of one agent's IALS per step), with the IALS/GS speed ratios;
+* **every agent learning** (DIALS's setting), in microseconds per agent-step: the GS with every
+  agent acting; the multi-agent IALS as a PettingZoo ``ParallelEnv`` (one copy per agent, dict
+  in, dicts out); and as DIALS trains on it (every agent's region x the domain's copies per
+  agent, arrays in and out); with each one's cost relative to the GS's (< 1: cheaper);
+* **the learner** (what IPPO and DIALS add per agent-step): the batched PPO's action
+  selection per agent-step and its update per agent-sample, at the multi-agent settings.
 
-``--ppo`` instead times the ``ppo_single`` baseline itself (its settings, 8 envs) on the GS,
-the IALS and on no simulator at all (a vec env whose steps cost nothing): the last is PPO's
-own cost, the floor under any IALS-vs-GS wall-clock ratio.
+The IALS uses ``--predictor`` (default ``trained``: the shipped AIPs; the multi-agent IALS uses
+the shipped set of every agent). The machine (CPU, cores, versions) heads the output and the
+``--out`` JSON. ``--ppo`` and ``--scaling`` are other measurements (see their help).
 
-``--scaling`` instead grows the system (traffic 3x3..10x10, warehouse 4x4..10x10 robots) and
-reports, per size, the GS time per step and per agent-step against the time per agent-step of
-one batched IALS per agent (all agents' regions, as in DIALS), with a PNG plot.
-
-Numbers are wall-clock on whatever else the machine is doing: run on an idle machine.
+Wall-clock numbers depend on whatever else the machine does: run it on an idle machine and
+compare ratios taken in one run rather than absolute figures from different runs.
 """
 
 from __future__ import annotations
 
 import json
+import os
+import platform
 import time
 
 import numpy as np
@@ -34,108 +37,277 @@ from ials_zoo.utils import atomic_write_text
 def configure(parser):
     parser.add_argument("--domain", choices=["all", *domain_ids()], default="all")
     parser.add_argument("--steps", type=int, default=None,
-                        help="GS steps per measurement (default: 3 episodes)")
+                        help="GS steps per measurement (default: 2 episodes)")
+    parser.add_argument("--repeats", type=int, default=3, help="repeats of every measurement (median, min, max)")
     parser.add_argument("--batch", type=int, default=64,
-                        help="local simulators in the batched IALS measurement")
+                        help="copies in the batched single-agent IALS measurement")
     parser.add_argument("--predictor", default="trained",
-                        help="AIP used by the IALS (trained, untrained, fixed:P, marginal, path)")
+                        help="AIP used by the IALS (trained, untrained, uniform, fixed:P, a file)")
     parser.add_argument("--scaling", action="store_true",
-                        help="measure GS vs IALS cost as the system grows, and plot it")
+                        help="instead: GS vs IALS cost as the system grows, with a plot")
     parser.add_argument("--ppo", action="store_true",
-                        help="time PPO training on the GS, the IALS and no simulator (PPO's own cost)")
+                        help="instead: time PPO training on the GS, the IALS and no simulator (PPO's own cost)")
     parser.add_argument("--ppo-steps", type=int, default=30_000, help="PPO steps per --ppo measurement")
-    parser.add_argument("--out", default=None, help="write the figures as JSON here")
+    parser.add_argument("--out", default=None, help="write the figures (and the machine) as JSON here")
     parser.add_argument("--plot", default="bench_scaling.png",
                         help="PNG for --scaling (default: bench_scaling.png)")
     parser.add_argument("--seed", type=int, default=0)
 
 
-def _timed_gs(env_id: str, learners, steps: int, seed: int, **options) -> float:
-    """GS steps/s with uniformly random actions for ``learners`` (others scripted)."""
-    domain = get_domain(env_id)
-    env = domain.parallel_env(learners=learners, **options)
+def machine_info() -> dict:
+    """What the numbers were measured on."""
+    import torch
+
+    import ials_zoo
+
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as f:
+            cpu = next((ln.split(":", 1)[1].strip() for ln in f if ln.startswith("model name")), cpu)
+    except OSError:
+        pass
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    try:
+        from importlib.metadata import version
+
+        sumo = version("eclipse-sumo")
+    except Exception:  # not installed
+        sumo = None
+    return {"cpu": cpu, "cores": cores, "python": platform.python_version(), "numpy": np.__version__,
+            "torch": torch.__version__, "torch_threads": torch.get_num_threads(), "sumo": sumo,
+            "ials_zoo": ials_zoo.__version__, "platform": platform.platform(),
+            "date": time.strftime("%Y-%m-%d %H:%M:%S")}
+
+
+def summary(values) -> dict:
+    """Median, min and max of repeated measurements."""
+    v = np.asarray(values, float)
+    return {"median": float(np.median(v)), "min": float(v.min()), "max": float(v.max()), "runs": [float(x) for x in v]}
+
+
+# ------------------------------------------------------------------------------ timings
+# each returns seconds per unit (per GS step, per agent-step, per sample)
+
+
+def _gs_seconds(env_id: str, learners, steps: int, seed: int, **options) -> float:
+    """Seconds per GS step with uniformly random actions for ``learners`` (others scripted)."""
+    env = get_domain(env_id).parallel_env(learners=learners, **options)
     try:
         rng = np.random.default_rng(seed)
         env.reset(seed=seed)
-        for agent in env.possible_agents:
-            env.action_space(agent).seed(int(rng.integers(2**31)))
+        n = int(env.action_space(env.possible_agents[0]).n)
         done, t0 = 0, time.perf_counter()
         while done < steps:
             if not env.agents:
                 env.reset(seed=int(rng.integers(2**31)))
-            env.step({a: env.action_space(a).sample() for a in env.agents})
+            acts = rng.integers(n, size=len(env.agents))
+            env.step({a: int(u) for a, u in zip(env.agents, acts)})
             done += 1
-        return steps / (time.perf_counter() - t0)
+        return (time.perf_counter() - t0) / steps
     finally:
         env.close()
 
 
-def _timed_ials_single(env_id: str, agent: str, steps: int, seed: int, predictor,
-                       **options) -> float:
+def _ials_seconds(env_id: str, agent: str, steps: int, seed: int, predictor, **options) -> float:
+    """Seconds per step of one agent's IALS (Gymnasium API)."""
     from ials_zoo.influence.ials import make_ials
 
     env = make_ials(env_id, agent, predictor=predictor, seed=seed, **options)
     try:
         env.reset(seed=seed)
-        env.action_space.seed(seed)
+        rng = np.random.default_rng(seed)
+        acts = rng.integers(int(env.action_space.n), size=steps)
         t0 = time.perf_counter()
-        for _ in range(steps):
-            _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+        for a in acts:
+            _, _, terminated, truncated, _ = env.step(int(a))
             if terminated or truncated:
                 env.reset()
-        return steps / (time.perf_counter() - t0)
+        return (time.perf_counter() - t0) / steps
     finally:
         env.close()
 
 
-def _timed_ials_batched(env_id: str, agent: str, steps: int, seed: int, predictor,
-                        n_envs: int, **options) -> float:
-    """Agent-steps/s of ``n_envs`` local simulators with one batched AIP call per step."""
+def _ials_batched_seconds(env_id: str, agent: str, steps: int, seed: int, predictor, n_envs: int,
+                          **options) -> float:
+    """Seconds per agent-step of ``n_envs`` copies of one agent's IALS stepped together."""
     from ials_zoo.influence.ials import make_ials_vec_env
 
-    venv = make_ials_vec_env(env_id, agent, n_envs=n_envs, predictor=predictor, seed=seed,
-                             **options)
+    venv = make_ials_vec_env(env_id, agent, n_envs=n_envs, predictor=predictor, seed=seed, **options)
     try:
         venv.reset()
         rng = np.random.default_rng(seed)
-        n_actions = venv.action_space.n
         rounds = max(1, steps // n_envs)
+        acts = rng.integers(int(venv.action_space.n), size=(rounds, n_envs))
         t0 = time.perf_counter()
-        for _ in range(rounds):
-            venv.step(rng.integers(n_actions, size=n_envs))
-        return rounds * n_envs / (time.perf_counter() - t0)
+        for a in acts:
+            venv.step(a)
+        return (time.perf_counter() - t0) / (rounds * n_envs)
     finally:
         venv.close()
 
 
-def bench_domain(env_id: str, steps: int | None, batch: int, predictor, seed: int) -> dict:
+def _parallel_env_seconds(env_id: str, steps: int, seed: int, predictors) -> float:
+    """Seconds per agent-step of the multi-agent IALS as a PettingZoo ParallelEnv."""
+    from ials_zoo.influence.multi import make_ials_parallel_env
+
+    env = make_ials_parallel_env(env_id, None, predictor=predictors, seed=seed)
+    try:
+        rng = np.random.default_rng(seed)
+        env.reset(seed=seed)
+        agents = list(env.possible_agents)
+        n = int(env.action_space(agents[0]).n)
+        acts = rng.integers(n, size=(steps, len(agents)))
+        t0 = time.perf_counter()
+        for a in acts:
+            if not env.agents:
+                env.reset()
+            env.step(dict(zip(agents, a.tolist())))
+        return (time.perf_counter() - t0) / (steps * len(agents))
+    finally:
+        env.close()
+
+
+def _multi_agent_seconds(env_id: str, steps: int, seed: int, predictors, copies: int) -> float:
+    """Seconds per agent-step of every agent's IALS x ``copies``, stepped as DIALS does."""
+    from ials_zoo.influence.multi import make_multi_agent_ials
+
+    core = make_multi_agent_ials(env_id, None, copies, predictors, seed=seed)
+    try:
+        rng = np.random.default_rng(seed)
+        core.reset(seed)
+        A = len(core.agents)
+        n = int(core.ls.action_space.n)
+        rounds = max(1, steps // copies)
+        acts = rng.integers(n, size=(rounds, A, copies))
+        t0 = time.perf_counter()
+        for a in acts:
+            if core.t >= core.max_cycles:
+                core.reset()
+            core.step(a)
+        return (time.perf_counter() - t0) / (rounds * A * copies)
+    finally:
+        core.close()
+
+
+def _learner_seconds(env_id: str, copies: int, seed: int, updates: int = 5) -> tuple[float, float]:
+    """(seconds per agent-step of action selection, per agent-sample of a PPO update) of the
+    batched learner of every agent, at the multi-agent baselines' settings."""
+    import torch
+
+    from ials_zoo.baselines import dials
+    from ials_zoo.baselines.multiagent import ppo_config
+    from ials_zoo.learners.batched_ppo import BatchedPPO, PPOConfig
+
+    domain = get_domain(env_id)
+    agents = domain.agents()
+    cfg = PPOConfig(**ppo_config(dials.Args(env_id=env_id), copies))
+    width = int(np.prod(domain.observation_space.shape)) * domain.frame_stack
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        learner = BatchedPPO(agents, width, domain.n_actions, cfg, seed=seed, total_updates=updates + 1)
+        rng = np.random.default_rng(seed)
+        A, N = len(agents), cfg.n_steps * cfg.n_envs
+        obs = rng.random((A, copies, width), dtype=np.float32)
+        rounds = max(20, 2000 // (A * copies))
+        learner.act(obs)
+        t0 = time.perf_counter()
+        for _ in range(rounds):
+            learner.act(obs)
+        act = (time.perf_counter() - t0) / (rounds * A * copies)
+        batch = (rng.random((A, N, width), dtype=np.float32), rng.integers(domain.n_actions, size=(A, N)),
+                 np.full((A, N), -np.log(domain.n_actions)), rng.standard_normal((A, N)),
+                 rng.standard_normal((A, N)), rng.standard_normal((A, N)))
+        learner.update(*batch)
+        t0 = time.perf_counter()
+        for _ in range(updates):
+            learner.update(*batch)
+        update = (time.perf_counter() - t0) / (updates * A * N)
+        return act, update
+    finally:
+        torch.set_num_threads(threads)
+
+
+def bench_domain(env_id: str, steps: int | None, batch: int, predictor, seed: int, repeats: int) -> dict:
+    """Every measurement of one domain, ``repeats`` times (module docstring)."""
+    from ials_zoo.influence.multi import resolve_predictor_set
+
     domain = get_domain(env_id)
     agent = domain.default_agents[0]
-    steps = steps or 3 * domain.episode_length
-    row = {"domain": env_id, "agent": agent, "steps": steps, "batch": batch}
-    print(f"[{env_id}] GS, one learner ({agent}) ...", flush=True)
-    row["gs_one_learner"] = _timed_gs(env_id, [agent], steps, seed)
-    print(f"[{env_id}] GS, every agent learning ...", flush=True)
-    row["gs_all_learners"] = _timed_gs(env_id, None, steps, seed)
-    print(f"[{env_id}] IALS single ...", flush=True)
-    row["ials_single"] = _timed_ials_single(env_id, agent, 3 * steps, seed, predictor)
-    print(f"[{env_id}] IALS batched x{batch} ...", flush=True)
-    row["ials_batched"] = _timed_ials_batched(env_id, agent, 30 * steps, seed, predictor, batch)
-    row["ratio_single"] = row["ials_single"] / row["gs_one_learner"]
-    row["ratio_batched"] = row["ials_batched"] / row["gs_one_learner"]
-    return row
+    agents = domain.agents()
+    steps = steps or 2 * domain.episode_length
+    copies = domain.dials.copies
+    print(f"[{env_id}] preparing the AIPs of {len(agents)} agents ({predictor}) ...", flush=True)
+    aips = dict(zip(agents, resolve_predictor_set(predictor, env_id, agents, seed=seed)))
+    runs: dict[str, list] = {k: [] for k in ("gs_one", "ials_one", "ials_batched", "gs_all", "ials_parallel",
+                                             "ials_dials", "act", "update")}
+    from tqdm.auto import tqdm
+
+    with tqdm(total=repeats * 7, desc=f"bench {env_id}", unit="measurement") as bar:
+        for r in range(repeats):
+            s = seed + r
+            for key, fn in (
+                ("gs_one", lambda: _gs_seconds(env_id, [agent], steps, s)),
+                ("ials_one", lambda: _ials_seconds(env_id, agent, 3 * steps, s, predictor)),
+                ("ials_batched", lambda: _ials_batched_seconds(env_id, agent, 30 * steps, s, predictor, batch)),
+                ("gs_all", lambda: _gs_seconds(env_id, None, steps, s)),
+                ("ials_parallel", lambda: _parallel_env_seconds(env_id, steps, s, aips)),
+                ("ials_dials", lambda: _multi_agent_seconds(env_id, steps, s, aips, copies)),
+                ("learner", lambda: _learner_seconds(env_id, copies, s)),
+            ):
+                bar.set_postfix_str(key)
+                value = fn()
+                if key == "learner":
+                    runs["act"].append(value[0])
+                    runs["update"].append(value[1])
+                else:
+                    runs[key].append(value)
+                bar.update(1)
+    v = {k: np.asarray(x) for k, x in runs.items()}
+    gs_all_agent = v["gs_all"] / len(agents)  # seconds per agent-step with every agent learning
+    return {
+        "domain": env_id, "agent": agent, "agents": len(agents), "steps": steps, "batch": batch, "copies": copies,
+        "predictor": predictor, "repeats": repeats,
+        "single_agent": {
+            "gs_steps_per_s": summary(1 / v["gs_one"]), "ials_steps_per_s": summary(1 / v["ials_one"]),
+            "ials_batched_agent_steps_per_s": summary(1 / v["ials_batched"]),
+            "ials_vs_gs_speed": summary(v["gs_one"] / v["ials_one"]),
+            "ials_batched_vs_gs_speed": summary(v["gs_one"] / v["ials_batched"])},
+        "every_agent": {
+            "gs_us_per_agent_step": summary(gs_all_agent * 1e6),
+            "ials_parallel_env_us_per_agent_step": summary(v["ials_parallel"] * 1e6),
+            "ials_dials_us_per_agent_step": summary(v["ials_dials"] * 1e6),
+            "ials_parallel_env_cost_vs_gs": summary(v["ials_parallel"] / gs_all_agent),
+            "ials_dials_cost_vs_gs": summary(v["ials_dials"] / gs_all_agent)},
+        "learner": {"act_us_per_agent_step": summary(v["act"] * 1e6),
+                    "update_us_per_agent_sample": summary(v["update"] * 1e6)},
+    }
 
 
-def _print_table(rows: list[dict]) -> None:
-    header = (f"{'domain':<16}{'GS 1 learner':>14}{'GS all':>10}{'IALS':>10}"
-              f"{'IALS batched':>14}{'IALS/GS':>9}{'batched/GS':>12}")
-    print("\nsteps/s (batched: agent-steps/s)")
-    print(header)
-    print("-" * len(header))
-    for r in rows:
-        print(f"{r['domain']:<16}{r['gs_one_learner']:>14,.0f}{r['gs_all_learners']:>10,.0f}"
-              f"{r['ials_single']:>10,.0f}{r['ials_batched']:>14,.0f}"
-              f"{r['ratio_single']:>8.1f}x{r['ratio_batched']:>11.1f}x")
+def _fmt(s: dict, spec: str = ",.0f", suffix: str = "") -> str:
+    return f"{format(s['median'], spec)}{suffix} [{format(s['min'], spec)}, {format(s['max'], spec)}]"
+
+
+def _print_domain(row: dict) -> None:
+    sa, ea, ln = row["single_agent"], row["every_agent"], row["learner"]
+    print(f"\n{row['domain']} ({row['agents']} agents; median [min, max] of {row['repeats']} runs; AIPs: "
+          f"{row['predictor']})")
+    print(f"  one learner ({row['agent']}), steps/s:")
+    print(f"    GS                        {_fmt(sa['gs_steps_per_s'])}")
+    print(f"    IALS                      {_fmt(sa['ials_steps_per_s'])}   speed vs GS "
+          f"{_fmt(sa['ials_vs_gs_speed'], '.1f', 'x')}")
+    print(f"    IALS x{row['batch']:<3} batched (agent-steps/s) {_fmt(sa['ials_batched_agent_steps_per_s'])}   "
+          f"speed vs GS {_fmt(sa['ials_batched_vs_gs_speed'], '.1f', 'x')}")
+    print("  every agent learning, µs per agent-step (cost vs GS: < 1 is cheaper):")
+    print(f"    GS, every agent acting    {_fmt(ea['gs_us_per_agent_step'], '.2f')}")
+    print(f"    IALS ParallelEnv          {_fmt(ea['ials_parallel_env_us_per_agent_step'], '.2f')}   cost vs GS "
+          f"{_fmt(ea['ials_parallel_env_cost_vs_gs'], '.2f')}")
+    print(f"    IALS as DIALS steps it    {_fmt(ea['ials_dials_us_per_agent_step'], '.2f')}   cost vs GS "
+          f"{_fmt(ea['ials_dials_cost_vs_gs'], '.2f')}   ({row['copies']} copies per agent)")
+    print("  the batched PPO learner of every agent:")
+    print(f"    act, µs per agent-step    {_fmt(ln['act_us_per_agent_step'], '.2f')}")
+    print(f"    update, µs per sample     {_fmt(ln['update_us_per_agent_sample'], '.2f')}")
+
 
 
 def bench_scaling(env_id: str, steps: int | None, seed: int) -> list[dict]:
@@ -157,13 +329,13 @@ def bench_scaling(env_id: str, steps: int | None, seed: int) -> list[dict]:
         agent = agents[len(agents) // 2]
         n_steps = steps or domain.episode_length
         print(f"[{env_id}] {key}={size}: GS with {len(agents)} agents ...", flush=True)
-        gs = _timed_gs(env_id, [agent], n_steps, seed, **options)
+        gs = 1 / _gs_seconds(env_id, [agent], n_steps, seed, **options)
         print(f"[{env_id}] {key}={size}: IALS single and x{len(agents)} ...", flush=True)
-        single = _timed_ials_single(env_id, agent, 3 * n_steps, seed, "uniform", **options)
+        single = 1 / _ials_seconds(env_id, agent, 3 * n_steps, seed, "uniform", **options)
         # DIALS: one local simulator per agent; every region of a domain has the same
         # layout, so one batch of len(agents) copies costs what all agents' IALS steps cost.
-        batched = _timed_ials_batched(env_id, agent, 10 * n_steps * len(agents) // 4, seed,
-                                      "uniform", len(agents), **options)
+        batched = 1 / _ials_batched_seconds(env_id, agent, 10 * n_steps * len(agents) // 4, seed, "uniform",
+                                            len(agents), **options)
         rows.append({
             "domain": env_id, "size": list(size), "agents": len(agents),
             "gs_steps_per_s": gs, "gs_agent_steps_per_s": gs * len(agents),
@@ -224,14 +396,21 @@ def bench_ppo(env_id: str, steps: int, predictor: str, seed: int) -> list[dict]:
 
 
 def run(args) -> int:
+    from ials_zoo.commands import CommandError
+
     if args.steps is not None and args.steps < 1:
-        raise SystemExit(f"--steps must be >= 1, got {args.steps}")
+        raise CommandError(f"--steps must be >= 1, got {args.steps}")
     if args.batch < 1:
-        raise SystemExit(f"--batch must be >= 1, got {args.batch}")
+        raise CommandError(f"--batch must be >= 1, got {args.batch}")
+    if args.repeats < 1:
+        raise CommandError(f"--repeats must be >= 1, got {args.repeats}")
+    if args.ppo and args.ppo_steps < 1:
+        raise CommandError(f"--ppo-steps must be >= 1, got {args.ppo_steps}")
     env_ids = domain_ids() if args.domain == "all" else [args.domain]
+    machine = machine_info()
+    print(f"machine: {machine['cpu']}, {machine['cores']} cores; python {machine['python']}, torch {machine['torch']}, "
+          f"numpy {machine['numpy']}, SUMO {machine['sumo']}, ials_zoo {machine['ials_zoo']}", flush=True)
     if args.ppo:
-        if args.ppo_steps < 1:
-            raise SystemExit(f"--ppo-steps must be >= 1, got {args.ppo_steps}")
         rows = [r for env_id in env_ids for r in bench_ppo(env_id, args.ppo_steps, args.predictor, args.seed)]
         print(f"\nppo_single training throughput ({args.ppo_steps} steps each, 8 envs, evaluation excluded)")
         print(f"{'domain':<16}{'simulator':<12}{'PPO steps/s':>12}{'time/step vs GS':>17}")
@@ -250,10 +429,11 @@ def run(args) -> int:
         _plot_scaling(rows, args.plot)
         print(f"plot: {args.plot}")
     else:
-        rows = [bench_domain(e, args.steps, args.batch, args.predictor, args.seed)
-                for e in env_ids]
-        _print_table(rows)
+        rows = []
+        for env_id in env_ids:
+            rows.append(bench_domain(env_id, args.steps, args.batch, args.predictor, args.seed, args.repeats))
+            _print_domain(rows[-1])
     if args.out:
-        atomic_write_text(args.out, json.dumps(rows, indent=2) + "\n")
+        atomic_write_text(args.out, json.dumps({"machine": machine, "rows": rows}, indent=2) + "\n")
         print(f"figures written to {args.out}")
     return 0

@@ -5,12 +5,16 @@ Examples::
     ials-zoo reproduce --dry-run
     ials-zoo reproduce --experiments training --domains warehouse_v0 --budget 300000 --seeds 3
     ials-zoo reproduce --report-only
+    ials-zoo reproduce --experiments dials --seeds 3     # every agent learning: IPPO vs DIALS
 
 Experiments: ``training`` (paper §5.2-5.3: PPO on gs / ials / untrained-ials / fixed:0.1
 [/ marginal], GS-evaluated curves vs wall-clock incl. the AIP's measured collection +
 training time), ``memory`` (§5.4: M-IALS vs NM-IALS x agents with/without frame stack,
 item_lifetime=8, + item-lifetime histograms), ``dset`` (§4.2: d-set vs full-observation AIP,
-off-policy cross-entropy). Each run is a subprocess writing into its own folder under
+off-policy cross-entropy), ``dials`` (SPEC §6, every agent learning at once: GS-IPPO, DIALS
+with periodic refresh, DIALS with AIPs trained once, untrained-DIALS, the 1-worker repeat of
+DIALS seed 0 for parallel efficiency, and joint scripted / random references; each multi-agent
+run has the machine to itself). Each run is a subprocess writing into its own folder under
 ``--out``; a run whose marker (``result.json``) exists is skipped, so the study can be
 continued across invocations. Afterwards the finished training runs are submitted to the
 leaderboard and ``<leaderboard>/reproduction.md`` + curve PNGs are re-made.
@@ -30,10 +34,11 @@ def _csv(text: str) -> tuple:
 
 
 def configure(parser):
-    from ials_zoo.core.domains import domain_ids
+    from ials_zoo.core.domains import domain_ids, get_domain
     from ials_zoo.reproduce.plan import (
         DEFAULT_MEMORY_BUDGET,
         DEFAULT_SIMULATORS,
+        DIALS_VARIANTS,
         EXPERIMENTS,
         Config,
         default_budgets,
@@ -54,6 +59,14 @@ def configure(parser):
     parser.add_argument("--memory-budget", type=int, default=None,
                         help="PPO environment steps per run of the memory experiment (12 warehouse runs; "
                              f"default {DEFAULT_MEMORY_BUDGET}, or the warehouse's budget when --budget is given)")
+    parser.add_argument("--dials-budget", default=None,
+                        help="steps per agent of each multi-agent run: N, and/or DOMAIN=N pairs (default: "
+                             + ", ".join(f"{d}={get_domain(d).study.multi_agent_budget}" for d in domain_ids()) + ")")
+    parser.add_argument("--dials-variants", default=",".join(DIALS_VARIANTS),
+                        help=f"multi-agent runs of the dials experiment, some of {','.join(DIALS_VARIANTS)}")
+    parser.add_argument("--dials-workers", type=int, default=c.dials_workers,
+                        help="worker processes of each DIALS run (default 2 = cores; with more than 1, the "
+                             "periodic run of seed 0 is repeated on 1 worker for the parallel efficiency)")
     parser.add_argument("--seeds", type=int, default=c.seeds, help="training seeds per configuration")
     parser.add_argument("--jobs", type=int, default=c.jobs, help="runs at once (default 2 = cores)")
     parser.add_argument("--out", default=c.out, help="study folder")
@@ -106,6 +119,9 @@ def config_from_args(args):
     from ials_zoo.reproduce.plan import DEFAULT_MEMORY_BUDGET, Config, default_budgets
 
     budget, per = parse_budget(args.budget, Config.budget, default_budgets())
+    dials_default, dials_per = parse_budget(args.dials_budget, 0, {})
+    if dials_default:  # one N for every domain
+        dials_per = {d: dials_per.get(d, dials_default) for d in _csv(args.domains)}
     memory_budget = args.memory_budget
     if memory_budget is None and args.budget is None:
         memory_budget = DEFAULT_MEMORY_BUDGET
@@ -118,6 +134,7 @@ def config_from_args(args):
         final_eval_episodes=args.final_eval_episodes, aip_steps=args.aip_steps, aip_epochs=args.aip_epochs,
         collect_workers=args.collect_workers,
         dset_offpolicy_steps=args.dset_offpolicy_steps, lifetime_episodes=args.lifetime_episodes,
+        dials_variants=_csv(args.dials_variants), dials_budgets=dials_per, dials_workers=args.dials_workers,
     ).check()
 
 
@@ -151,6 +168,7 @@ def run(args) -> int:
         for r in sub["rejected"]:
             print(f"  rejected: {r}")
     # --report-only: the settings of this command line need not be those of the runs.
-    path = write_report(cfg.out, cfg.leaderboard, None if args.report_only else settings(cfg))
+    path = write_report(cfg.out, cfg.leaderboard, None if args.report_only else settings(cfg),
+                        cfg.experiments)
     print(f"wrote {path}")
     return 1 if status["failed"] or status["blocked"] else 0

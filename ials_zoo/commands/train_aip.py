@@ -4,8 +4,13 @@ Examples::
 
     ials-zoo train-aip --data wh.npz --arch gru --out robot_20.pt
     ials-zoo train-aip --env traffic_grid_v0 --agent tls_12 --steps 50000 --arch mlp --out t12.pt
+    ials-zoo train-aip --env warehouse_v0 --agent all --steps 50000 --out robots.pt
 
-Without ``--data`` it first collects ``--steps`` steps (Algorithm 1). Prints the train/test
+Without ``--data`` it first collects ``--steps`` steps (Algorithm 1). Several agents (a
+comma-separated list, or ``all``): one GS run records every listed region (all of them acting
+uniformly at random) and every agent's AIP is trained at once with the domain's multi-agent
+(DIALS) settings unless given, into one predictor-set file (what ``make_ials_parallel_env`` and
+``train dials --aip FILE`` read). One agent: prints the train/test
 cross-entropy (nats, mean over influence sources) of the trained AIP against the untrained
 variants (random initialisation, uniform probabilities) and the empirical marginal, and the
 collection/training wall-clock times. ``--report`` also writes them as JSON.
@@ -65,6 +70,8 @@ def run(args) -> int:
             check_output_file(path, option)
     torch.set_num_threads(1)
     progress = not args.no_progress
+    if args.agent is not None and (args.agent == "all" or "," in args.agent):
+        return _train_set(args, progress)
     if args.data:
         data = InfluenceDataset.load(args.data, env_id=args.env, agent=args.agent)
     else:
@@ -83,5 +90,46 @@ def run(args) -> int:
     if args.report:
         atomic_write_text(args.report, json.dumps(report, indent=2) + "\n")
     print(format_report(report))
+    print(f"wrote {args.out}")
+    return 0
+
+
+def _train_set(args, progress: bool) -> int:
+    """Every listed agent's AIP from one GS run, into one predictor-set file."""
+    from ials_zoo.core.domains import get_domain
+    from ials_zoo.influence.dataset import collect_all
+    from ials_zoo.influence.files import save_predictor_set
+    from ials_zoo.influence.train import train_predictors
+    from ials_zoo.utils import atomic_write_text
+
+    if args.data:
+        raise CommandError("--data holds one agent's data; several agents are collected in one GS run (leave "
+                           "--data out)")
+    if not args.env:
+        raise CommandError("give --env")
+    options = check_collect_arguments(args)
+    domain = get_domain(args.env)
+    agents = domain.check_agents(None if args.agent == "all" else args.agent, **options)
+    d = domain.dials
+    arch = args.arch or d.aip_arch
+    data = collect_all(args.env, agents, steps=args.steps, seed=args.seed, gs_options=options, progress=progress,
+                       workers=args.workers)
+    preds, report = train_predictors(
+        data, arch, hidden=args.hidden or (d.aip_hidden if arch == d.aip_arch else None),
+        lr=args.lr or (d.aip_lr if arch == d.aip_arch else None),
+        epochs=args.epochs or (d.aip_epochs if arch == d.aip_arch else None),
+        batch_size=args.batch_size or (d.aip_batch if arch == d.aip_arch else None),
+        seed=args.seed, dset_kind=args.dset_kind, progress=progress)
+    collect_seconds = next(iter(data.values())).metadata["collect_seconds"]
+    save_predictor_set(preds.values(), args.out, metadata={
+        "steps": next(iter(data.values())).n_steps, "policy": "uniform_random (every listed agent)",
+        "options": options, "seed": args.seed, "collect_seconds": collect_seconds,
+        "train_seconds": report["train_seconds"], "mean_test_cross_entropy": report["mean_test_cross_entropy"]})
+    if args.report:
+        atomic_write_text(args.report, json.dumps(report, indent=2) + "\n")
+    ce = report["test_cross_entropy"]
+    print(f"{len(agents)} {arch} AIPs of {args.env}: test cross-entropy mean {report['mean_test_cross_entropy']:.4f} "
+          f"(min {min(ce.values()):.4f}, max {max(ce.values()):.4f}); collection {collect_seconds:.1f} s, training "
+          f"{report['train_seconds']:.1f} s")
     print(f"wrote {args.out}")
     return 0

@@ -74,7 +74,7 @@ def trained_predictor_set(env_id: str, agents=None, dset_kind: str = "dset", opt
                 return {a: found[a] for a in agents}
     if not train_if_missing:
         raise FileNotFoundError(f"no trained AIPs for the agents of {env_id} (options {options}); run "
-                                f"`ials-zoo train-aip --env {env_id} --agent all --out-dir ...`")
+                                f"`ials-zoo train-aip --env {env_id} --agent all --out FILE.pt`")
     from ials_zoo.influence.dataset import collect_all
     from ials_zoo.influence.train import train_predictors
 

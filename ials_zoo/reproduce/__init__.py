@@ -1,7 +1,7 @@
 """``ials-zoo reproduce``: the paper's experiments as a resumable, budgeted study.
 
 * :mod:`ials_zoo.reproduce.plan` -- :class:`Config`, :class:`Job`, :func:`build_plan`
-  (experiments ``training`` §5.2-5.3, ``memory`` §5.4, ``dset`` §4.2);
+  (experiments ``training`` §5.2-5.3, ``memory`` §5.4, ``dset`` §4.2, ``dials`` §6);
 * :mod:`ials_zoo.reproduce.runner` -- :func:`run_jobs`: one subprocess per job, at most
   ``jobs`` at once, finished jobs (marker file present) skipped;
 * :mod:`ials_zoo.reproduce.experiments` -- what each job does (AIP training timed here, PPO on
@@ -26,7 +26,7 @@ def reproduce(cfg: Config, progress: bool = True, report: bool = True, submit: b
     if submit:
         out["leaderboard"] = submit_results(cfg.out, cfg.leaderboard)
     if report:
-        out["report"] = str(write_report(cfg.out, cfg.leaderboard, settings(cfg)))
+        out["report"] = str(write_report(cfg.out, cfg.leaderboard, settings(cfg), cfg.experiments))
     return out
 
 
@@ -37,7 +37,9 @@ def settings(cfg: Config) -> dict:
             "n_envs": cfg.n_envs, "eval_points": cfg.eval_points, "eval_episodes": cfg.eval_episodes,
             "final_eval_episodes": cfg.final_eval_episodes, "aip_steps": cfg.aip_steps,
             "collect_workers": cfg.collect_workers,
-            "aip_epochs": cfg.aip_epochs if cfg.aip_epochs is not None else "default"}
+            "aip_epochs": cfg.aip_epochs if cfg.aip_epochs is not None else "default",
+            **({"dials_budget_per_agent": {d: cfg.dials_budget_for(d) for d in cfg.domains},
+                "dials_workers": cfg.dials_workers} if "dials" in cfg.experiments else {})}
 
 
 __all__ = ["Config", "Job", "build_plan", "describe_plan", "reproduce", "settings"]

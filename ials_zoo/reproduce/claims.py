@@ -290,3 +290,109 @@ def dset_verdicts(d: dict) -> list[dict]:
             out.append({"data": k, "gap": gap, "full": ce["full"]["increase"][k], "dset": ce["dset"]["increase"][k],
                         "verdict": verdict})
     return out
+
+
+# --------------------------------------------------------------------------------------------
+# Every agent learning at once (the dials experiment)
+
+# Issue targets, on the same cores: DIALS's joint GS score >= 95% of GS-IPPO's and its
+# wall-clock for the same steps <= 1/2 of GS-IPPO's.
+DIALS_SCORE_RATIO = 0.95
+DIALS_TIME_RATIO = 1 / 2
+
+
+def load_multiagent_runs(out) -> list[dict]:
+    """Every multi-agent run folder of the dials experiment: ``{job, curve, result, dir}``."""
+    runs = []
+    for jf in sorted(Path(out, "dials").glob("*/*/job.json")):
+        job = _load(jf)
+        if not job or job.get("kind") != "multiagent":
+            continue
+        run = jf.parent / "run"
+        runs.append({"job": job, "dir": run, "curve": _load(run / "curve.json"), "result": _load(run / "result.json")})
+    return runs
+
+
+def joint_references(out, env_id: str) -> dict:
+    """``{"joint scripted": score, "joint random": score}`` of the study's reference runs."""
+    refs = {}
+    for jf in sorted(Path(out, "dials", env_id).glob("joint-*/result.json")):
+        r = _load(jf)
+        if r:
+            refs[f"joint {r['policy']['name']}"] = r["score"]["mean"]
+    return refs
+
+
+def _total_seconds(result: dict) -> float:
+    t = result["training"]
+    return float(t["wall_clock_seconds"]) + float(t["aip_seconds"])
+
+
+def summarize_dials(runs: list[dict]) -> dict:
+    """Per domain: per variant (label), the joint GS scores over seeds, wall-clocks (training
+    and AIP), the curve over seeds, and the ratios to GS-IPPO; plus the parallel efficiency of
+    the 1-worker run against the same run (seed 0) on more workers."""
+    out = {}
+    for env_id, rs in sorted(group(runs, lambda r: r["job"]["params"]["env_id"]).items()):
+        variants = {}
+        for label, vrs in group(rs, lambda r: r["job"]["label"]).items():
+            done = [r for r in vrs if r["result"]]
+            finals = [r["result"]["score"]["mean"] for r in done]
+            m, lo, hi = mean_ci(finals) if finals else (None, None, None)
+            variants[label] = {
+                "planned": len(vrs), "finished": len(done), "seeds": [r["job"]["params"]["seed"] for r in done],
+                "final_mean": m, "final_ci_low": lo, "final_ci_high": hi, "final_per_seed": finals,
+                "total_seconds": float(np.mean([_total_seconds(r["result"]) for r in done])) if done else None,
+                "aip_seconds": float(np.mean([r["result"]["training"]["aip_seconds"] for r in done])) if done else None,
+                "steps_per_agent": int(done[0]["result"]["training"]["env_steps"]) if done else None,
+                "workers": sorted({r["job"]["params"].get("workers", 0) for r in vrs}),
+                "curve": aggregate_curves([r["curve"]["points"] for r in vrs if r["curve"]]),
+                "per_seed": {r["job"]["params"]["seed"]: r["result"] for r in done},
+            }
+        from ials_zoo.reproduce.plan import DIALS_VARIANTS
+
+        order = {v: i for i, v in enumerate(DIALS_VARIANTS)}
+        variants = dict(sorted(variants.items(), key=lambda kv: (order.get(kv[0], len(order)), kv[0])))
+        ippo = variants.get("ippo", {})
+        for s in variants.values():
+            s["score_ratio_to_ippo"] = _ratio(s["final_mean"], ippo.get("final_mean"))
+            s["time_ratio_to_ippo"] = _ratio(s["total_seconds"], ippo.get("total_seconds"))
+        out[env_id] = {"variants": variants, "parallel": parallel_efficiency(variants)}
+    return out
+
+
+def parallel_efficiency(variants: dict) -> dict | None:
+    """Speed-up and efficiency of the periodic DIALS run of seed 0 on its workers against the
+    same run on one worker (training wall-clock, AIP work included), and whether both gave the
+    same joint score (they should: a run does not depend on its worker count)."""
+    one = variants.get("dials (1 worker)", {}).get("per_seed", {}).get(0)
+    many = variants.get("dials", {}).get("per_seed", {}).get(0)
+    if not one or not many:
+        return None
+    workers = max(variants["dials"]["workers"])
+    t1, tn = _total_seconds(one), _total_seconds(many)
+    train1, trainn = one["training"]["wall_clock_seconds"], many["training"]["wall_clock_seconds"]
+    return {"workers": workers, "seconds_1": t1, "seconds_n": tn, "speedup": t1 / tn, "efficiency": t1 / tn / workers,
+            "train_seconds_1": train1, "train_seconds_n": trainn, "train_speedup": train1 / trainn,
+            "same_score": one["score"]["mean"] == many["score"]["mean"]}
+
+
+def dials_claims(summary: dict) -> list[dict]:
+    """The issue's targets for one domain, computed from :func:`summarize_dials`."""
+    v = summary["variants"]
+    dials, untrained = v.get("dials", {}), v.get("untrained-dials", {})
+    claims = []
+    for label in ("dials", "dials-once"):
+        s = v.get(label, {})
+        r = s.get("score_ratio_to_ippo")
+        claims.append({"id": "score", "label": label, "measured": r,
+                       "holds": None if r is None else r >= DIALS_SCORE_RATIO})
+        t = s.get("time_ratio_to_ippo")
+        claims.append({"id": "time", "label": label, "measured": t,
+                       "holds": None if t is None else t <= DIALS_TIME_RATIO})
+    if untrained.get("final_mean") is not None and dials.get("final_mean") is not None:
+        undecided = untrained["finished"] < 2 or dials["finished"] < 2
+        worse = (not undecided) and untrained["final_ci_high"] < dials["final_ci_low"]
+        claims.append({"id": "untrained_worse", "measured": (untrained["final_mean"], dials["final_mean"]),
+                       "holds": None if undecided else worse})
+    return claims

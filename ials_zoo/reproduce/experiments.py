@@ -5,6 +5,8 @@
   collection and training seconds, which ``ppo_single`` adds to the wall-clock) and
   ``marginal.pt`` (F-IALS with the empirical marginal of the same data, charged the same
   collection time).
+* :func:`joint_reference` -- every agent acting with a scripted / random policy on the GS
+  (the multi-agent track's references).
 * :func:`item_lifetimes`, :func:`record_item_ages`, :func:`lifetime_histograms` -- how long
   items stay on the shelves in the GS vs an IALS (paper §5.4).
 * :func:`off_policy_cross_entropy`, :func:`dset_ablation` -- the d-set vs full-history AIP,
@@ -61,6 +63,20 @@ def train_aip(env_id: str, agent: str, out_dir, steps: int = 50_000, epochs: int
                   options=dict(options or {}))
     _write_json(out / "report.json", report)
     return report
+
+
+def joint_reference(params: dict, out_dir) -> dict:
+    """Every agent of ``params["env_id"]`` acting with a reference policy (``scripted`` or
+    ``random``) on the GS with the protocol's seeds: the multi-agent track's references.
+    Writes ``result.json``."""
+    from ials_zoo.commands.evaluate import result_for
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    result = result_for(params["env_id"], None, params["policy"], params["episodes"], joint=True,
+                        notes="ials-zoo reproduce (dials): every agent acting with this reference policy")
+    _write_json(out / "result.json", result)
+    return result
 
 
 # --------------------------------------------------------------------------------------------

@@ -14,6 +14,12 @@ Layout under ``--out`` (default ``runs/reproduce``)::
     memory/<env_id>__<agent>/<aip>__fs<k>__s<seed>/ PPO on that IALS with frame stack k
     memory/<env_id>__<agent>/lifetimes/        item-lifetime histograms (GS, M-IALS, NM-IALS)
     dset/<env_id>__<agent>/                    d-set vs full-history AIP, off-policy CE
+    dials/<env_id>/<variant>__s<seed>/         one multi-agent run (every agent learning): GS-IPPO,
+                                               DIALS (periodic / once), untrained-DIALS; its run/
+                                               holds the baseline's outputs (result.json, ...)
+    dials/<env_id>/dials__1worker__s0/         the periodic DIALS run of seed 0 with one worker
+                                               (parallel efficiency; bitwise the same run)
+    dials/<env_id>/joint-<policy>/             joint scripted / random references (result.json)
 """
 
 from __future__ import annotations
@@ -25,7 +31,12 @@ from pathlib import Path
 
 from ials_zoo.core.domains import domain_ids, domain_of_agent, get_domain
 
-EXPERIMENTS = ("training", "memory", "dset")
+EXPERIMENTS = ("training", "memory", "dset", "dials")
+# The multi-agent study (issue: every agent learning at once): GS-IPPO and the DIALS variants,
+# each ``(algorithm, extra arguments)`` of :mod:`ials_zoo.baselines.ippo` / ``.dials``.
+# "dials" retrains the AIPs every half budget (rounds at 0 and budget/2); see plan_dials.
+DIALS_VARIANTS = ("ippo", "dials", "dials-once", "untrained-dials")
+JOINT_REFERENCES = ("scripted", "random")
 RUN_SUBDIR = "run"  # a PPO job's run folder inside its job folder (which holds job.json, log.txt)
 DEFAULT_SIMULATORS = ("gs", "ials", "untrained-ials", "fixed:0.1")
 KNOWN_SIMULATORS = DEFAULT_SIMULATORS + ("marginal",)
@@ -70,6 +81,10 @@ class Config:
     collect_workers: int = 2  # GS processes of Algorithm 1 in SUMO domains (the cores here)
     dset_offpolicy_steps: int = 10_000
     lifetime_episodes: int = 20
+    dials_variants: tuple = DIALS_VARIANTS
+    dials_budgets: dict = field(default_factory=dict)  # steps per agent; default Domain.study.multi_agent_budget
+    dials_workers: int = 2  # worker processes of each DIALS run (the cores here)
+    dials_eval_points: int = 4  # GS evaluations along each multi-agent curve (each scores every agent)
 
     def check(self) -> Config:
         """Clear errors for bad settings; returns self."""
@@ -98,6 +113,18 @@ class Config:
             raise ValueError(f"memory_budget must be None or a positive int, got {self.memory_budget!r}")
         if self.aip_epochs is not None and (not isinstance(self.aip_epochs, int) or self.aip_epochs < 0):
             raise ValueError(f"aip_epochs must be None or an int >= 0, got {self.aip_epochs!r}")
+        bad = [v for v in self.dials_variants if v not in DIALS_VARIANTS]
+        if bad or not self.dials_variants:
+            raise ValueError(f"unknown dials_variants {bad}; expected some of {list(DIALS_VARIANTS)}")
+        for env_id, steps in dict(self.dials_budgets).items():
+            if env_id not in domain_ids():
+                raise ValueError(f"unknown domain {env_id!r} in dials_budgets; expected one of {domain_ids()}")
+            if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
+                raise ValueError(f"dials budget of {env_id} must be a positive int, got {steps!r}")
+        for name in ("dials_workers", "dials_eval_points"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValueError(f"{name} must be a positive int, got {v!r}")
         for a in self.agents:
             domain_of_agent(a)  # one domain has it, else a ValueError naming the problem
         return self
@@ -118,6 +145,10 @@ class Config:
         less than starting processes costs)."""
         return self.collect_workers if get_domain(env_id).one_simulation_per_process else 1
 
+    def dials_budget_for(self, env_id: str) -> int:
+        """Steps per agent of each multi-agent run in ``env_id``."""
+        return int(dict(self.dials_budgets).get(env_id, get_domain(env_id).study.multi_agent_budget))
+
     def memory_budget_steps(self, env_id: str) -> int:
         """PPO steps per run of the memory experiment in ``env_id``."""
         return self.budget_for(env_id) if self.memory_budget is None else int(self.memory_budget)
@@ -133,13 +164,19 @@ class Job:
     """One subprocess of the study (see the module docstring)."""
 
     id: str
-    kind: str  # aip | ppo | lifetimes | dset
+    kind: str  # aip | ppo | lifetimes | dset | multiagent | joint-reference
     dir: str
     marker: str
     params: dict
     deps: list = field(default_factory=list)
     experiment: str = ""
     label: str = ""
+
+    @property
+    def exclusive(self) -> bool:
+        """Runs alone: a multi-agent run spreads over every core itself, and its wall-clock is
+        compared with other runs' (GS-IPPO vs DIALS on the same cores)."""
+        return self.kind == "multiagent"
 
     @property
     def done(self) -> bool:
@@ -167,7 +204,8 @@ class Job:
 
     def priority(self) -> tuple:
         """Sort key for starting ready jobs: AIPs first (they unblock IALS runs), then the
-        longest runs (estimated seconds), so that the study's makespan on few cores is short."""
+        longest runs (estimated seconds), so that the study's makespan on few cores is short;
+        multi-agent runs last, seed by seed."""
         if self.kind == "aip":
             return (0, 0.0)
         p = self.params
@@ -175,6 +213,9 @@ class Job:
             sim = "gs" if p["simulator"] == "gs" else "ials"
             rate = get_domain(p["env_id"]).study.ppo_steps_per_second.get(sim, 1000.0)
             return (1, -p["total_timesteps"] / rate)
+        if self.kind == "multiagent":
+            # seed by seed: a study cut short still compares every variant on the same seeds
+            return (2, p["seed"])
         return (1, 0.0)
 
     @classmethod
@@ -298,6 +339,49 @@ def plan_dset(cfg: Config) -> list[Job]:
     return jobs
 
 
+def _multiagent_params(cfg: Config, env_id: str, variant: str, seed: int, out: Path, workers: int) -> dict:
+    budget = cfg.dials_budget_for(env_id)
+    params = {"algorithm": "ippo" if variant == "ippo" else "dials", "env_id": env_id, "seed": seed,
+              "total_timesteps": budget, "eval_every": max(1, -(-budget // cfg.dials_eval_points)),
+              "eval_episodes": cfg.eval_episodes, "final_eval_episodes": cfg.final_eval_episodes,
+              "out_dir": str(Path(out) / RUN_SUBDIR), "progress": False,
+              "notes": f"ials-zoo reproduce (dials, {variant}, {budget:,} steps per agent)"}
+    if variant != "ippo":
+        params["workers"] = workers
+        params["refresh"] = {"dials": str(max(1, budget // 2)), "dials-once": "once",
+                             "untrained-dials": "never"}[variant]
+        if variant == "untrained-dials":
+            params["aip"] = "untrained"
+    return params
+
+
+def plan_dials(cfg: Config) -> list[Job]:
+    """Every agent learning at once (SPEC §6): GS-IPPO and DIALS with periodic refresh (every
+    half budget), AIPs trained once, and untrained-DIALS, ``seeds`` seeds each; the periodic
+    DIALS run of seed 0 again with one worker (parallel efficiency: the same run, bitwise, so
+    only its wall-clock differs); and the joint scripted / random references."""
+    jobs = []
+    for env_id in cfg.domains:
+        base = Path(cfg.out) / "dials" / env_id
+        for policy in JOINT_REFERENCES:
+            d = base / f"joint-{policy}"
+            jobs.append(Job(id=f"dials/{env_id}/joint-{policy}", kind="joint-reference", dir=str(d),
+                            marker="result.json", experiment="dials", label=f"joint {policy}",
+                            params={"env_id": env_id, "policy": policy, "episodes": cfg.final_eval_episodes}))
+        for variant in cfg.dials_variants:
+            for seed in range(cfg.seeds):
+                d = base / f"{variant}__s{seed}"
+                jobs.append(Job(id=f"dials/{env_id}/{variant}/s{seed}", kind="multiagent", dir=str(d),
+                                marker=f"{RUN_SUBDIR}/result.json", experiment="dials", label=variant,
+                                params=_multiagent_params(cfg, env_id, variant, seed, d, cfg.dials_workers)))
+        if "dials" in cfg.dials_variants and cfg.dials_workers > 1:
+            d = base / "dials__1worker__s0"
+            jobs.append(Job(id=f"dials/{env_id}/dials/1worker/s0", kind="multiagent", dir=str(d),
+                            marker=f"{RUN_SUBDIR}/result.json", experiment="dials", label="dials (1 worker)",
+                            params=_multiagent_params(cfg, env_id, "dials", 0, d, 1)))
+    return jobs
+
+
 def build_plan(cfg: Config) -> list[Job]:
     """Every job of the study, dependencies before dependants."""
     cfg.check()
@@ -308,6 +392,8 @@ def build_plan(cfg: Config) -> list[Job]:
         jobs += plan_memory(cfg)
     if "dset" in cfg.experiments:
         jobs += plan_dset(cfg)
+    if "dials" in cfg.experiments:
+        jobs += plan_dials(cfg)
     return jobs
 
 
@@ -324,5 +410,9 @@ def describe_plan(jobs: list[Job]) -> str:
             extra = f" sim={p['simulator']} steps={p['total_timesteps']}"
             if "frame_stack" in p:
                 extra += f" frame_stack={p['frame_stack']}"
+        elif j.kind == "multiagent":
+            p = j.params
+            extra = f" {p['algorithm']} steps/agent={p['total_timesteps']}"
+            extra += "".join(f" {k}={p[k]}" for k in ("refresh", "aip", "workers") if k in p)
         lines.append(f"[{state}] {j.id} ({j.kind}){extra} -> {j.dir}")
     return "\n".join(lines)

@@ -18,14 +18,18 @@ from ials_zoo.reproduce.claims import (  # noqa: F401 - names of the former sing
     TARGET_TIME_RATIO,
     _load,
     aggregate_curves,
+    dials_claims,
     dset_verdicts,
     group,
+    joint_references,
+    load_multiagent_runs,
     load_runs,
     memory_claims,
     memory_stats,
     normalize_ce,
     paper_steps_per_second,
     reference_scores,
+    summarize_dials,
     summarize_training,
     time_to_reach,
     training_claims,
@@ -46,16 +50,18 @@ def _savefig(fig, path: Path) -> Path:
     return path
 
 
-def plot_training(summary: dict, refs: dict, path, title: str) -> Path:
-    """GS mean return vs wall-clock (log x), mean ± 95% CI over seeds, per simulator, with
-    the reference policies as horizontal lines."""
+def plot_training(summary: dict, refs: dict, path, title: str, key: str = "simulators",
+                  xlabel: str = "wall-clock seconds (AIP data collection + training included)",
+                  ylabel: str = "GS mean episodic return") -> Path:
+    """GS mean return vs wall-clock (log x), mean ± 95% CI over seeds, per simulator (or per
+    ``summary[key]`` entry), with the reference policies as horizontal lines."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(7, 4.5))
-    for label, s in summary["simulators"].items():
+    for label, s in summary[key].items():
         c = s["curve"]
         if c is None:
             continue
@@ -68,8 +74,8 @@ def plot_training(summary: dict, refs: dict, path, title: str) -> Path:
     if summary.get("target_95pct") is not None:
         ax.axhline(summary["target_95pct"], color="k", lw=0.6, alpha=0.5, label="95% of the GS curve's end")
     ax.set_xscale("log")
-    ax.set_xlabel("wall-clock seconds (AIP data collection + training included)")
-    ax.set_ylabel("GS mean episodic return")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
     ax.set_title(title)
     ax.legend(fontsize=7, loc="best")
     fig.tight_layout()
@@ -168,6 +174,64 @@ def training_section(key, summary, aip_report, refs, png_name, budget_note) -> l
     return L
 
 
+def format_dials_claim(c: dict) -> str:
+    """One claim of :func:`~ials_zoo.reproduce.claims.dials_claims` as a sentence."""
+    if c["id"] == "score":
+        return (f"- {c['label']} joint GS score >= 95% of GS-IPPO's: ratio {_f(c['measured'], 3)} -> "
+                f"{_verdict(c['holds'])}.")
+    if c["id"] == "time":
+        return (f"- {c['label']} wall-clock for the same steps <= 1/2 of GS-IPPO's: ratio {_f(c['measured'], 2)} -> "
+                f"{_verdict(c['holds'])}.")
+    if c["id"] == "untrained_worse":
+        un, d = c["measured"]
+        answer = {True: "yes (95% CIs apart)", False: "no (95% CIs overlap)",
+                  None: "undecided: a 95% CI needs >= 2 seeds"}[c["holds"]]
+        return f"- untrained-DIALS measurably worse than DIALS: {un:.3f} vs {d:.3f} -> {answer}."
+    raise ValueError(f"unknown claim {c['id']!r}")
+
+
+def dials_section(out, leaderboard) -> list[str]:
+    """Every agent learning at once: GS-IPPO vs the DIALS variants per domain (table, curves
+    against wall-clock, the issue's targets, parallel efficiency)."""
+    runs = load_multiagent_runs(out)
+    if not runs:
+        return []
+    L = ["## Every agent learning at once: GS-IPPO vs DIALS (SPEC §6)", "",
+         "Score: the mean over agents of each agent's GS episodic return, every agent acting with its own "
+         "policy (the multi-agent track), final evaluation on the protocol's seeds; mean [95% CI] over "
+         "training seeds. Wall-clock: training plus AIP data collection and training (GS evaluations "
+         "excluded); every multi-agent run had the machine to itself. `dials` retrains every AIP every half "
+         "budget, `dials-once` trains them once at the start, `untrained-dials` keeps randomly initialised "
+         "AIPs.", ""]
+    for env_id, summ in summarize_dials(runs).items():
+        v = summ["variants"]
+        refs = joint_references(out, env_id)
+        png = f"reproduction_dials_{env_id}.png"
+        if any(s["curve"] for s in v.values()):
+            plot_training(summ, refs, Path(leaderboard) / png, f"{env_id}: every agent learning, joint GS score",
+                          key="variants", xlabel="wall-clock seconds (AIP work included)",
+                          ylabel="joint GS score (mean over agents)")
+        steps = sorted({s["steps_per_agent"] for s in v.values() if s["steps_per_agent"]})
+        L += [f"### {env_id}", "", f"![learning curves]({png})", "",
+              f"Budget: {', '.join(f'{b:,}' for b in steps) or '-'} steps per agent.", "",
+              "| variant | runs done | joint GS score | / IPPO | wall-clock (s) | of which AIP (s) | / IPPO | workers |",
+              "|---|---|---|---|---|---|---|---|"]
+        for label, s in v.items():
+            L.append(f"| {label} | {s['finished']}/{s['planned']} | {_ci(s)} | {_f(s['score_ratio_to_ippo'], 3)} "
+                     f"| {_f(s['total_seconds'], 0)} | {_f(s['aip_seconds'], 0)} | {_f(s['time_ratio_to_ippo'], 2)} "
+                     f"| {','.join(str(w) for w in s['workers'])} |")
+        if refs:
+            L += ["", "References (every agent acting with it): " + ", ".join(f"{k} {x:.3f}" for k, x in sorted(refs.items()))]
+        par = summ["parallel"]
+        if par:
+            L += ["", f"Parallel efficiency (periodic DIALS, seed 0): 1 worker {par['seconds_1']:.0f} s, "
+                  f"{par['workers']} workers {par['seconds_n']:.0f} s: speed-up {par['speedup']:.2f}, efficiency "
+                  f"{par['efficiency']:.2f} (training alone, AIP work excluded: speed-up {par['train_speedup']:.2f}); "
+                  f"same joint score on both: {'yes' if par['same_score'] else 'NO'}."]
+        L += ["", "Targets:", ""] + [format_dials_claim(c) for c in dials_claims(summ)] + [""]
+    return L
+
+
 def memory_section(out, leaderboard=None) -> list[str]:
     L = []
     for (env_id, agent), rows in memory_stats(load_runs(out, "memory")).items():
@@ -248,10 +312,36 @@ def dset_section(out) -> list[str]:
     return L
 
 
-def write_report(out, leaderboard, cfg_note: dict | None = None) -> Path:
-    """Re-make every figure and ``<leaderboard>/reproduction.md`` from the run folders."""
+DIALS_REPORT = "reproduction_dials.md"
+
+
+def write_dials_report(out, leaderboard, cfg_note: dict | None = None) -> Path:
+    """Re-make ``<leaderboard>/reproduction_dials.md`` and its figures (the dials experiment:
+    every agent learning at once) from the run folders."""
     out, lb = Path(out), Path(leaderboard)
     lb.mkdir(parents=True, exist_ok=True)
+    L = ["# Every agent learning at once: GS-IPPO vs DIALS", "",
+         "Generated by `ials-zoo reproduce --experiments dials` (re-make with `ials-zoo reproduce --experiments "
+         f"dials --report-only`) from the run folders under `{out}`.", ""]
+    if cfg_note:
+        L += ["Study settings: " + ", ".join(f"{k}={v}" for k, v in cfg_note.items()), ""]
+    L += dials_section(out, lb) or ["No multi-agent runs yet.", ""]
+    path = lb / DIALS_REPORT
+    atomic_write_text(path, "\n".join(L) + "\n")
+    return path
+
+
+def write_report(out, leaderboard, cfg_note: dict | None = None, experiments=("training", "memory", "dset")) -> Path:
+    """Re-make every figure and ``<leaderboard>/reproduction.md`` (the single-agent
+    experiments) from the run folders; with ``"dials"`` in ``experiments``, also
+    ``reproduction_dials.md`` (:func:`write_dials_report`). Returns the last file written."""
+    out, lb = Path(out), Path(leaderboard)
+    lb.mkdir(parents=True, exist_ok=True)
+    single = [e for e in experiments if e != "dials"]
+    if "dials" in experiments:
+        dials_path = write_dials_report(out, lb, cfg_note)
+        if not single:
+            return dials_path
     cfg_note = cfg_note or {}
     runs = load_runs(out, "training")
     summaries = summarize_training(runs)
@@ -292,6 +382,8 @@ def write_report(out, leaderboard, cfg_note: dict | None = None) -> Path:
         aip = _load(out / "training" / f"{env_id}__{agent}" / "aip" / "report.json")
         L += training_section(key, s, aip, refs, png, budget_note(env_id))
     L += memory_section(out, lb) + dset_section(out)
+    L += ["## Every agent learning at once", "",
+          f"GS-IPPO vs DIALS (`ials-zoo reproduce --experiments dials`): see [{DIALS_REPORT}]({DIALS_REPORT}).", ""]
     path = lb / "reproduction.md"
     atomic_write_text(path, "\n".join(L) + "\n")
     summary_json = {f"{k[0]}/{k[1]}": {lab: {kk: vv for kk, vv in v.items() if kk != "curve"}
@@ -300,7 +392,7 @@ def write_report(out, leaderboard, cfg_note: dict | None = None) -> Path:
     return path
 
 
-def submit_results(out, leaderboard, experiments=("training",)) -> dict:
+def submit_results(out, leaderboard, experiments=("training", "dials")) -> dict:
     """Submit the study's finished configurations to the leaderboard with the project's own
     :func:`ials_zoo.leaderboard.submit`: one entry per (domain, agent, simulator, budget),
     its seeds merged (:func:`ials_zoo.leaderboard.merge_results`: a score per seed and the
@@ -314,15 +406,28 @@ def submit_results(out, leaderboard, experiments=("training",)) -> dict:
     have = {identity(d) for _, d in load_entries(leaderboard)[0]}
     done = {"submitted": [], "already": [], "rejected": [], "incomplete": []}
     for exp in experiments:
-        runs = load_runs(out, exp)
-        configs = group(runs, lambda r: (r["job"]["params"]["env_id"], r["job"]["params"]["agent"],
-                                         r["job"]["label"], r["job"]["params"]["total_timesteps"]))
+        if exp == "dials":
+            runs = load_multiagent_runs(out)
+            # the 1-worker run repeats seed 0 (parallel efficiency): not a seed of its own
+            runs = [r for r in runs if r["job"]["label"] != "dials (1 worker)"]
+            configs = group(runs, lambda r: (r["job"]["params"]["env_id"], "all", r["job"]["label"],
+                                             r["job"]["params"]["total_timesteps"]))
+            for ref in sorted(Path(out, "dials").glob("*/joint-*/result.json")):
+                _submit_one(ref, leaderboard, have, done, f"dials/{ref.parent.parent.name}/{ref.parent.name}")
+        else:
+            runs = load_runs(out, exp)
+            configs = group(runs, lambda r: (r["job"]["params"]["env_id"], r["job"]["params"]["agent"],
+                                             r["job"]["label"], r["job"]["params"]["total_timesteps"]))
         for (env_id, agent, label, steps), rs in sorted(configs.items()):
             name = f"{exp}/{env_id}/{agent}/{label_of(label)}/{steps}"
             if any(r["result"] is None for r in rs):
                 done["incomplete"].append(name)
                 continue
             rs = sorted(rs, key=lambda r: r["job"]["params"]["seed"])
+            for r in rs:  # the merged file lives elsewhere: point at each seed's own policy file
+                for sc in r["result"]["scores"]:
+                    if sc.get("policy_file") and not Path(sc["policy_file"]).is_absolute():
+                        sc["policy_file"] = str((Path(r["dir"]) / sc["policy_file"]).resolve())
             try:
                 result = (rs[0]["result"] if len(rs) == 1 else
                           merge_results([r["result"] for r in rs],
@@ -335,7 +440,8 @@ def submit_results(out, leaderboard, experiments=("training",)) -> dict:
                 done["already"].append(name)
                 continue
             # submit() reads a file: the merged result is written next to the runs first
-            path = Path(out) / exp / f"{env_id}__{agent}" / f"{label_of(label)}__{steps}__merged.json"
+            folder = f"{env_id}__{agent}" if exp != "dials" else env_id
+            path = Path(out) / exp / folder / f"{label_of(label)}__{steps}__merged.json"
             if len(rs) == 1:
                 path = rs[0]["dir"] / "result.json"
             else:
@@ -348,3 +454,23 @@ def submit_results(out, leaderboard, experiments=("training",)) -> dict:
             have.add(identity(result))
             done["submitted"].append(str(dest))
     return done
+
+
+def _submit_one(path: Path, leaderboard, have: set, done: dict, name: str) -> None:
+    """Submit one finished result file unless the board already has it."""
+    from ials_zoo.leaderboard import ResultError, identity, submit
+
+    result = _load(path)
+    if result is None:
+        done["rejected"].append(f"{name}: {path} is unreadable")
+        return
+    if identity(result) in have:
+        done["already"].append(name)
+        return
+    try:
+        dest = submit(path, leaderboard)
+    except ResultError as exc:
+        done["rejected"].append(f"{name}: {exc}")
+        return
+    have.add(identity(result))
+    done["submitted"].append(str(dest))

@@ -1,6 +1,8 @@
 """Run the jobs of a study as subprocesses, at most ``jobs`` at once, skipping done ones.
 
-Ready jobs start in :meth:`Job.priority` order (AIPs, then the longest runs first).
+Ready jobs start in :meth:`Job.priority` order (AIPs, then the longest runs first); an
+:attr:`~ials_zoo.reproduce.plan.Job.exclusive` job (a multi-agent run, which uses every core
+itself and whose wall-clock is compared) runs alone.
 
 Every job is its own process (``python -m ials_zoo.reproduce.worker job.json``) so that each
 SUMO simulation owns its process (libsumo holds one per process) and a crash loses one run
@@ -123,6 +125,8 @@ def _run(jobs, status, n_jobs, progress, poll) -> dict:
                         bar.write(f"BLOCKED {job.id}: a dependency failed")
                     continue
                 if len(running) >= n_jobs or not all(s in ("done", "skipped") for s in states):
+                    continue
+                if running and (job.exclusive or any(j.exclusive for j, *_ in running.values())):
                     continue
                 job_file = job.write()
                 log = open(Path(job.dir) / "log.txt", "a")

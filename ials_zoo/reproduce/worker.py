@@ -37,12 +37,32 @@ def run_job(job) -> None:
             resumable = (Path(p["out_dir"]) / "checkpoint.pt").is_file() and state != "finished"
             p["resume" if resumable else "overwrite"] = True
         main(Args(**p))
+    elif job.kind == "multiagent":
+        _run_multiagent(p)
+    elif job.kind == "joint-reference":
+        X.joint_reference(p, job.dir)
     elif job.kind == "lifetimes":
         X.run_lifetimes(p, job.dir)
     elif job.kind == "dset":
         X.dset_ablation(p, job.dir)
     else:
         raise ValueError(f"unknown job kind {job.kind!r}")
+
+
+def _run_multiagent(params: dict) -> None:
+    """A GS-IPPO or DIALS run (:mod:`ials_zoo.baselines.ippo` / ``.dials``); a run killed
+    earlier continues from its last checkpoint, one killed before it starts again."""
+    from importlib import import_module
+
+    from ials_zoo.baselines.runs import run_state
+
+    p = dict(params)
+    module = import_module(f"ials_zoo.baselines.{p.pop('algorithm')}")
+    state = run_state(p["out_dir"])
+    if state is not None:
+        resumable = (Path(p["out_dir"]) / "checkpoint.pt").is_file() and state != "finished"
+        p["resume" if resumable else "overwrite"] = True
+    module.main(module.Args(**p))
 
 
 def main(argv=None) -> int:
