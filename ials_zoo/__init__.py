@@ -20,8 +20,7 @@ Your own domain: build an :class:`ials_zoo.core.Domain` and :func:`register_doma
 declare it in the ``ials_zoo.domains`` entry point group).
 """
 
-__version__ = "0.2.0"
-
+from ials_zoo._version import __version__
 from ials_zoo.core.domains import Domain, domain_ids, get_domain, register_domain
 
 

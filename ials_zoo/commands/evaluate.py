@@ -16,6 +16,7 @@ Protocol (20 episodes, seeds 10000 + i, 95% bootstrap interval): :mod:`ials_zoo.
 from __future__ import annotations
 
 from ials_zoo.commands import CommandError
+from ials_zoo.leaderboard.build import result_for
 
 
 def configure(parser):
@@ -42,42 +43,6 @@ def configure(parser):
     parser.add_argument("--submitter", default="", help="submitter name in the result")
     parser.add_argument("--notes", default="", help="notes in the result")
     parser.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
-
-
-def result_for(env_id, agent, policy, episodes, deterministic=False, frame_stack=None,
-               submitter="", notes="", progress=False, options: dict | None = None, joint: bool = False) -> dict:
-    """Evaluate ``policy`` and build its leaderboard result (training record from a model's
-    metadata; none for reference policies and callables)."""
-    from ials_zoo.core.domains import get_domain
-    from ials_zoo.evaluation import evaluate, evaluate_joint, load_policy
-    from ials_zoo.leaderboard import make_result
-
-    pol = load_policy(policy, env_id, agent, deterministic=deterministic, frame_stack=frame_stack)
-    meta = pol.metadata if pol.kind == "model" else {}
-    env_id = env_id or meta.get("env_id")
-    if env_id is None:
-        raise ValueError("--env is required unless the policy is a model that names its domain")
-    domain = get_domain(env_id)
-    if pol.kind == "model" and len(pol.agents) > 1 and agent is None:
-        joint = True
-    options = meta.get("env_options", {}) if options is None else options
-    if joint:
-        if agent is not None:
-            raise ValueError("--joint scores every agent: leave out --agent")
-        ev = evaluate_joint(env_id, pol, episodes=episodes, deterministic=deterministic, progress=progress, **options)
-    else:
-        agent = agent or (pol.agents[0] if pol.kind == "model" else domain.default_agents[0])
-        ev = evaluate(env_id, agent, pol, episodes=episodes, deterministic=deterministic,
-                      frame_stack=frame_stack, progress=progress, **options)
-    if meta.get("training"):
-        seed = meta.get("seed")
-        curve = meta.get("learning_curve") or []
-        return make_result([ev], algorithm=meta.get("algorithm", "model"), training=meta["training"],
-                           training_seeds=[seed],
-                           learning_curves=[{"seed": seed, "points": curve}] if curve else [],
-                           trained_agents=list(pol.agents), submitter=submitter, notes=notes)
-    algorithm = ev.policy_kind if ev.policy_kind in ("random", "scripted", "callable") else "model"
-    return make_result([ev], algorithm=algorithm, submitter=submitter, notes=notes)
 
 
 def run(args) -> int:

@@ -197,12 +197,10 @@ _loaded: dict[str, Domain] = {}
 
 def _builtin_loaders() -> dict[str, Callable[[], Domain]]:
     """Every ``ials_zoo/<package>/domain.py`` (imported: the id lives in its ``DOMAIN``)."""
-    import ials_zoo
-
+    package_dir = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))  # ials_zoo/
     out = {}
-    for info in pkgutil.iter_modules(ials_zoo.__path__):
-        if not (info.ispkg and any(os.path.isfile(os.path.join(p, info.name, "domain.py"))
-                                   for p in ials_zoo.__path__)):
+    for info in pkgutil.iter_modules([package_dir]):
+        if not (info.ispkg and os.path.isfile(os.path.join(package_dir, info.name, "domain.py"))):
             continue
         domain = importlib.import_module(f"ials_zoo.{info.name}.domain").DOMAIN
         out[domain.env_id] = (lambda d=domain: d)
@@ -266,7 +264,7 @@ def register_domain(domain: Domain, replace: bool = False) -> Domain:
         if taken and not replace:
             raise ValueError(f"a domain {domain.env_id!r} is already registered; pass replace=True")
         _registered[domain.env_id] = domain
-    from ials_zoo.influence.gym_registration import register_ials
+    from ials_zoo.core.gym_ids import register_ials
 
     register_ials(domain.env_id)
     return domain

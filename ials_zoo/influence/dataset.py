@@ -331,7 +331,7 @@ def collect_all(
     finally:
         env.close()
     seconds = time.perf_counter() - t0
-    from ials_zoo import __version__
+    from ials_zoo._version import __version__
 
     out = {}
     for a in agents:

@@ -35,7 +35,7 @@ _CLASSES = {
 
 
 def _package_version() -> str:
-    from ials_zoo import __version__
+    from ials_zoo._version import __version__
 
     return __version__
 

@@ -18,13 +18,13 @@ from ials_zoo.leaderboard.build import (
     VARIANT,
     hardware_info,
     make_result,
-    merge_results,
     now_iso,
     overall_score,
     protocol_of,
     reference_result,
     split_env_id,
 )
+from ials_zoo.leaderboard.merge import merge_results
 from ials_zoo.leaderboard.render import render, show
 from ials_zoo.leaderboard.store import (
     ARCHIVE_SUBDIR,

@@ -178,54 +178,39 @@ def reference_result(env_id: str, agent: str | None, policy: str, episodes: int 
     return make_result([ev], algorithm=policy, submitter=submitter, notes=notes)
 
 
-def merge_results(results: Sequence[dict], submitter: str | None = None, notes: str | None = None) -> dict:
-    """Combine single-seed results of the same experiment (same track, domain, agents,
-    algorithm, training simulator and evaluation; different training seeds) into one result
-    with a score per seed and the overall score over seeds.
+def result_for(env_id, agent, policy, episodes, deterministic=False, frame_stack=None,
+               submitter="", notes="", progress=False, options: dict | None = None, joint: bool = False) -> dict:
+    """Evaluate ``policy`` and build its leaderboard result (training record from a model's
+    metadata; none for reference policies and callables)."""
+    from ials_zoo.core.domains import get_domain
+    from ials_zoo.evaluation import evaluate, evaluate_joint, load_policy
 
-    ``training.env_steps`` must agree; ``wall_clock_seconds`` and ``aip_seconds`` become the
-    means over seeds (documented in SCHEMA.md)."""
-    from ials_zoo.leaderboard.validate import ResultError, validate_result
-
-    if len(results) < 2:
-        raise ValueError("merge needs at least two results")
-    for i, r in enumerate(results):
-        try:
-            validate_result(r)
-        except ResultError as exc:
-            raise ResultError(f"results[{i}].{exc.field}", str(exc)) from None
-        if r["training"] is None:
-            raise ResultError(f"results[{i}].training", "only trained policies have seeds to merge")
-    first = results[0]
-
-    def same(key_fn, field):
-        for i, r in enumerate(results[1:], 1):
-            if key_fn(r) != key_fn(first):
-                raise ResultError(f"results[{i}].{field}", f"differs from results[0]: "
-                                  f"{key_fn(r)!r} vs {key_fn(first)!r}")
-
-    for field in ("track", "env_id", "agent", "agents", "algorithm", "evaluation"):
-        same(lambda r, f=field: r[f], field)
-    same(lambda r: r["policy"]["kind"], "policy.kind")
-    same(lambda r: r["policy"]["frame_stack"], "policy.frame_stack")
-    same(lambda r: r["training"]["simulator"], "training.simulator")
-    same(lambda r: r["training"]["env_steps"], "training.env_steps")
-    scores = [s for r in results for s in r["scores"]]
-    seeds = [s["seed"] for s in scores]
-    if len(set(seeds)) != len(seeds):
-        raise ResultError("scores", f"training seeds repeat: {seeds}")
-    n = len(results)
-    training = dict(first["training"], seeds=seeds,
-                    wall_clock_seconds=sum(r["training"]["wall_clock_seconds"] for r in results) / n,
-                    aip_seconds=sum(r["training"]["aip_seconds"] for r in results) / n)
-    merged = dict(first, training=training, scores=scores, score=overall_score(scores),
-                  learning_curves=[c for r in results for c in r["learning_curves"]],
-                  created=now_iso(),
-                  submitter=first["submitter"] if submitter is None else submitter,
-                  notes=first["notes"] if notes is None else notes)
-    if first["track"] == MULTI:
-        merged["per_agent_scores"] = per_agent_scores(scores)
-    return validate_result(merged)
+    pol = load_policy(policy, env_id, agent, deterministic=deterministic, frame_stack=frame_stack)
+    meta = pol.metadata if pol.kind == "model" else {}
+    env_id = env_id or meta.get("env_id")
+    if env_id is None:
+        raise ValueError("--env is required unless the policy is a model that names its domain")
+    domain = get_domain(env_id)
+    if pol.kind == "model" and len(pol.agents) > 1 and agent is None:
+        joint = True
+    options = meta.get("env_options", {}) if options is None else options
+    if joint:
+        if agent is not None:
+            raise ValueError("--joint scores every agent: leave out --agent")
+        ev = evaluate_joint(env_id, pol, episodes=episodes, deterministic=deterministic, progress=progress, **options)
+    else:
+        agent = agent or (pol.agents[0] if pol.kind == "model" else domain.default_agents[0])
+        ev = evaluate(env_id, agent, pol, episodes=episodes, deterministic=deterministic,
+                      frame_stack=frame_stack, progress=progress, **options)
+    if meta.get("training"):
+        seed = meta.get("seed")
+        curve = meta.get("learning_curve") or []
+        return make_result([ev], algorithm=meta.get("algorithm", "model"), training=meta["training"],
+                           training_seeds=[seed],
+                           learning_curves=[{"seed": seed, "points": curve}] if curve else [],
+                           trained_agents=list(pol.agents), submitter=submitter, notes=notes)
+    algorithm = ev.policy_kind if ev.policy_kind in ("random", "scripted", "callable") else "model"
+    return make_result([ev], algorithm=algorithm, submitter=submitter, notes=notes)
 
 
 __all__ = [
@@ -236,10 +221,10 @@ __all__ = [
     "VARIANT",
     "hardware_info",
     "make_result",
-    "merge_results",
     "now_iso",
     "overall_score",
     "protocol_of",
     "reference_result",
+    "result_for",
     "split_env_id",
 ]

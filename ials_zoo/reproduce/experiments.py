@@ -69,7 +69,7 @@ def joint_reference(params: dict, out_dir) -> dict:
     """Every agent of ``params["env_id"]`` acting with a reference policy (``scripted`` or
     ``random``) on the GS with the protocol's seeds: the multi-agent track's references.
     Writes ``result.json``."""
-    from ials_zoo.commands.evaluate import result_for
+    from ials_zoo.leaderboard.build import result_for
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
