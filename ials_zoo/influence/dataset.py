@@ -139,9 +139,10 @@ class InfluenceDataset:
             with np.load(path, allow_pickle=False) as z:
                 arrays = {k: z[k] for k in ("dset", "full", "influences", "metadata")}
         except (zipfile.BadZipFile, OSError, ValueError, KeyError, EOFError) as exc:
-            raise ValueError(
-                f"not an ials_zoo influence data set: {path} ({type(exc).__name__}: {exc})"
-            ) from None
+            why = f"{type(exc).__name__}: {exc}"
+            if "pickle" in str(exc):  # numpy's advice to allow pickles is not ours to give
+                why = "not an .npz archive of arrays; pickled content is never loaded"
+            raise ValueError(f"not an ials_zoo influence data set: {path} ({why})") from None
         try:
             meta = json.loads(str(arrays["metadata"]))
             if meta.get("format") != FORMAT:

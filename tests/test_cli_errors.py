@@ -1,0 +1,60 @@
+"""One error style for the whole CLI: bad input is refused before any work starts, as
+``ials-zoo <command>: <what is wrong>`` on stderr, exit status 2, no traceback."""
+
+from __future__ import annotations
+
+import os
+import pickle
+
+import pytest
+
+from ials_zoo.cli import main
+
+
+@pytest.fixture
+def files(tmp_path):
+    (tmp_path / "adir").mkdir()
+    (tmp_path / "afile").write_text("x")
+    (tmp_path / "trunc.npz").write_bytes(b"PK\x03\x04" + b"\0" * 10)
+    (tmp_path / "random.npz").write_bytes(os.urandom(200))
+    (tmp_path / "pickled.npz").write_bytes(pickle.dumps({"dset": 1}))
+    return tmp_path
+
+
+CASES = [
+    (["evaluate", "--env", "warehouse_v0", "--policy", "random", "--out", "{d}/adir"], "is a folder"),
+    (["evaluate", "--env", "warehouse_v0", "--policy", "random", "--frame-stack", "-1"], "--frame-stack"),
+    (["evaluate", "--env", "warehouse_v0", "--policy", "random", "--frame-stack", "0"], "--frame-stack"),
+    (["collect", "--env", "warehouse_v0", "--agent", "robot_20", "--out", "{d}/adir"], "is a folder"),
+    (["collect", "--env", "warehouse_v0", "--agent", "robot_20", "--options", '{"bad": 1}', "--out", "{d}/c.npz"],
+     "bad"),
+    (["collect", "--env", "warehouse_v0", "--agent", "robot_20", "--seed", "-1", "--out", "{d}/c.npz"], "seed"),
+    (["train-aip", "--env", "warehouse_v0", "--out", "{d}/adir"], "is a folder"),
+    (["train-aip", "--data", "{d}/trunc.npz", "--out", "{d}/o.pt"], "not an ials_zoo influence data set"),
+    (["train-aip", "--data", "{d}/random.npz", "--out", "{d}/o.pt"], "not an ials_zoo influence data set"),
+    (["train-aip", "--data", "{d}/pickled.npz", "--out", "{d}/o.pt"], "never loaded"),
+    (["train-aip", "--data", "{d}/missing.npz", "--out", "{d}/o.pt"], "not found"),
+    (["train-aip", "--env", "warehouse_v0", "--epochs", "0", "--out", "{d}/o.pt"], "--epochs"),
+    (["train-aip", "--env", "warehouse_v0", "--batch-size", "0", "--out", "{d}/o.pt"], "--batch-size"),
+    (["train-aip", "--env", "warehouse_v0", "--lr", "nan", "--out", "{d}/o.pt"], "--lr"),
+    (["train", "ppo_single", "--env", "warehouse_v0", "--batch-size", "0", "--out-dir", "{d}/r"], "batch_size"),
+    (["train", "ppo_single", "--env", "warehouse_v0", "--learning-rate", "-1", "--out-dir", "{d}/r"],
+     "learning_rate"),
+    (["train", "ppo_single", "--env", "warehouse_v0", "--learning-rate", "nan", "--out-dir", "{d}/r"],
+     "learning_rate"),
+    (["train", "ppo_single", "--env", "warehouse_v0", "--out-dir", "{d}/afile"], "is a file"),
+    (["train", "dials", "--env", "warehouse_v0", "--refresh", "0", "--out-dir", "{d}/r"], "--refresh"),
+    (["train", "dials", "--env", "warehouse_v0", "--agents", "robot_99", "--out-dir", "{d}/r"], "robot_99"),
+    (["train", "ippo", "--env", "nowhere_v0", "--out-dir", "{d}/r"], "nowhere_v0"),
+    (["reproduce", "--experiments", "dials", "--dials-variants", "bogus", "--dry-run"], "bogus"),
+]
+
+
+@pytest.mark.parametrize("argv, words", CASES, ids=[" ".join(c[0][:2]) + f" #{i}" for i, c in enumerate(CASES)])
+def test_bad_input_is_one_clear_error_before_any_work(files, capsys, argv, words):
+    argv = [a.replace("{d}", str(files)) for a in argv]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    command = argv[0]
+    assert f"ials-zoo {command}" in err and words in err and "Traceback" not in err
+    assert not (files / "r").exists() and not (files / "o.pt").exists() and not (files / "c.npz").exists()
