@@ -310,7 +310,7 @@ class LocalCore:
         self.reader = None
         self.lights = None
         self.running = False
-        self.counter = 0
+        self.counters = [0] * self.n
 
     def reset(self, seed: int):
         """Start a new episode (all lights north-south green); returns ``(occ, phases)``.
@@ -340,7 +340,7 @@ class LocalCore:
             # not have entered the lane at this step
             ls.start(_sumo_cmd(*self.files, [], seed, extra=("--max-depart-delay", "0")))
             self.running = True
-            self.counter = 0
+            self.counters = [0] * self.n
         if self.reader is None:
             lengths = [[ls.lane.getLength(x) for x in g] for g in self.lanes]
             self.reader = _LaneReader(self.lanes, lengths)
@@ -362,10 +362,12 @@ class LocalCore:
         if inserts:
             # raw call: (id, route, type, depart, departLane, departPos, departSpeed)
             add = ls._libsumo.vehicle_add
-            route_ids = self.route_ids
+            route_ids, counters = self.route_ids, self.counters
             for k, a, t in inserts:
-                self.counter += 1
-                add(f"v{self.counter}", route_ids[k][a][t], "car", "now", "0", "base", "10")
+                # ids numbered per copy, zero-padded: SUMO breaks ties by comparing vehicle
+                # ids as strings, so a copy's cars must sort alike in any batch of copies
+                counters[k] += 1
+                add(f"c{k}.{counters[k]:09d}", route_ids[k][a][t], "car", "now", "0", "base", "10")
         self._sim_step(0.0)
         occ, entries, reward = self.reader.read()
         self.lights.tick()

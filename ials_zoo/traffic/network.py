@@ -521,13 +521,13 @@ def build_local(n_copies: int, internal_links: bool = True) -> NetworkFiles:
 
     def builder(tmp: Path) -> dict:
         nodes, edges, approach_of_edge = [], [], {}
-        spacing = 3 * EDGE_LENGTH
-        per_row = max(1, int(np.ceil(np.sqrt(n_copies))))
         routes_xml, route_ids = [], []
         for k in range(n_copies):
             ids = local_copy_ids(k)
-            cx = (k % per_row) * spacing + EDGE_LENGTH
-            cy = (k // per_row) * spacing + EDGE_LENGTH
+            # Every copy at the same coordinates: the copies share no edge, so they never
+            # meet, and netconvert computes bitwise the same lane lengths and junction shapes
+            # for each (at other offsets rounding differs, and with it a copy's dynamics).
+            cx = cy = EDGE_LENGTH
             c = ids["tls"]
             nodes.append((c, cx, cy, "traffic_light"))
             for a in APPROACHES:
@@ -561,5 +561,6 @@ def build_local(n_copies: int, internal_links: bool = True) -> NetworkFiles:
             f.unlink()
         return {"kind": "local", "n_copies": n_copies, "states": states, "routes": route_ids}
 
-    d = _cached_build("local", {"n_copies": n_copies, "internal_links": internal_links}, builder)
+    d = _cached_build("local", {"n_copies": n_copies, "internal_links": internal_links, "layout": "stacked"},
+                      builder)
     return NetworkFiles(d, json.loads((d / "meta.json").read_text()))
