@@ -37,8 +37,8 @@ from ials_zoo.utils import atomic_write_text
 def configure(parser):
     parser.add_argument("--domain", choices=["all", *domain_ids()], default="all")
     parser.add_argument("--steps", type=int, default=None,
-                        help="GS steps per measurement (default: 2 episodes)")
-    parser.add_argument("--repeats", type=int, default=3, help="repeats of every measurement (median, min, max)")
+                        help="GS steps per measurement (default: 10 episodes)")
+    parser.add_argument("--repeats", type=int, default=5, help="repeats of every measurement (median, min, max)")
     parser.add_argument("--batch", type=int, default=64,
                         help="copies in the batched single-agent IALS measurement")
     parser.add_argument("--predictor", default="trained",
@@ -235,7 +235,8 @@ def bench_domain(env_id: str, steps: int | None, batch: int, predictor, seed: in
     domain = get_domain(env_id)
     agent = domain.default_agents[0]
     agents = domain.agents()
-    steps = steps or 2 * domain.episode_length
+    # 10 episodes per measurement: shorter ones swung several-fold on a shared machine
+    steps = steps or 10 * domain.episode_length
     copies = domain.dials.copies
     print(f"[{env_id}] preparing the AIPs of {len(agents)} agents ({predictor}) ...", flush=True)
     aips = dict(zip(agents, resolve_predictor_set(predictor, env_id, agents, seed=seed)))
