@@ -29,7 +29,9 @@ def configure(parser):
     parser.add_argument("--joint", action="store_true",
                         help="every agent acts with its own policy (multi-agent track)")
     parser.add_argument("--policy", required=True,
-                        help="random | scripted | FILE.safetensors | FILE.zip (SB3) | module:function")
+                        help="random | scripted | FILE.safetensors | FILE.zip (SB3) | module:function (a callable "
+                             "fn(obs) -> action importable from the current folder; fn.frame_stack "
+                             "observations, default 1; local results only, never submitted)")
     parser.add_argument("--episodes", type=int, default=PROTOCOL_EPISODES,
                         help=f"episodes, seeds 10000.. (default: the protocol's {PROTOCOL_EPISODES})")
     parser.add_argument("--deterministic", action="store_true",
