@@ -95,6 +95,24 @@ class PPOSettings:
     max_grad_norm: float = arg(0.5, "gradient clipping")
 
 
+def check_ppo_settings(args) -> None:
+    """Clear errors for the :class:`PPOSettings` fields of ``args``."""
+    import math
+
+    if args.n_epochs < 1:
+        raise ValueError(f"n_epochs must be >= 1, got {args.n_epochs}")
+    for name in ("learning_rate", "clip_range", "max_grad_norm"):
+        value = getattr(args, name)
+        if not (math.isfinite(value) and value > 0):
+            raise ValueError(f"{name} must be a finite number > 0, got {value}")
+    for name in ("ent_coef", "vf_coef"):
+        if not (math.isfinite(getattr(args, name)) and getattr(args, name) >= 0):
+            raise ValueError(f"{name} must be a finite number >= 0, got {getattr(args, name)}")
+    for name in ("gamma", "gae_lambda"):
+        if not 0.0 <= getattr(args, name) <= 1.0:
+            raise ValueError(f"{name} must be in [0, 1], got {getattr(args, name)}")
+
+
 def parse_env_options(text: str | None) -> dict:
     """``--env-options`` (a JSON object of GS/LS options, e.g. ``{"item_lifetime": 8}``)."""
     from ials_zoo.utils import parse_json_object

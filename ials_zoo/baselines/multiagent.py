@@ -7,18 +7,17 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
-import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from ials_zoo.baselines.common import arg
+from ials_zoo.baselines.common import PPOSettings, arg, check_ppo_settings
 from ials_zoo.utils import atomic_path, atomic_write_text
 
 
 @dataclass
-class MultiPPOSettings:
+class MultiPPOSettings(PPOSettings):
     """PPO settings of every agent (SPEC §3/§6: lr 2.5e-4 decayed linearly, clip 0.1, entropy
     0.01, 3 epochs, gamma 0.99, lambda 0.95; value coefficient 1, as in §3).
 
@@ -29,15 +28,6 @@ class MultiPPOSettings:
 
     samples_per_update: int = arg(128, "samples of each agent per PPO update")
     batch_size: int = arg(64, "minibatch size (samples of one agent)")
-    n_epochs: int = arg(3, "epochs per update")
-    learning_rate: float = arg(2.5e-4, "initial learning rate")
-    anneal_lr: bool = arg(True, "decay the learning rate linearly to 0")
-    clip_range: float = arg(0.1, "PPO clip range")
-    ent_coef: float = arg(0.01, "entropy coefficient")
-    vf_coef: float = arg(1.0, "value loss coefficient")
-    gamma: float = arg(0.99, "discount")
-    gae_lambda: float = arg(0.95, "GAE lambda")
-    max_grad_norm: float = arg(0.5, "gradient clipping (per agent)")
     hidden: str = arg("64,64", "hidden layers of every actor and critic, comma-separated")
 
 
@@ -45,16 +35,10 @@ def check_multi_ppo(args) -> list[int]:
     """Clear errors for the PPO settings; returns the hidden sizes."""
     from ials_zoo.baselines.ppo_single import _hidden
 
-    for name in ("samples_per_update", "batch_size", "n_epochs"):
+    for name in ("samples_per_update", "batch_size"):
         if getattr(args, name) < 1:
             raise ValueError(f"{name} must be >= 1, got {getattr(args, name)}")
-    for name in ("learning_rate", "clip_range", "max_grad_norm"):
-        v = getattr(args, name)
-        if not (math.isfinite(v) and v > 0):
-            raise ValueError(f"{name} must be a finite number > 0, got {v}")
-    for name in ("gamma", "gae_lambda"):
-        if not 0.0 <= getattr(args, name) <= 1.0:
-            raise ValueError(f"{name} must be in [0, 1], got {getattr(args, name)}")
+    check_ppo_settings(args)
     return _hidden(args.hidden)
 
 

@@ -109,8 +109,7 @@ def _hidden(net_arch: str) -> list[int]:
 
 def check_ppo_args(args, positive=()) -> None:
     """Clear errors for the PPO settings before anything is built."""
-    import math
-
+    from ials_zoo.baselines.common import check_ppo_settings
     from ials_zoo.utils import check_seed
 
     for name in ("n_envs", "n_steps", "batch_size", "n_epochs", "eval_episodes", "final_eval_episodes",
@@ -118,16 +117,7 @@ def check_ppo_args(args, positive=()) -> None:
         value = getattr(args, name, None)
         if value is not None and int(value) < 1:
             raise ValueError(f"{name} must be >= 1, got {value}")
-    for name in ("learning_rate", "clip_range", "max_grad_norm"):
-        value = getattr(args, name)
-        if not (math.isfinite(value) and value > 0):
-            raise ValueError(f"{name} must be a finite number > 0, got {value}")
-    for name in ("ent_coef", "vf_coef"):
-        if not (math.isfinite(getattr(args, name)) and getattr(args, name) >= 0):
-            raise ValueError(f"{name} must be a finite number >= 0, got {getattr(args, name)}")
-    for name in ("gamma", "gae_lambda"):
-        if not 0.0 <= getattr(args, name) <= 1.0:
-            raise ValueError(f"{name} must be in [0, 1], got {getattr(args, name)}")
+    check_ppo_settings(args)
     if args.eval_every < 0:
         raise ValueError(f"eval_every must be >= 0, got {args.eval_every}")
     if args.frame_stack is not None and args.frame_stack < 1:
