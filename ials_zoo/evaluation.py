@@ -34,6 +34,7 @@ it saw in training.
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import importlib
 import json
@@ -257,6 +258,10 @@ def load_policy(spec, env_id: str | None = None, agent: str | None = None,
         spec = NetworkPolicy(spec, deterministic=deterministic, name="policy network")
     if isinstance(spec, Policy):
         pol = spec
+        if deterministic and isinstance(pol, NetworkPolicy) and not pol.deterministic:
+            # a loaded model asked to act deterministically: never ignore the request silently
+            pol = copy.copy(pol)
+            pol.deterministic = True
     elif callable(spec):
         pol = CallablePolicy(spec, getattr(spec, "__name__", "callable"), frame_stack)
     elif not isinstance(spec, (str, os.PathLike)):

@@ -210,6 +210,7 @@ def main(args: Args | None = None) -> dict:
     from ials_zoo.baselines.common import format_seconds
     from ials_zoo.baselines.multiagent import (
         TrainingLog,
+        frame_stack_of,
         joint_policy,
         merge_shard_stats,
         policy_file,
@@ -234,7 +235,7 @@ def main(args: Args | None = None) -> dict:
     collect_steps = int(args.collect_steps or domain.dials.collect_steps)
     epochs = int(args.aip_epochs or domain.dials.aip_epochs)
     workers = default_workers(len(agents)) if args.workers is None else min(args.workers, len(agents))
-    frame_stack = domain.frame_stack
+    frame_stack = frame_stack_of(args, domain)
     obs_size = int(np.prod(domain.observation_space.shape))
     out = Path(args.out_dir or f"runs/{args.env_id}__dials__s{args.seed}")
     run = RunFolder(out, resume=args.resume, overwrite=args.overwrite, settings=settings_of(args))

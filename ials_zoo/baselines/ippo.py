@@ -61,6 +61,7 @@ def main(args: Args | None = None) -> dict:
     from ials_zoo.baselines.multiagent import (
         TrainingLog,
         check_multi_ppo,
+        frame_stack_of,
         joint_policy,
         merge_shard_stats,
         policy_file,
@@ -102,7 +103,7 @@ def main(args: Args | None = None) -> dict:
     per_update = args.samples_per_update
     total = max(per_update, int(args.total_timesteps or domain.study.multi_agent_budget) // per_update * per_update)
     eval_every = int(args.eval_every or max(per_update, total // 10))
-    frame_stack = domain.frame_stack
+    frame_stack = frame_stack_of(args, domain)
     obs_size = int(np.prod(domain.observation_space.shape))
     out = Path(args.out_dir or f"runs/{args.env_id}__ippo__s{args.seed}")
     run = RunFolder(out, resume=args.resume, overwrite=args.overwrite,

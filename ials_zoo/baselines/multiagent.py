@@ -29,6 +29,9 @@ class MultiPPOSettings(PPOSettings):
     samples_per_update: int = arg(128, "samples of each agent per PPO update")
     batch_size: int = arg(64, "minibatch size (samples of one agent)")
     hidden: str = arg("64,64", "hidden layers of every actor and critic, comma-separated")
+    normalize_advantage: bool = arg(True, "normalise advantages per agent and minibatch")
+    normalize_reward: bool = arg(False, "divide rewards by the running std of each agent's discounted return")
+    frame_stack: int | None = arg(None, "observations a policy reads (default: the domain's)")
 
 
 def check_multi_ppo(args) -> list[int]:
@@ -38,8 +41,15 @@ def check_multi_ppo(args) -> list[int]:
     for name in ("samples_per_update", "batch_size"):
         if getattr(args, name) < 1:
             raise ValueError(f"{name} must be >= 1, got {getattr(args, name)}")
+    if args.frame_stack is not None and args.frame_stack < 1:
+        raise ValueError(f"frame_stack must be >= 1, got {args.frame_stack}")
     check_ppo_settings(args)
     return _hidden(args.hidden)
+
+
+def frame_stack_of(args, domain) -> int:
+    """The observations a policy reads: ``--frame-stack`` or the domain's."""
+    return int(args.frame_stack or domain.frame_stack)
 
 
 def ppo_config(args, copies: int) -> dict:
@@ -51,7 +61,8 @@ def ppo_config(args, copies: int) -> dict:
             "n_epochs": args.n_epochs, "learning_rate": args.learning_rate, "anneal_lr": args.anneal_lr,
             "clip_range": args.clip_range, "ent_coef": args.ent_coef, "vf_coef": args.vf_coef, "gamma": args.gamma,
             "gae_lambda": args.gae_lambda, "max_grad_norm": args.max_grad_norm,
-            "hidden": tuple(int(x) for x in args.hidden.split(","))}
+            "hidden": tuple(int(x) for x in args.hidden.split(",")),
+            "normalize_advantage": args.normalize_advantage, "normalize_reward": args.normalize_reward}
 
 
 def joint_policy(agents, layers, obs_size: int, n_actions: int, frame_stack: int, metadata: dict):
@@ -143,4 +154,4 @@ def settings_of(args, skip=("resume", "overwrite", "progress", "out_dir", "submi
 
 
 __all__ = ["JointActor", "MultiPPOSettings", "TrainingLog", "atomic_path", "check_multi_ppo", "joint_policy",
-           "merge_shard_stats", "policy_file", "ppo_config", "save_aips", "settings_of", "write_curve"]
+           "frame_stack_of", "merge_shard_stats", "policy_file", "ppo_config", "save_aips", "settings_of", "write_curve"]

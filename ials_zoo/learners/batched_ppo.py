@@ -21,8 +21,11 @@ single-column outputs do not, and a different CPU or torch build may round diffe
 the same worker count is the safe way to repeat a run bit for bit). The update follows
 SB3's PPO (clipped surrogate, value loss ``vf_coef * MSE`` without clipping, entropy bonus,
 ``n_epochs`` passes over ``batch_size`` minibatches, linear learning-rate decay, time-limit
-bootstrapping ``r_T += gamma V(s_T)``); ``compare_with_sb3`` in the tests and the study's
-learner comparison check that it learns alike.
+bootstrapping ``r_T += gamma V(s_T)``), with optional reward scaling (:class:`RewardScale`,
+SB3's ``VecNormalize``). ``tests/test_ppo_reference.py`` checks one update of every agent
+against a per-agent PPO written with SB3's formulas in plain torch, GAE against hand-computed
+advantages and the reward scale against SB3's; the study's learner comparison checks that it
+learns like SB3's PPO.
 """
 
 from __future__ import annotations
@@ -54,6 +57,8 @@ class PPOConfig:
     gae_lambda: float = 0.95
     max_grad_norm: float = 0.5
     hidden: tuple = (256, 128)
+    normalize_advantage: bool = True
+    normalize_reward: bool = False
 
 
 PAD = 8
@@ -117,6 +122,7 @@ class BatchedPPO:
         self.streams = CopyStreams(self.agents, cfg.n_envs, 1, salt=ACTION_STREAM_SALT)
         self.streams.seed(self.seed)
         self._perm_rngs = [self._rng(a, "minibatches") for a in self.agents]
+        self.reward_scale = RewardScale(A, cfg.n_envs, cfg.gamma)
 
     def _rng(self, agent: str, what: str) -> np.random.Generator:
         return np.random.default_rng([self.seed, agent_key(agent), agent_key(what)])
@@ -191,7 +197,7 @@ class BatchedPPO:
                 logp_all = torch.log_softmax(logits, dim=-1)
                 logp = logp_all.gather(-1, act_t[rows, idx][..., None])[..., 0]
                 adv = adv_t[rows, idx]
-                if adv.shape[1] > 1:
+                if cfg.normalize_advantage and adv.shape[1] > 1:
                     adv = (adv - adv.mean(dim=1, keepdim=True)) / (adv.std(dim=1, keepdim=True) + 1e-8)
                 ratio = torch.exp(logp - logp_t[rows, idx])
                 surrogate = torch.min(adv * ratio, adv * torch.clamp(ratio, 1 - cfg.clip_range, 1 + cfg.clip_range))
@@ -224,7 +230,8 @@ class BatchedPPO:
     def state_dict(self) -> dict:
         """Weights, optimiser and counters: tensors and plain containers (``weights_only``)."""
         return {"params": {k: v.detach().clone() for k, v in self.params.items()},
-                "optimizer": self.opt.state_dict(), "updates": self.updates}
+                "optimizer": self.opt.state_dict(), "updates": self.updates,
+                "reward_scale": self.reward_scale.state_dict()}
 
     def load_state_dict(self, state: dict) -> None:
         import torch
@@ -234,6 +241,8 @@ class BatchedPPO:
                 self.params[k].copy_(v)
         self.opt.load_state_dict(state["optimizer"])
         self.updates = int(state["updates"])
+        if "reward_scale" in state:
+            self.reward_scale.load_state_dict(state["reward_scale"])
 
     def actor_layers(self) -> list:
         """The actors' ``[(W [A, in, out], b [A, out]), ...]`` as float32 numpy arrays."""
@@ -241,6 +250,47 @@ class BatchedPPO:
         return [(self.params[f"pi.{i}.weight"].detach().numpy()[:, :a, :b].copy(),
                  self.params[f"pi.{i}.bias"].detach().numpy()[:, :b].copy())
                 for i, (a, b) in enumerate(zip(sizes[:-1], sizes[1:]))]
+
+
+class RewardScale:
+    """Rewards divided by the running standard deviation of each agent's discounted return
+    (SB3's ``VecNormalize(norm_reward=True)``, Gymnasium's ``NormalizeReward``), per agent so
+    that an agent's numbers do not depend on the batch. Traffic returns reach ~50 in value
+    units, and with one gradient-norm clip over actor and critic the critic's loss would
+    otherwise scale the policy gradient down."""
+
+    def __init__(self, n_agents: int, n_envs: int, gamma: float, epsilon: float = 1e-8):
+        self.gamma, self.epsilon = float(gamma), float(epsilon)
+        self.returns = np.zeros((n_agents, n_envs))
+        self.mean = np.zeros(n_agents)
+        self.var = np.ones(n_agents)
+        self.count = 1e-4
+
+    def __call__(self, rewards: np.ndarray, done: bool) -> np.ndarray:
+        """Scale ``rewards [A, n]`` of one step (updating the statistics first)."""
+        self.returns = self.returns * self.gamma + rewards
+        self._update(self.returns)
+        scaled = rewards / np.sqrt(self.var + self.epsilon)[:, None]
+        if done:
+            self.returns[:] = 0.0
+        return scaled
+
+    def _update(self, x: np.ndarray) -> None:
+        # Chan et al.'s parallel update, as SB3's RunningMeanStd, with one count for all agents
+        batch_mean, batch_var, n = x.mean(axis=1), x.var(axis=1), x.shape[1]
+        delta, total = batch_mean - self.mean, self.count + n
+        self.mean = self.mean + delta * n / total
+        m2 = self.var * self.count + batch_var * n + delta ** 2 * self.count * n / total
+        self.var, self.count = m2 / total, total
+
+    def state_dict(self) -> dict:
+        return {"returns": self.returns.tolist(), "mean": self.mean.tolist(), "var": self.var.tolist(),
+                "count": self.count}
+
+    def load_state_dict(self, state: dict) -> None:
+        self.returns = np.asarray(state["returns"], float)
+        self.mean, self.var = np.asarray(state["mean"], float), np.asarray(state["var"], float)
+        self.count = float(state["count"])
 
 
 def gae(rewards, values, dones, last_values, gamma: float, lam: float):
@@ -258,4 +308,4 @@ def gae(rewards, values, dones, last_values, gamma: float, lam: float):
     return adv, adv + values
 
 
-__all__ = ["BatchedPPO", "PPOConfig", "gae"]
+__all__ = ["BatchedPPO", "PPOConfig", "RewardScale", "gae"]

@@ -94,6 +94,8 @@ class RolloutTrainer:
             obs, r, done = self.env.step(a)
             r = np.asarray(r, np.float64)
             self.running += r
+            if cfg.normalize_reward:
+                r = learner.reward_scale(r, done)
             xs.append(self.x)
             acts.append(a)
             logps.append(lp)
