@@ -10,6 +10,14 @@
   10 distinct resamples and badly understates the uncertainty; the t interval does not.
 
 A sample whose values are all equal gets the interval ``[v, v]``; a single value too.
+
+For comparing algorithms over seeds the way the field reports (Agarwal et al., 2021, "Deep RL
+at the edge of the statistical precipice"): the **interquartile mean** (IQM, the mean of the
+middle 50% of the scores, ``scipy.stats.trim_mean(x, 0.25)``) with a **stratified bootstrap**
+interval (``scipy.stats.bootstrap`` over one sample per task: each task's seeds are resampled
+within the task), and the **probability of improvement** P(X > Y) + P(X = Y) / 2 of one
+algorithm's seeds over another's (the Mann-Whitney U statistic over ``n m``, scipy), with a
+stratified bootstrap interval too.
 """
 
 from __future__ import annotations
@@ -72,6 +80,63 @@ def bootstrap_interval(values: Sequence[float], level: float = CI_LEVEL) -> tupl
     return mean, min(low, mean), max(high, mean)
 
 
+def iqm(values: Sequence[float]) -> float:
+    """The interquartile mean (scipy's 25% trimmed mean)."""
+    from scipy import stats
+
+    return float(stats.trim_mean(_values(values), 0.25))
+
+
+def iqm_interval(per_task: Sequence[Sequence[float]], level: float = CI_LEVEL) -> tuple[float, float, float]:
+    """``(iqm, low, high)`` of the scores of every task and seed, with a stratified percentile
+    bootstrap interval (each task's scores resampled within the task; one task: a plain one)."""
+    import warnings
+
+    from scipy import stats
+
+    samples = [_values(x) for x in per_task]
+    if not samples:
+        raise ValueError("need the scores of at least one task")
+    point = iqm(np.concatenate(samples))
+    if all(x.size == 1 or np.all(x == x[0]) for x in samples):
+        return point, point, point
+
+    def statistic(*xs, axis=-1):
+        return stats.trim_mean(np.concatenate(xs, axis=axis), 0.25, axis=axis)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = stats.bootstrap(samples, statistic, n_resamples=BOOTSTRAP_RESAMPLES, confidence_level=level,
+                              method="percentile", vectorized=True, random_state=np.random.default_rng(BOOTSTRAP_SEED))
+    return point, min(float(res.confidence_interval.low), point), max(float(res.confidence_interval.high), point)
+
+
+def probability_of_improvement(x: Sequence[float], y: Sequence[float], level: float = CI_LEVEL
+                               ) -> tuple[float, float, float]:
+    """``(p, low, high)``: P(X > Y) + P(X = Y) / 2 for a score X of ``x``'s runs and Y of ``y``'s
+    (the Mann-Whitney U statistic of ``x`` over ``len(x) * len(y)``), with a percentile
+    bootstrap interval that resamples each algorithm's runs."""
+    import warnings
+
+    from scipy import stats
+
+    a, b = _values(x), _values(y)
+
+    def statistic(a, b, axis=-1):
+        greater = (a[..., :, None] > b[..., None, :]).mean(axis=(-2, -1))
+        equal = (a[..., :, None] == b[..., None, :]).mean(axis=(-2, -1))
+        return greater + 0.5 * equal
+
+    point = float(stats.mannwhitneyu(a, b).statistic) / (a.size * b.size)
+    if a.size == 1 and b.size == 1:
+        return point, point, point
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = stats.bootstrap((a, b), statistic, n_resamples=BOOTSTRAP_RESAMPLES, confidence_level=level,
+                              method="percentile", vectorized=True, random_state=np.random.default_rng(BOOTSTRAP_SEED))
+    return point, min(float(res.confidence_interval.low), point), max(float(res.confidence_interval.high), point)
+
+
 def interval(values: Sequence[float], method: str, level: float = CI_LEVEL) -> tuple[float, float, float]:
     """``(mean, low, high)`` with ``method`` :data:`EPISODES_METHOD` or :data:`SEEDS_METHOD`."""
     if method == EPISODES_METHOD:
@@ -89,5 +154,8 @@ __all__ = [
     "SEEDS_METHOD",
     "bootstrap_interval",
     "interval",
+    "iqm",
+    "iqm_interval",
+    "probability_of_improvement",
     "t_interval",
 ]

@@ -7,6 +7,7 @@
     ials-zoo leaderboard merge run_s0/result.json run_s1/result.json --out merged.json
     ials-zoo leaderboard validate result.json
     ials-zoo leaderboard convert model.zip --out policy.safetensors   # SB3 zip -> policy file
+    ials-zoo leaderboard export --format marl-eval --out board.json   # for marl-eval's tools
 
 The board is ``--dir``, else ``$IALS_ZOO_LEADERBOARD``, else ``./leaderboard``. See
 :mod:`ials_zoo.leaderboard` and ``leaderboard/SCHEMA.md``. A rejected submission or a failed
@@ -42,6 +43,10 @@ def configure(parser):
     p.add_argument("files", nargs="+")
     p.add_argument("--out", required=True, help="merged result JSON (atomic)")
     p.add_argument("--notes", default=None)
+    p = sub.add_parser("export", help="write the board's trained entries in another tool's format")
+    p.add_argument("--format", required=True, choices=["marl-eval"], help="marl-eval: InstaDeep's marl-eval JSON")
+    p.add_argument("--out", default=None, help="the file to write (atomic; default: standard output)")
+    board(p)
     p = sub.add_parser("convert", help="turn an SB3 PPO model zip (+ its .meta.json) into a policy file")
     p.add_argument("file")
     p.add_argument("--out", required=True, help="the .safetensors policy file to write")
@@ -67,6 +72,19 @@ def run(args) -> int:
                   f"[{s['ci_low']:.3f}, {s['ci_high']:.3f}] (t-interval over seeds); wrote {args.out}")
         elif args.action == "show":
             print(lb.show(args.dir))
+        elif args.action == "export":
+            import json
+
+            from ials_zoo.utils import atomic_write_text, check_output_file
+
+            if args.out:
+                check_output_file(args.out, "--out")
+            text = json.dumps(lb.export_board(args.format, args.dir), indent=1) + "\n"
+            if args.out:
+                atomic_write_text(args.out, text)
+                print(f"wrote {args.out}")
+            else:
+                sys.stdout.write(text)
         elif args.action == "render":
             print(f"wrote {lb.render(args.dir)}")
         elif args.action == "convert":

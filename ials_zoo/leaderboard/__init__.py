@@ -5,7 +5,8 @@
 * :mod:`~ials_zoo.leaderboard.validate` -- the schema (``schema.json``) and every number;
 * :mod:`~ials_zoo.leaderboard.store` -- the board folder: entries, policies, ``submit``;
 * :mod:`~ials_zoo.leaderboard.render` -- ``show`` and ``README.md`` with plots;
-* :mod:`~ials_zoo.leaderboard.verify` -- exact re-scoring of an entry.
+* :mod:`~ials_zoo.leaderboard.verify` -- exact re-scoring of an entry;
+* :mod:`~ials_zoo.leaderboard.export` -- the board in other tools' formats (marl-eval).
 
 The format and the guarantees are documented in ``leaderboard/SCHEMA.md``.
 """
@@ -24,6 +25,7 @@ from ials_zoo.leaderboard.build import (
     reference_result,
     split_env_id,
 )
+from ials_zoo.leaderboard.export import export_board
 from ials_zoo.leaderboard.merge import merge_results
 from ials_zoo.leaderboard.render import render, show
 from ials_zoo.leaderboard.store import (
@@ -49,6 +51,7 @@ from ials_zoo.leaderboard.verify import verify
 
 __all__ = [
     "ARCHIVE_SUBDIR",
+    "export_board",
     "MAX_RESULT_BYTES",
     "MULTI",
     "OFFICIAL",

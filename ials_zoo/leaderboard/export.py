@@ -1,0 +1,69 @@
+"""The board in other tools' formats.
+
+``marl-eval`` (InstaDeep's ``id-marl-eval``, Gorsane et al. 2022) reads one JSON object::
+
+    {env: {task: {algorithm: {"run_<seed>": {"step_<i>": {"step_count": int,
+                                                           "episode_return": [float, ...]},
+                                             ...,
+                                             "absolute_metrics": {"episode_return": [float, ...]}}}}}}
+
+Here ``env`` is the domain's id (``traffic_grid_v0``), ``task`` the agents evaluated (an agent's
+name on the single-agent track, ``"<n>-agents"`` on the multi-agent one), ``algorithm`` the
+entry's algorithm and training simulator (``dials/dials-once``, ``ippo/gs``; a sampled entry
+and a ``deterministic`` one are two algorithms), ``run_<seed>`` one training seed. A step
+is one point of that seed's learning curve: its ``episode_return`` holds the curve point's mean
+(the board keeps a curve's means, not its episodes). ``absolute_metrics`` holds the final
+evaluation's returns, one per episode of the protocol, and the entry's physical ``metrics``
+where it has them (their means, one value per seed). Only the board's official-protocol entries
+are exported; references (scripted, random) have no training run and are left out.
+"""
+
+from __future__ import annotations
+
+from ials_zoo.leaderboard.store import load_entries
+
+
+def algorithm_label(data: dict) -> str:
+    """``algorithm/simulator``, with ``/deterministic`` for a deterministic evaluation."""
+    label = f"{data['algorithm']}/{(data.get('training') or {}).get('simulator') or 'none'}"
+    if data.get("evaluation", {}).get("deterministic"):
+        label += "/deterministic"
+    return label
+
+
+def task_label(data: dict) -> str:
+    if data.get("track") == "multi-agent":
+        return f"{len(data['agents'])}-agents"
+    return str(data["agent"])
+
+
+def marl_eval(entries) -> dict:
+    """The marl-eval JSON object of ``entries`` (``(path, data)`` pairs; module docstring)."""
+    out: dict = {}
+    for _path, data in entries:
+        if data.get("evaluation", {}).get("protocol") != "official" or data.get("policy", {}).get("kind") != "model":
+            continue
+        curves = {c["seed"]: c["points"] for c in data.get("learning_curves") or []}
+        runs = out.setdefault(data["env_id"], {}).setdefault(task_label(data), {}).setdefault(algorithm_label(data), {})
+        for score in data["scores"]:
+            seed = score["seed"]
+            run: dict = {}
+            for i, point in enumerate(curves.get(seed, [])):
+                run[f"step_{i}"] = {"step_count": int(point["env_steps"]), "episode_return": [float(point["mean"])]}
+            absolute = {"episode_return": [float(r) for r in score["returns"]]}
+            for name, value in (score.get("metrics") or {}).items():
+                absolute[name] = [float(value["mean"])]
+            run["absolute_metrics"] = absolute
+            runs[f"run_{seed}"] = run
+    return out
+
+
+def export_board(fmt: str, directory=None) -> dict:
+    """The board of ``directory`` in format ``fmt`` (only ``"marl-eval"``)."""
+    if fmt != "marl-eval":
+        raise ValueError(f"unknown export format {fmt!r}; expected 'marl-eval'")
+    entries, _bad = load_entries(directory)
+    return marl_eval(entries)
+
+
+__all__ = ["algorithm_label", "export_board", "marl_eval", "task_label"]
