@@ -73,6 +73,36 @@ def eval_seeds(episodes: int = PROTOCOL_EPISODES, base: int = EVAL_SEED_BASE) ->
     return [base + i for i in range(int(episodes))]
 
 
+class _MetricRecorder:
+    """Collects a GS's physical metrics (:attr:`Domain.metrics`) episode by episode."""
+
+    def __init__(self, domain, env):
+        self.names = list(domain.metrics)
+        self.env = env
+        self.enabled = False
+        self.values: dict[str, list[float]] = {n: [] for n in self.names}
+
+    def episode_started(self) -> None:
+        if self.names and not self.enabled:
+            self.env.enable_metrics()
+            self.enabled = True
+
+    def episode_ended(self) -> None:
+        if self.names:
+            got = self.env.episode_metrics()
+            for n in self.names:
+                self.values[n].append(float(got[n]))
+
+    def summary(self) -> dict | None:
+        if not self.names:
+            return None
+        out = {}
+        for n, vals in self.values.items():
+            mean, lo, hi = mean_ci(vals)
+            out[n] = {"mean": mean, "ci_low": lo, "ci_high": hi}
+        return out
+
+
 def mean_ci(values: Sequence[float]) -> tuple[float, float, float]:
     """``(mean, low, high)`` over episodes: the bootstrap interval of :mod:`ials_zoo.stats`."""
     return bootstrap_interval(values, CI_LEVEL)
@@ -342,6 +372,8 @@ class EvaluationResult:
         mean, ci_low, ci_high: mean and its 95% bootstrap interval over episodes.
         episode_length: steps per episode; seconds: wall-clock of the evaluation.
         options: GS options.
+        metrics: ``{name: {"mean", "ci_low", "ci_high"}}``, the domain's physical metrics
+            over the episodes (bootstrap intervals), or None where the domain has none.
     """
 
     env_id: str
@@ -363,6 +395,7 @@ class EvaluationResult:
     options: dict = field(default_factory=dict)
     per_agent_returns: dict | None = None
     ci_method: str = EPISODES_METHOD
+    metrics: dict | None = None
 
     @property
     def episodes(self) -> int:
@@ -410,6 +443,7 @@ def evaluate(env_id: str, agent: str, policy, episodes: int = PROTOCOL_EPISODES,
     seeds = _check_seeds(seeds, episodes)
     stack = FrameStack(pol.frame_stack)
     env = SingleAgentGS(env_id, agent, scripted_learner=(pol.kind == "scripted"), **options)
+    recorder = _MetricRecorder(domain, env.parallel)
     start = time.perf_counter()
     iterator = seeds
     if progress:
@@ -421,6 +455,7 @@ def evaluate(env_id: str, agent: str, policy, episodes: int = PROTOCOL_EPISODES,
         for seed in iterator:
             pol.reset(int(seed))
             obs, _ = env.reset(seed=int(seed))
+            recorder.episode_started()
             obs = stack.reset(obs)
             total, steps, done = 0.0, 0, False
             while not done:
@@ -429,6 +464,7 @@ def evaluate(env_id: str, agent: str, policy, episodes: int = PROTOCOL_EPISODES,
                 total += reward
                 steps += 1
                 done = terminated or truncated
+            recorder.episode_ended()
             returns.append(float(total))
             length = steps
     finally:
@@ -440,6 +476,7 @@ def evaluate(env_id: str, agent: str, policy, episodes: int = PROTOCOL_EPISODES,
         deterministic=bool(pol.deterministic) if pol.kind == "model" else False,
         seeds=[int(s) for s in seeds], returns=returns, mean=mean, ci_low=lo, ci_high=hi,
         episode_length=length, seconds=time.perf_counter() - start, options=dict(options),
+        metrics=recorder.summary(),
     )
 
 
@@ -466,6 +503,7 @@ def evaluate_joint(env_id: str, policy, agents=None, episodes: int = PROTOCOL_EP
             pol = pol.for_agents(agents)
     seeds = _check_seeds(seeds, episodes)
     env = domain.parallel_env(learners=agents, scripted_learners=(pol.kind == "scripted"), **options)
+    recorder = _MetricRecorder(domain, env)
     stack = FrameStack(pol.frame_stack)
     n_actions = domain.n_actions
     start = time.perf_counter()
@@ -480,6 +518,7 @@ def evaluate_joint(env_id: str, policy, agents=None, episodes: int = PROTOCOL_EP
         for e, seed in enumerate(iterator):
             pol.reset(int(seed))
             obs, _ = env.reset(seed=int(seed))
+            recorder.episode_started()
             x = stack.reset(np.stack([obs[a] for a in agents]))
             steps = 0
             while env.agents:
@@ -494,6 +533,7 @@ def evaluate_joint(env_id: str, policy, agents=None, episodes: int = PROTOCOL_EP
                 steps += 1
                 if env.agents:
                     x = stack.step(np.stack([obs[a] for a in agents]))
+            recorder.episode_ended()
             length = steps
     finally:
         env.close()
@@ -506,6 +546,7 @@ def evaluate_joint(env_id: str, policy, agents=None, episodes: int = PROTOCOL_EP
         seeds=[int(s) for s in seeds], returns=returns, mean=mean, ci_low=lo, ci_high=hi,
         episode_length=length, seconds=time.perf_counter() - start, options=dict(options),
         per_agent_returns={a: per_agent[i].tolist() for i, a in enumerate(agents)},
+        metrics=recorder.summary(),
     )
 
 

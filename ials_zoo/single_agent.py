@@ -86,6 +86,11 @@ class SingleAgentGS(gymnasium.Env):
         self.action_space = self._par.action_space(agent)
         self._done = True
 
+    @property
+    def parallel(self):
+        """The GS this env drives (a PettingZoo ``ParallelEnv`` of every agent)."""
+        return self._par
+
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         obs, infos = self._par.reset(seed=seed, options=options)

@@ -8,6 +8,7 @@
     ials-zoo leaderboard validate result.json
     ials-zoo leaderboard convert model.zip --out policy.safetensors   # SB3 zip -> policy file
     ials-zoo leaderboard export --format marl-eval --out board.json   # for marl-eval's tools
+    ials-zoo leaderboard compare results/a.json results/b.json       # IQM, P(a improves on b)
 
 The board is ``--dir``, else ``$IALS_ZOO_LEADERBOARD``, else ``./leaderboard``. See
 :mod:`ials_zoo.leaderboard` and ``leaderboard/SCHEMA.md``. A rejected submission or a failed
@@ -29,6 +30,8 @@ def configure(parser):
     p.add_argument("file")
     board(p)
     p = sub.add_parser("show", help="print the board")
+    p.add_argument("--sort", default="score", help="best first by 'score' (default) or a physical metric, e.g. "
+                   "delay, throughput, items_per_robot (each domain knows which way is better)")
     board(p)
     p = sub.add_parser("render", help="regenerate <board>/README.md and its plots")
     board(p)
@@ -43,6 +46,9 @@ def configure(parser):
     p.add_argument("files", nargs="+")
     p.add_argument("--out", required=True, help="merged result JSON (atomic)")
     p.add_argument("--notes", default=None)
+    p = sub.add_parser("compare", help="IQM of two entries and the probability that the first improves on the second")
+    p.add_argument("first")
+    p.add_argument("second")
     p = sub.add_parser("export", help="write the board's trained entries in another tool's format")
     p.add_argument("--format", required=True, choices=["marl-eval"], help="marl-eval: InstaDeep's marl-eval JSON")
     p.add_argument("--out", default=None, help="the file to write (atomic; default: standard output)")
@@ -71,7 +77,9 @@ def run(args) -> int:
             print(f"{len(merged['scores'])} seeds: GS score {s['mean']:.3f} "
                   f"[{s['ci_low']:.3f}, {s['ci_high']:.3f}] (t-interval over seeds); wrote {args.out}")
         elif args.action == "show":
-            print(lb.show(args.dir))
+            print(lb.show(args.dir, sort=args.sort))
+        elif args.action == "compare":
+            print(lb.compare_entries(lb.load_result(args.first), lb.load_result(args.second)))
         elif args.action == "export":
             import json
 

@@ -121,6 +121,9 @@ class Domain:
         dials: :class:`DIALSSettings` of multi-agent training.
         tools: extra ``ials-zoo`` subcommands of this domain: ``{name: (module, help)}``,
             each module with ``configure(parser)`` and ``run(args)``.
+        metrics: the physical metrics of an episode, ``{name: "lower" | "higher"}`` (which
+            way is better); the GS then has ``enable_metrics()`` (record from the next
+            reset on) and ``episode_metrics() -> {name: float}`` for the episode just run.
         description: one line for listings.
     """
 
@@ -146,6 +149,7 @@ class Domain:
     study: StudySettings = field(default_factory=StudySettings)
     dials: DIALSSettings = field(default_factory=DIALSSettings)
     tools: dict = field(default_factory=dict)
+    metrics: dict = field(default_factory=dict)
     description: str = ""
 
     def __post_init__(self):
@@ -153,6 +157,9 @@ class Domain:
             raise ValueError(f"{self.env_id}: default_predictor must be 'gru' or 'mlp'")
         if not self.default_agents:
             raise ValueError(f"{self.env_id}: default_agents must name at least one agent")
+        bad = {k: v for k, v in self.metrics.items() if v not in ("lower", "higher")}
+        if bad:
+            raise ValueError(f"{self.env_id}: metrics must map names to 'lower' or 'higher' (better), got {bad}")
 
     def agents(self, **options) -> list[str]:
         """Every agent id under ``options`` (only :attr:`agent_options` are looked at)."""

@@ -77,6 +77,22 @@ def overall_score(scores: Sequence[dict]) -> dict:
     return {"mean": mean, "ci_low": lo, "ci_high": hi, "ci_over": "seeds"}
 
 
+def overall_metrics(scores: Sequence[dict]) -> dict | None:
+    """The physical metrics of a result: one seed's own (interval over episodes), or the mean
+    over seeds with the Student-t interval (as :func:`overall_score`); None when the seeds
+    carry no metrics (or not the same ones)."""
+    per_seed = [s.get("metrics") for s in scores]
+    if not per_seed or any(not m for m in per_seed) or len({tuple(sorted(m)) for m in per_seed}) != 1:
+        return None
+    if len(per_seed) == 1:
+        return {k: dict(v) for k, v in per_seed[0].items()}
+    out = {}
+    for name in per_seed[0]:
+        mean, lo, hi = t_interval([m[name]["mean"] for m in per_seed])
+        out[name] = {"mean": mean, "ci_low": lo, "ci_high": hi}
+    return out
+
+
 def per_agent_scores(scores: Sequence[dict]) -> dict:
     """Each agent's mean return over seeds and episodes (multi-agent track)."""
     agents = list(scores[0]["per_agent_returns"])
@@ -124,6 +140,8 @@ def make_result(evaluations: Sequence, *, algorithm: str, training: dict | None 
                  "mean": ev.mean, "ci_low": ev.ci_low, "ci_high": ev.ci_high, "returns": list(ev.returns)}
         if track == MULTI:
             entry["per_agent_returns"] = {a: list(v) for a, v in ev.per_agent_returns.items()}
+        if ev.metrics:
+            entry["metrics"] = {k: dict(v) for k, v in ev.metrics.items()}
         scores.append(entry)
     options = dict(first.options or {})
     evaluation = {
@@ -159,6 +177,9 @@ def make_result(evaluations: Sequence, *, algorithm: str, training: dict | None 
     }
     if track == MULTI:
         result["per_agent_scores"] = per_agent_scores(scores)
+    metrics = overall_metrics(scores)
+    if metrics:
+        result["metrics"] = metrics
     return result
 
 

@@ -58,6 +58,29 @@ def marl_eval(entries) -> dict:
     return out
 
 
+def compare_entries(first: dict, second: dict) -> str:
+    """Two entries of one domain and agents, the way the field compares them: each one's IQM
+    over its training seeds with a bootstrap interval, and the probability of improvement
+    P(a seed of the first scores above a seed of the second), with its interval."""
+    from ials_zoo.stats import iqm_interval, probability_of_improvement
+
+    for field in ("env_id", "agents"):
+        if first[field] != second[field]:
+            raise ValueError(f"the entries differ in {field}: {first[field]!r} vs {second[field]!r}")
+    lines = []
+    seeds = []
+    for name, d in (("first", first), ("second", second)):
+        scores = [s["mean"] for s in d["scores"]]
+        seeds.append(scores)
+        iqm, lo, hi = iqm_interval([scores])
+        mode = "deterministic" if d["evaluation"].get("deterministic") else "sampled"
+        lines.append(f"{name}: {algorithm_label(d)} ({mode}), {len(scores)} seed{'s' if len(scores) != 1 else ''}: "
+                     f"IQM {iqm:.3f} [{lo:.3f}, {hi:.3f}]")
+    p, lo, hi = probability_of_improvement(*seeds)
+    lines.append(f"P(first > second) = {p:.3f} [{lo:.3f}, {hi:.3f}] (95% bootstrap over seeds)")
+    return "\n".join(lines)
+
+
 def export_board(fmt: str, directory=None) -> dict:
     """The board of ``directory`` in format ``fmt`` (only ``"marl-eval"``)."""
     if fmt != "marl-eval":
@@ -66,4 +89,4 @@ def export_board(fmt: str, directory=None) -> dict:
     return marl_eval(entries)
 
 
-__all__ = ["algorithm_label", "export_board", "marl_eval", "task_label"]
+__all__ = ["algorithm_label", "compare_entries", "export_board", "marl_eval", "task_label"]

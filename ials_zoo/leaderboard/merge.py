@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from ials_zoo.leaderboard.build import MULTI, now_iso, overall_score, per_agent_scores
+from ials_zoo.leaderboard.build import MULTI, now_iso, overall_metrics, overall_score, per_agent_scores
 from ials_zoo.leaderboard.validate import ResultError, validate_result
 
 
@@ -53,6 +53,10 @@ def merge_results(results: Sequence[dict], submitter: str | None = None, notes: 
                   notes=first["notes"] if notes is None else notes)
     if first["track"] == MULTI:
         merged["per_agent_scores"] = per_agent_scores(scores)
+    merged.pop("metrics", None)
+    metrics = overall_metrics(scores)
+    if metrics:
+        merged["metrics"] = metrics
     return validate_result(merged)
 
 

@@ -8,11 +8,12 @@ from pathlib import Path
 
 from ials_zoo.leaderboard.build import MULTI, OFFICIAL, SINGLE
 from ials_zoo.leaderboard.store import ARCHIVE_SUBDIR, board_path, load_entries
+from ials_zoo.stats import iqm_interval
 from ials_zoo.utils import atomic_path, atomic_write_text
 
 WRITEUP = "writeup.md"
-HEADER = ["policy / algorithm", "trained on", "GS score", "95% CI", "seeds", "episodes", "env steps",
-          "wall-clock (+AIP)", "date"]
+HEADER = ["policy / algorithm", "trained on", "GS score", "95% CI", "IQM [95% CI]", "seeds", "episodes",
+          "env steps", "wall-clock (+AIP)", "date"]
 
 
 def _training_label(data: dict) -> str:
@@ -32,18 +33,46 @@ def format_duration(seconds: float) -> str:
     return f"{seconds / 3600:.2f} h"
 
 
+def _iqm(d: dict) -> str:
+    """The IQM of the seeds' scores with its bootstrap interval (several seeds only)."""
+    if len(d["scores"]) < 2:
+        return "-"
+    point, lo, hi = iqm_interval([[s["mean"] for s in d["scores"]]])
+    return f"{point:.2f} [{lo:.2f}, {hi:.2f}]"
+
+
 def _row(d: dict) -> list[str]:
     s, t = d["score"], d["training"]
     total = _total_seconds(d)
-    return [d["algorithm"], _training_label(d), f"{s['mean']:.2f}", f"[{s['ci_low']:.2f}, {s['ci_high']:.2f}]",
+    label = d["algorithm"] + (" (deterministic)" if d["evaluation"].get("deterministic") else "")
+    return [label, _training_label(d), f"{s['mean']:.2f}", f"[{s['ci_low']:.2f}, {s['ci_high']:.2f}]", _iqm(d),
             str(len(d["scores"])) if t else "-", str(d["evaluation"]["episodes"]),
             f"{t['env_steps']:,}" if t else "-", format_duration(total) if total is not None else "-",
             d["created"][:10]]
 
 
-def group_entries(entries) -> dict:
+def sort_key(sort: str):
+    """Best first by the score, or by a physical metric (its domain says which way is better;
+    entries without it last)."""
+    from ials_zoo.core.domains import get_domain
+
+    if sort == "score":
+        return lambda d: (0, -d["score"]["mean"])
+
+    def key(d):
+        metric = (d.get("metrics") or {}).get(sort)
+        if metric is None:
+            return (1, 0.0)
+        sign = 1.0 if get_domain(d["env_id"]).metrics.get(sort) == "lower" else -1.0
+        return (0, sign * metric["mean"])
+
+    return key
+
+
+def group_entries(entries, sort: str = "score") -> dict:
     """``{(section, env_id, who): [entries best first]}``; section: ``single-agent``,
-    ``multi-agent`` or ``variants``; ``who``: the agent, or ``all agents``."""
+    ``multi-agent`` or ``variants``; ``who``: the agent, or ``all agents``; best by
+    :func:`sort_key`."""
     groups: dict = {}
     for p, d in entries:
         section = d["track"] if d["evaluation"]["protocol"] == OFFICIAL else "variants"
@@ -51,27 +80,49 @@ def group_entries(entries) -> dict:
         groups.setdefault((section, d["env_id"], who), []).append(dict(d, _file=p.name))
     order = {SINGLE: 0, MULTI: 1, "variants": 2}
     for rows in groups.values():
-        rows.sort(key=lambda d: -d["score"]["mean"])
+        rows.sort(key=sort_key(sort))
     return dict(sorted(groups.items(), key=lambda kv: (order[kv[0][0]], kv[0][1], kv[0][2])))
 
 
-def _text_table(rows: list[dict]) -> list[str]:
-    table = [HEADER] + [_row(d) for d in rows]
-    widths = [max(len(r[i]) for r in table) for i in range(len(HEADER))]
+def _text_table(rows: list[dict], sort: str = "score") -> list[str]:
+    if sort == "score":
+        table = [HEADER] + [_row(d) for d in rows]
+    else:
+        def metric(d):
+            m = (d.get("metrics") or {}).get(sort)
+            return "-" if m is None else f"{m['mean']:.2f} [{m['ci_low']:.2f}, {m['ci_high']:.2f}]"
+
+        table = [[*HEADER[:2], sort, *HEADER[2:]]] + [[*_row(d)[:2], metric(d), *_row(d)[2:]] for d in rows]
+    widths = [max(len(r[i]) for r in table) for i in range(len(table[0]))]
     return ["  " + "  ".join(c.ljust(w) for c, w in zip(r, widths)) for r in table]
 
 
-def show(directory=None) -> str:
-    """A plain-text table of the board (where it is, then per track, domain and agent)."""
+def metric_names(entries) -> dict:
+    """``{metric: "lower" | "higher"}`` of every domain on the board."""
+    from ials_zoo.core.domains import get_domain
+
+    names: dict = {}
+    for env_id in sorted({d["env_id"] for _, d in entries}):
+        names.update(get_domain(env_id).metrics)
+    return names
+
+
+def show(directory=None, sort: str = "score") -> str:
+    """A plain-text table of the board (where it is, then per track, domain and agent), best
+    first by the score or by a physical metric (``sort``)."""
     board = board_path(directory)
     entries, problems = load_entries(board)
+    known = metric_names(entries)
+    if sort != "score" and sort not in known:
+        raise ValueError(f"--sort {sort!r}: expected 'score' or a metric of the board's domains: "
+                         f"{', '.join(f'{k} ({v} is better)' for k, v in known.items()) or 'none'}")
     lines = [f"leaderboard: {board.resolve()}"]
     for p, why in problems:
         lines.append(f"  skipped {p.name}: {why}")
     lines.append("")
-    for (section, env_id, who), rows in group_entries(entries).items():
+    for (section, env_id, who), rows in group_entries(entries, sort).items():
         lines.append(f"[{section}] {env_id} / {who}")
-        lines += _text_table(rows)
+        lines += _text_table(rows, sort)
         lines.append("")
     if not entries:
         lines.append("(no entries yet)")
@@ -148,6 +199,43 @@ def _plot(board: Path, key: tuple, rows: list[dict]) -> str | None:
     return f"plots/{name}"
 
 
+def _profile_plot(board: Path, key: tuple, rows: list[dict]) -> str | None:
+    """Performance profiles (Agarwal et al. 2021): for each entry, the fraction of its
+    evaluation episodes, over every training seed, whose score exceeds tau, against tau; the
+    references as dashed lines. Drawn where at least one trained entry has several seeds."""
+    if not any(d["training"] is not None and len(d["scores"]) > 1 for d in rows):
+        return None
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    section, env_id, who = key
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    everything = np.concatenate([np.asarray(s["returns"], float) for d in rows for s in d["scores"]])
+    taus = np.linspace(everything.min(), everything.max(), 200)
+    for i, d in enumerate(rows):
+        returns = np.concatenate([np.asarray(s["returns"], float) for s in d["scores"]])
+        fraction = (returns[None, :] > taus[:, None]).mean(axis=1)
+        trained = d["training"] is not None
+        label = f"{d['algorithm']}" + (f" on {_training_label(d)}, {len(d['scores'])} seeds" if trained else "")
+        if d["evaluation"].get("deterministic"):
+            label += " (deterministic)"
+        ax.plot(taus, fraction, lw=1.5 if trained else 1, ls="-" if trained else "--", color=f"C{i % 10}",
+                label=label)
+    ax.set_xlabel("score tau (episode return" + (", mean over agents)" if section == MULTI else ")"))
+    ax.set_ylabel("fraction of episodes (all seeds) scoring above tau")
+    ax.set_title(f"{env_id} / {who}: performance profiles")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    name = f"{env_id}__{who.replace(' ', '-')}{'__multi' if section == MULTI else ''}__profile.png"
+    with atomic_path(board / "plots" / name, suffix=".png") as tmp:
+        fig.savefig(tmp, dpi=100, format="png")
+    plt.close(fig)
+    return f"plots/{name}"
+
+
 def _md_table(rows, link: str | None = "results") -> list[str]:
     head = HEADER + (["file"] if link else [])
     out = ["| " + " | ".join(head) + " |\n", "|" + "---|" * len(head) + "\n"]
@@ -155,6 +243,27 @@ def _md_table(rows, link: str | None = "results") -> list[str]:
         cells = _row(d) + ([f"[json]({link}/{d['_file']})"] if link else [])
         out.append("| " + " | ".join(cells) + " |\n")
     return out
+
+
+def _sections(board: Path, entries, titles: dict) -> list[str]:
+    """Each track's Markdown section: per domain and agents a table, learning curves and
+    performance profiles."""
+    parts: list[str] = []
+    current = None
+    for key, rows in group_entries(entries).items():
+        section, env_id, who = key
+        if section != current:
+            parts.append(f"\n## {titles[section]}\n")
+            current = section
+        parts.append(f"\n### {env_id} / {who}\n\n")
+        parts += _md_table(rows)
+        plot = _plot(board, key, rows)
+        if plot:
+            parts.append(f"\n![{env_id} {who}]({plot})\n")
+        profile = _profile_plot(board, key, rows)
+        if profile:
+            parts.append(f"\n![{env_id} {who} performance profiles]({profile})\n")
+    return parts
 
 
 def render(directory=None) -> Path:
@@ -171,17 +280,12 @@ def render(directory=None) -> Path:
     titles = {SINGLE: "Single-agent track (one agent learns, the others are scripted)",
               MULTI: "Multi-agent track (every agent learns)",
               "variants": "Protocol variants (other seeds, options or agents: not comparable with the tracks)"}
-    current = None
-    for key, rows in group_entries(entries).items():
-        section, env_id, who = key
-        if section != current:
-            parts.append(f"\n## {titles[section]}\n")
-            current = section
-        parts.append(f"\n### {env_id} / {who}\n\n")
-        parts += _md_table(rows)
-        plot = _plot(board, key, rows)
-        if plot:
-            parts.append(f"\n![{env_id} {who}]({plot})\n")
+    import matplotlib
+
+    # entry names are user text: "$...$" must print as written, not go to mathtext (which can
+    # fail on it and end the render)
+    with matplotlib.rc_context({"text.parse_math": False}):
+        parts += _sections(board, entries, titles)
     if not entries:
         parts.append("\n(no entries yet)\n")
     archived, _ = load_entries(board, ARCHIVE_SUBDIR)

@@ -179,6 +179,8 @@ def validate_result(data) -> dict:
                 _close(data["per_agent_scores"][a], v) for a, v in want_agents.items()):
             raise ResultError("per_agent_scores", "does not match the per-agent returns")
 
+    _check_metrics(data, get_domain(env_id).metrics)
+
     training = data["training"]
     if training is None:
         if kind == "model":
@@ -192,6 +194,27 @@ def validate_result(data) -> dict:
         if steps != sorted(steps):
             raise ResultError(f"learning_curves.{i}.points", "env_steps must not decrease")
     return data
+
+
+def _check_metrics(data: dict, known: dict) -> None:
+    """Physical metrics: only the domain's names, an interval around each mean, and the
+    top level recomputed from the seeds (as the score)."""
+    from ials_zoo.leaderboard.build import overall_metrics
+
+    places = [(f"scores.{i}.metrics", s.get("metrics")) for i, s in enumerate(data["scores"])]
+    for where, metrics in places + [("metrics", data.get("metrics"))]:
+        for name, value in (metrics or {}).items():
+            if name not in known:
+                raise ResultError(f"{where}.{name}", f"not a metric of {data['env_id']} (its metrics: "
+                                  f"{', '.join(known) or 'none'})")
+            if not value["ci_low"] <= value["mean"] <= value["ci_high"]:
+                raise ResultError(f"{where}.{name}", "the mean must lie in [ci_low, ci_high]")
+    want = overall_metrics(data["scores"])
+    got = data.get("metrics")
+    if (want is None) != (got is None) or (want is not None and (list(want) != list(got) or not all(
+            _close(got[n][k], want[n][k]) for n in want for k in ("mean", "ci_low", "ci_high")))):
+        raise ResultError("metrics", "does not match the per-seed metrics (every seed carries the same metrics, "
+                          "and the top level is their mean with a t interval over seeds)")
 
 
 def _refuse_constant(name):

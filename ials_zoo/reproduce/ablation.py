@@ -2,9 +2,8 @@
 
 Usage::
 
-    python -m ials_zoo.reproduce.ablation --env traffic_grid_v0 --seeds 3 --budget 51200
-    python -m ials_zoo.reproduce.ablation --env warehouse_v0 --seeds 3 --budget 51200
-    python -m ials_zoo.reproduce.ablation --env traffic_grid_v0 --report   # table only
+    python -m ials_zoo.reproduce.ablation --env <domain id> --seeds 3 --budget 51200
+    python -m ials_zoo.reproduce.ablation --env <domain id> --report   # the table of finished runs
 
 Every cell is IPPO (every agent learns on the GS, :mod:`ials_zoo.baselines.ippo`) at the same
 budget per agent; a cell is a base setting (``base``) with one change. The runs go into
@@ -58,14 +57,10 @@ CHANGES = {
 }
 """Cell name -> the settings it changes (``old defaults`` replaces them all)."""
 
-DOMAIN_CELLS = {
-    # the grid's observation is Markov enough for a memoryless rule to beat actuated lights, and
-    # its policies read one observation already
-    "traffic_grid_v0": [c for c in CHANGES if c != "frame stack 1"],
-    # the warehouse's policies read 8 observations (SPEC §1); a nearest-item rule that reads one
-    # scores 0.90 of the scripted robots, so one observation is a cell of its own
-    "warehouse_v0": list(CHANGES),
-}
+def domain_cells(domain) -> list[str]:
+    """The cells of a domain: every change, and a policy that reads one observation where the
+    domain's policies read several (frame stack)."""
+    return [c for c in CHANGES if c != "frame stack 1" or domain.frame_stack > 1]
 
 
 def cell_settings(env_id: str, cell: str) -> dict:
@@ -166,8 +161,8 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     from ials_zoo.core.domains import get_domain
 
-    get_domain(args.env)
-    cells = DOMAIN_CELLS.get(args.env, list(CHANGES)) if args.cells == "all" else args.cells.split(",")
+    domain = get_domain(args.env)
+    cells = domain_cells(domain) if args.cells == "all" else args.cells.split(",")
     for cell in cells:
         cell_settings(args.env, cell)
     if args.seeds < 1 or args.budget < 1 or args.episodes < 1:

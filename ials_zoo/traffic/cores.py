@@ -206,14 +206,20 @@ class GridCore:
         self.state_reader = None
         self.lights = None
         self.running = False
+        self.record_metrics = False
+        self._halting = 0
+        self._steps = 0
 
     def reset(self, seed: int, warmup_steps: int = 0):
         """Start a new simulation; returns ``(occ [L,36], phases [L])``."""
         ls = self.ls
         _close_any_simulation(self)
         net, routes, tls_add = self.files
-        ls.start(_sumo_cmd(net, routes, [tls_add], seed))
+        # every vehicle carries SUMO's tripinfo device (time loss, waiting time) for the
+        # episode's metrics; it only records (episodes are bitwise the same with or without it)
+        ls.start(_sumo_cmd(net, routes, [tls_add], seed, extra=("--device.tripinfo.probability", "1")))
         self.running = True
+        self._halting = self._steps = 0
         for _ in range(int(warmup_steps)):
             ls.simulationStep()
         if self.reader is None:
@@ -240,6 +246,8 @@ class GridCore:
         if self.controlled:
             lights.act(actions)
         self._sim_step(0.0)
+        if self.record_metrics:
+            self._record_step()
         occ, entries, reward = self.reader.read()
         if self.controlled:
             lights.tick()
@@ -247,6 +255,27 @@ class GridCore:
         else:
             phases = np.array(self._actuated_phases(), np.int64)
         return occ, entries, reward, phases
+
+    def enable_metrics(self) -> None:
+        """Record the queues at every step from now on (one libsumo call per incoming lane)."""
+        self.record_metrics = True
+        self._metric_lanes = [ln for g in self.all_lanes for ln in g]
+        self._get_halting = import_libsumo()._libsumo.lane_getLastStepHaltingNumber
+
+    def _record_step(self) -> None:
+        get = self._get_halting
+        self._halting += sum(get(ln) for ln in self._metric_lanes)
+        self._steps += 1
+
+    def episode_metrics(self) -> dict:
+        """SUMO's tripinfo averages over the vehicles that arrived (time loss = delay, waiting
+        time), the vehicles arrived, and the mean number of halting vehicles (speed < 0.1 m/s)
+        on the lanes entering the intersections, over the steps (``nan`` unless recording)."""
+        get = self.ls.simulation.getParameter
+        return {"delay": float(get("", "device.tripinfo.timeLoss")),
+                "waiting_time": float(get("", "device.tripinfo.waitingTime")),
+                "throughput": float(get("", "device.tripinfo.count")),
+                "queue": self._halting / self._steps if self._steps else float("nan")}
 
     def state(self):
         """The 40-bit observation of every intersection (``all_tls`` order), flattened."""

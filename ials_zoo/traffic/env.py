@@ -344,6 +344,17 @@ class TrafficGridEnv(ParallelEnv):
         """Vehicles in the network, pending insertions, loaded/departed, teleports, time."""
         return self._sim.call("stats")
 
+    def enable_metrics(self) -> None:
+        """Record the queues at every step from now on, for :meth:`episode_metrics`."""
+        self._sim.call("enable_metrics")
+
+    def episode_metrics(self) -> dict[str, float]:
+        """The episode's physical figures (call at its end): ``delay`` (mean time lost per
+        arrived vehicle, SUMO's tripinfo timeLoss, s), ``waiting_time`` (mean seconds an arrived
+        vehicle stood, s), ``throughput`` (vehicles arrived) and ``queue`` (mean halting vehicles
+        on the lanes entering the intersections; after :meth:`enable_metrics`)."""
+        return self._sim.call("episode_metrics")
+
     def sumo_query(self, domain: str, method: str, *args):
         """Call a libsumo getter on this env's simulation, e.g. ``("lane", "getLength", id)``."""
         return self._sim.call("query", domain, method, *args)

@@ -53,6 +53,7 @@ DOMAIN = Domain(
     scaling=("robots", ((4, 4), (6, 6), (10, 10))),
     legend=render.LEGEND,
     episode_summary=episode_summary,
+    metrics={"items_per_robot": "higher", "age_at_collection": "lower", "items_waiting": "lower"},
     # Fed the GS's own actions and u_t from the same start, the LS differs only where items
     # appear at other times (its own draws); the exact replay, with the GS's draws, is
     # tests/test_warehouse_local.py.

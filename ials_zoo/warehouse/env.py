@@ -150,6 +150,8 @@ class WarehouseEnv(ParallelEnv):
         self._cycle = 0
         self.episode_returns = np.zeros(n)
         self.items_collected = 0
+        self._collected_age = 0
+        self._items_waiting = 0
 
     # ------------------------------------------------------------------ geometry
 
@@ -238,6 +240,8 @@ class WarehouseEnv(ParallelEnv):
         self._cycle = 0
         self.episode_returns = np.zeros(self.n_robots)
         self.items_collected = 0
+        self._collected_age = 0
+        self._items_waiting = 0
         self.agents = list(self.possible_agents)
         obs, dset, full = self._learner_views()
         none = np.full(R.N_SOURCES, R.NONE, dtype=np.int64)
@@ -273,7 +277,10 @@ class WarehouseEnv(ParallelEnv):
         reward = R.collect_reward(ages[cell], max_age)
         appear = self._rng.random(self.n_shelf_cells + 1) < self.item_probability
         appear[-1] = False
-        self.items_collected += R.advance_items(ages, cell, appear, self.item_lifetime)
+        collected, collected_age = R.advance_items_counted(ages, cell, appear, self.item_lifetime)
+        self.items_collected += collected
+        self._collected_age += collected_age
+        self._items_waiting += np.count_nonzero(ages)
         self.episode_returns += reward
         self._cycle += 1
 
@@ -364,6 +371,18 @@ class WarehouseEnv(ParallelEnv):
     def robot_positions(self) -> np.ndarray:
         """Floor coordinates (row, col) of every robot, shape (n_robots, 2)."""
         return self._origin + np.stack([self._pos // R.SIZE, self._pos % R.SIZE], axis=1)
+
+    def enable_metrics(self) -> None:
+        """The warehouse records its metrics always (a few sums per step): nothing to do."""
+
+    def episode_metrics(self) -> dict[str, float]:
+        """The physical figures of the episode so far, over all robots: items collected per
+        robot, the mean age (steps on the shelf) of the items collected, and the items waiting
+        on the shelves per robot, averaged over the steps."""
+        steps = max(self._cycle, 1)
+        return {"items_per_robot": self.items_collected / self.n_robots,
+                "age_at_collection": self._collected_age / self.items_collected if self.items_collected else 0.0,
+                "items_waiting": self._items_waiting / steps / self.n_robots}
 
     def item_ages_floor(self) -> np.ndarray:
         """Item ages on the whole floor, shape (height, width) (0 = no item)."""

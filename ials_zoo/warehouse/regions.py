@@ -367,14 +367,20 @@ def advance_items(ages: np.ndarray, occupied, appear: np.ndarray, item_lifetime)
     Returns:
         the number of items collected (removed by a robot).
     """
-    before = np.count_nonzero(ages)
+    return advance_items_counted(ages, occupied, appear, item_lifetime)[0]
+
+
+def advance_items_counted(ages: np.ndarray, occupied, appear: np.ndarray, item_lifetime) -> tuple[int, int]:
+    """:func:`advance_items`, also returning the summed ages of the items collected."""
+    before, age_before = np.count_nonzero(ages), int(ages.sum())
     ages[occupied] = 0
     collected = before - np.count_nonzero(ages)
+    collected_age = age_before - int(ages.sum())
     ages += ages > 0
     if item_lifetime is not None:
         ages[ages > item_lifetime] = 0
     ages += appear & (ages == 0)
-    return collected
+    return collected, collected_age
 
 
 # ----------------------------------------------------------------------------- scalar tables
