@@ -36,6 +36,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ials_zoo.utils import loads_untrusted_json
+
 FORMAT = "ials_zoo.policy"
 FORMAT_VERSION = 1
 HEADER_KEY = "ials_zoo.policy"
@@ -76,6 +78,9 @@ class PolicyNetwork:
         self.agents = tuple(agents)
         if not self.agents or len(set(self.agents)) != len(self.agents):
             raise PolicyFileError(f"a policy needs distinct agents, got {list(self.agents)}")
+        for name, value in (("obs_size", obs_size), ("n_actions", n_actions), ("frame_stack", frame_stack)):
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+                raise PolicyFileError(f"{name} must be an integer, got {value!r}")
         self.obs_size, self.n_actions = int(obs_size), int(n_actions)
         self.frame_stack = int(frame_stack)
         if self.obs_size < 1 or self.n_actions < 2 or self.frame_stack < 1:
@@ -89,6 +94,9 @@ class PolicyNetwork:
         width = self.obs_size * self.frame_stack
         A = 1 if self.shared else len(self.agents)
         for i, (w, b) in enumerate(layers):
+            for part, x in (("weight", w), ("bias", b)):
+                if np.asarray(x).dtype.kind != "f":
+                    raise PolicyFileError(f"layer {i}: {part} must be floating point, got {np.asarray(x).dtype}")
             w, b = np.asarray(w, dtype=np.float32), np.asarray(b, dtype=np.float32)
             if w.ndim != 3 or w.shape[:2] != (A, width) or b.shape != (A, w.shape[2]):
                 raise PolicyFileError(f"layer {i}: weight {w.shape} / bias {b.shape} do not fit "
@@ -225,7 +233,7 @@ def load_policy_file(path) -> PolicyNetwork:
 
 def _from_parts(meta: dict, tensors: dict, where: str) -> PolicyNetwork:
     try:
-        header = json.loads(meta[HEADER_KEY], parse_constant=_no_constants)
+        header = loads_untrusted_json(meta[HEADER_KEY])
     except (KeyError, TypeError, ValueError) as exc:
         raise PolicyFileError(f"not an ials_zoo policy file: {where} (no readable {HEADER_KEY!r} header: {exc})") from None
     if not isinstance(header, dict) or header.get("format") != FORMAT:
@@ -249,10 +257,6 @@ def _from_parts(meta: dict, tensors: dict, where: str) -> PolicyNetwork:
         raise PolicyFileError(f"{where}: {exc}") from None
 
 
-def _no_constants(name):
-    raise ValueError(f"non-finite number {name} in a policy header")
-
-
 # --------------------------------------------------------------------------------------------
 # SB3 models, read without unpickling
 
@@ -269,7 +273,7 @@ def _sb3_zip_parts(path: Path) -> tuple[dict, dict]:
                     raise PolicyFileError(f"{path}: not an SB3 model zip (no {name!r})")
                 if members[name].file_size > MAX_ZIP_MEMBER_BYTES:
                     raise PolicyFileError(f"{path}: {name!r} is too large")
-            data = json.loads(z.read("data"), parse_constant=_no_constants)
+            data = loads_untrusted_json(z.read("data"))
             raw = z.read("policy.pth")
     except (zipfile.BadZipFile, OSError, ValueError) as exc:
         if isinstance(exc, PolicyFileError):

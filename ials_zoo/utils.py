@@ -47,6 +47,84 @@ def atomic_write_text(path: str | os.PathLike, text: str) -> None:
         tmp.write_text(text)
 
 
+MAX_JSON_DEPTH = 64
+"""Deepest nesting of arrays and objects :func:`loads_untrusted_json` accepts (our files
+nest 6 deep; Python's parser recurses and dies of a ``RecursionError`` near 1,000)."""
+
+_JSON_STRING = None
+
+
+def json_depth(text: str) -> int:
+    """The deepest nesting of ``[``/``{`` in JSON ``text`` (brackets inside strings ignored)."""
+    import re
+
+    global _JSON_STRING
+    if _JSON_STRING is None:
+        _JSON_STRING = re.compile(r'"(?:[^"\\]|\\.)*"', re.S)
+    structure = np.frombuffer(_JSON_STRING.sub("", text).encode("utf-8", "replace"), np.uint8)
+    step = np.zeros(structure.shape, np.int64)
+    step[(structure == ord("[")) | (structure == ord("{"))] = 1
+    step[(structure == ord("]")) | (structure == ord("}"))] = -1
+    return int(np.cumsum(step).max(initial=0))
+
+
+def _float_sized_int(text: str) -> int:
+    value = int(text)
+    try:
+        float(value)
+    except OverflowError:
+        raise ValueError(f"the integer {text[:20]}... does not fit a float") from None
+    return value
+
+
+def _no_constant(name: str):
+    raise ValueError(f"{name} is not a number JSON allows")
+
+
+def loads_untrusted_json(text: str | bytes, max_depth: int = MAX_JSON_DEPTH):
+    """Parse JSON that someone else may have written: a ValueError (never a RecursionError or
+    an OverflowError later) for nesting deeper than ``max_depth``, integers that do not fit a
+    float, and NaN/Infinity."""
+    if isinstance(text, bytes):
+        text = text.decode("utf-8")
+    depth = json_depth(text)
+    if depth > max_depth:
+        raise ValueError(f"JSON nested {depth} deep; at most {max_depth} is accepted")
+    return json.loads(text, parse_int=_float_sized_int, parse_constant=_no_constant)
+
+
+def read_regular_file(path: str | os.PathLike, max_bytes: int, follow_links: bool = True) -> bytes:
+    """The bytes of ``path`` if it is a regular file of at most ``max_bytes``; a ValueError
+    otherwise. Never blocks on a fifo, never reads a device, reads at most ``max_bytes + 1``
+    bytes whatever the file claims; with ``follow_links=False`` a symbolic link is refused."""
+    import stat
+
+    flags = os.O_RDONLY | os.O_NONBLOCK | (0 if follow_links else os.O_NOFOLLOW)
+    try:
+        fd = os.open(path, flags)
+    except OSError as exc:
+        if not follow_links and os.path.islink(path):
+            raise ValueError(f"{str(path)!r} is a symbolic link; only regular files are read") from None
+        raise ValueError(f"cannot read {str(path)!r}: {exc.strerror or exc}") from None
+    try:
+        mode = os.fstat(fd).st_mode
+        if not stat.S_ISREG(mode):
+            kind = "a folder" if stat.S_ISDIR(mode) else "not a regular file"
+            raise ValueError(f"{str(path)!r} is {kind}")
+        chunks, total = [], 0
+        while total <= max_bytes:
+            chunk = os.read(fd, min(1 << 20, max_bytes + 1 - total))
+            if not chunk:
+                break
+            chunks.append(chunk)
+            total += len(chunk)
+    finally:
+        os.close(fd)
+    if total > max_bytes:
+        raise ValueError(f"{str(path)!r} has more than {max_bytes:,} bytes")
+    return b"".join(chunks)
+
+
 def parse_json_object(text: str | None, name: str) -> dict:
     """Parse a command-line option holding a JSON object (empty -> ``{}``); a ValueError
     naming the option otherwise."""

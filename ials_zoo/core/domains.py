@@ -102,6 +102,9 @@ class Domain:
         frame_stack: observations the paper's policy reads (1 = current only).
         agent_options: the GS options that change the set of agents (e.g. a grid size):
             :meth:`check_agent` passes only these to ``possible_agents``.
+        gs_options: every GS option that changes what an episode is (the evaluation
+            protocol's ``options`` may hold these and nothing else; rendering and backends
+            are not options of a result).
         one_simulation_per_process: each GS/LS holds a process-wide resource (libsumo: one
             simulation per process), so vectorised training puts each in its own process.
         null_influence: the "nothing comes in" class of the influence sources (F-IALS
@@ -139,6 +142,7 @@ class Domain:
     episode_length: int
     frame_stack: int = 1
     agent_options: tuple[str, ...] = ()
+    gs_options: tuple[str, ...] = ()
     one_simulation_per_process: bool = False
     null_influence: int = 0
     untrained_probs: tuple | None = None

@@ -23,6 +23,7 @@ from ials_zoo.core.region import RegionSpec
 from ials_zoo.influence.base import InfluencePredictor
 from ials_zoo.influence.constant import FixedPredictor, MarginalPredictor, UniformPredictor
 from ials_zoo.influence.networks import ARCHS, GRUPredictor, MLPPredictor
+from ials_zoo.utils import loads_untrusted_json
 
 FORMAT = "ials_zoo.influence_predictor"
 SET_FORMAT = "ials_zoo.influence_predictor_set"
@@ -120,7 +121,9 @@ def _from_payload(payload, where) -> InfluencePredictor:
             f"ials_zoo reads version {FORMAT_VERSION}"
         )
     try:
-        meta = json.loads(payload["metadata_json"])
+        meta = loads_untrusted_json(payload["metadata_json"])
+        if not isinstance(meta, dict):
+            raise TypeError("metadata_json must hold a JSON object")
         cls = _CLASSES[payload["class"]]
         region = RegionSpec.from_dict(meta["region"])
         arrays = {k: v.numpy() for k, v in payload["arrays"].items()}
@@ -128,7 +131,7 @@ def _from_payload(payload, where) -> InfluencePredictor:
         if cls in ARCHS.values():
             return cls(region, dset_kind=meta["dset_kind"], arrays=arrays, metadata=meta, **kwargs)
         return cls(region, dset_kind=meta["dset_kind"], metadata=meta, table=arrays["table"], **kwargs)
-    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+    except (KeyError, TypeError, ValueError, AttributeError, UnicodeDecodeError) as exc:
         raise ValueError(f"not an ials_zoo influence predictor: {where} (bad content: {exc})") from None
 
 
@@ -150,11 +153,20 @@ def load_predictor_set(path, env_id: str | None = None) -> dict:
     payload = _torch_load(path)
     if not isinstance(payload, dict) or payload.get("format") != SET_FORMAT:
         raise ValueError(f"not an ials_zoo influence predictor set: {path}")
+    if payload.get("format_version") != FORMAT_VERSION:
+        raise ValueError(f"{path}: influence predictor set format version {payload.get('format_version')!r}, this "
+                         f"ials_zoo reads version {FORMAT_VERSION}")
+    members = payload.get("members")
+    if not isinstance(members, list) or not members:
+        raise ValueError(f"not an ials_zoo influence predictor set: {path} (members must be a non-empty list, got "
+                         f"{type(members).__name__})")
     out = {}
-    for i, member in enumerate(payload.get("members", [])):
+    for i, member in enumerate(members):
         pred = _from_payload(member, f"{path} (member {i})")
         if env_id is not None and pred.region.domain != env_id:
             raise ValueError(f"{path} holds predictors of {pred.region.domain!r}, not {env_id!r}")
+        if pred.region.agent in out:
+            raise ValueError(f"{path}: two members are predictors of {pred.region.agent!r}")
         out[pred.region.agent] = pred
     return out
 

@@ -9,9 +9,10 @@ from pathlib import Path
 from ials_zoo.leaderboard.build import MULTI, OFFICIAL, SINGLE
 from ials_zoo.leaderboard.store import ARCHIVE_SUBDIR, board_path, load_entries
 from ials_zoo.stats import iqm_interval
-from ials_zoo.utils import atomic_path, atomic_write_text
+from ials_zoo.utils import atomic_path, atomic_write_text, read_regular_file
 
 WRITEUP = "writeup.md"
+MAX_WRITEUP_BYTES = 1 << 20
 HEADER = ["policy / algorithm", "trained on", "GS score", "95% CI", "IQM [95% CI]", "seeds", "episodes",
           "env steps", "wall-clock (+AIP)", "date"]
 
@@ -45,6 +46,8 @@ def _row(d: dict) -> list[str]:
     s, t = d["score"], d["training"]
     total = _total_seconds(d)
     label = d["algorithm"] + (" (deterministic)" if d["evaluation"].get("deterministic") else "")
+    if d.get("provenance") == "external":
+        label += " [external: training claims unverified]"
     return [label, _training_label(d), f"{s['mean']:.2f}", f"[{s['ci_low']:.2f}, {s['ci_high']:.2f}]", _iqm(d),
             str(len(d["scores"])) if t else "-", str(d["evaluation"]["episodes"]),
             f"{t['env_steps']:,}" if t else "-", format_duration(total) if total is not None else "-",
@@ -240,9 +243,18 @@ def _md_table(rows, link: str | None = "results") -> list[str]:
     head = HEADER + (["file"] if link else [])
     out = ["| " + " | ".join(head) + " |\n", "|" + "---|" * len(head) + "\n"]
     for d in rows:
-        cells = _row(d) + ([f"[json]({link}/{d['_file']})"] if link else [])
+        cells = [markdown_cell(c) for c in _row(d)] + ([f"[json]({link}/{d['_file']})"] if link else [])
         out.append("| " + " | ".join(cells) + " |\n")
     return out
+
+
+def markdown_cell(text: str) -> str:
+    """User text as one Markdown table cell: no line breaks, ``|`` and HTML escaped, so that no
+    entry can add rows, links or markup to the page."""
+    import html
+
+    flat = " ".join(str(text).split())
+    return html.escape(flat, quote=False).replace("|", "\\|").replace("[", "\\[").replace("]", "\\]")
 
 
 def _sections(board: Path, entries, titles: dict) -> list[str]:
@@ -270,13 +282,18 @@ def render(directory=None) -> Path:
     """Regenerate ``<board>/README.md`` and ``<board>/plots/*.png``."""
     board = board_path(directory)
     entries, problems = load_entries(board)
-    if problems:
-        names = ", ".join(p.name for p, _ in problems)
-        raise ValueError(f"fix or remove these files first: {names} ({problems[0][1]})")
     parts = [README_HEAD]
     writeup = board / WRITEUP
-    if writeup.is_file():
-        parts.append("\n" + writeup.read_text().strip() + "\n")
+    if writeup.exists() or writeup.is_symlink():
+        try:
+            parts.append("\n" + read_regular_file(writeup, MAX_WRITEUP_BYTES, follow_links=False).decode("utf-8")
+                         .strip() + "\n")
+        except (ValueError, UnicodeDecodeError) as exc:
+            problems.append((writeup, str(exc)))
+    if problems:
+        # one bad file never hides the rest: it is named here and skipped
+        parts.append("\n**Skipped files** (not entries of this board until fixed):\n\n")
+        parts += [f"- `{markdown_cell(p.name)}`: {markdown_cell(why)}\n" for p, why in problems]
     titles = {SINGLE: "Single-agent track (one agent learns, the others are scripted)",
               MULTI: "Multi-agent track (every agent learns)",
               "variants": "Protocol variants (other seeds, options or agents: not comparable with the tracks)"}

@@ -19,14 +19,16 @@ name and skipped, so one bad file never hides the rest of the board.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
+import math
 import os
 import re
 import shutil
 from pathlib import Path
 
-from ials_zoo.leaderboard.validate import ResultError, load_result
+from ials_zoo.leaderboard.validate import ResultError, load_result, validate_result
 from ials_zoo.utils import atomic_path, remove_stale_temporaries
 
 RESULTS_SUBDIR = "results"
@@ -54,7 +56,7 @@ def load_entries(directory=None, subdir: str = RESULTS_SUBDIR) -> tuple[list[tup
     entries, problems = [], []
     for p in sorted(folder.glob("*.json")) if folder.is_dir() else []:
         try:
-            entries.append((p, load_result(p)))
+            entries.append((p, load_result(p, follow_links=False)))
         except ResultError as exc:
             problems.append((p, str(exc)))
     return entries, problems
@@ -91,26 +93,47 @@ def resolve_policy_file(spec: str, result_path: Path, board: Path | None = None)
     return None
 
 
-def submit(path, directory=None) -> Path:
-    """Validate the result at ``path`` and add it to the board; return its new path.
+PROVENANCE_OURS = "ials_zoo"
+PROVENANCE_EXTERNAL = "external"
 
-    Raises :class:`ResultError` for a malformed, inconsistent or duplicate result, for code,
-    and for a policy file that is missing or does not have its recorded sha256; the board is
-    left untouched in every failure (atomic writes, never an overwrite)."""
-    from ials_zoo.evaluation import sha256_file
 
-    path = Path(path)
-    board = board_path(directory)
-    results = board / RESULTS_SUBDIR
-    remove_stale_temporaries(results)
-    data = load_result(path)
-    if data["policy"]["kind"] == "callable":
-        raise ResultError("policy.kind", "a callable policy is code; the board holds policy files (weights + JSON) "
-                          "and reference policies only")
-    copies = []
+def training_provenance(data: dict, networks: list) -> str:
+    """Whether our trainers produced the policies of ``data``: each policy file's header holds
+    the training record its trainer wrote (algorithm, seed, simulator, steps, wall-clock).
+    ``"ials_zoo"`` when every header has one and the result repeats it; ``"external"`` when a
+    header has none (the result's training claims cannot be checked). A header whose record
+    contradicts the result is a :class:`ResultError`: the result claims another training."""
+    training = data["training"] or {}
+    headers = [net.metadata for net in networks]
+    if not headers or any(not isinstance(h.get("training"), dict) or "algorithm" not in h for h in headers):
+        return PROVENANCE_EXTERNAL
+    for i, (score, h) in enumerate(zip(data["scores"], headers)):
+        record = h["training"]
+        claims = {"algorithm": (h["algorithm"], data["algorithm"]), "seed": (h.get("seed"), score["seed"]),
+                  "training.simulator": (record.get("simulator"), training.get("simulator")),
+                  "training.env_steps": (record.get("env_steps"), training.get("env_steps"))}
+        for field, (written, claimed) in claims.items():
+            if written != claimed:
+                raise ResultError(f"scores.{i}", f"{field} is {claimed!r} in the result but {written!r} in the "
+                                  "training record its policy file carries")
+    walls = [float(h["training"].get("wall_clock_seconds", float("nan"))) for h in headers]
+    claimed_wall = float(training.get("wall_clock_seconds", float("nan")))
+    if not math.isclose(sum(walls) / len(walls), claimed_wall, rel_tol=1e-6, abs_tol=1e-6):
+        raise ResultError("training.wall_clock_seconds", f"{claimed_wall!r} in the result, but the policy files "
+                          f"record {walls} (the result's is their mean)")
+    return PROVENANCE_OURS
+
+
+def _check_policies(data: dict, path: Path, board: Path) -> tuple[list, list]:
+    """Resolve, hash-check and load every policy of a model result; returns ``(copies,
+    networks)``: ``(source, board target)`` pairs and the loaded networks. A policy that does
+    not load as a policy of the entry's domain and agents is refused; an SB3 zip is converted
+    to a policy file (the board keeps weights + JSON only)."""
+    from ials_zoo.evaluation import load_model, sha256_file
+    from ials_zoo.policy import PolicyFileError, save_policy
+
+    copies, networks = [], []
     for i, s in enumerate(data["scores"]):
-        if data["policy"]["kind"] != "model":
-            continue
         found = resolve_policy_file(s["policy_file"], path, board)
         if found is None:
             raise ResultError(f"scores.{i}.policy_file", f"{s['policy_file']!r} not found (looked next to the "
@@ -119,26 +142,102 @@ def submit(path, directory=None) -> Path:
         if digest != s["policy_sha256"]:
             raise ResultError(f"scores.{i}.policy_sha256", f"{found} has sha256 {digest}, the result says "
                               f"{s['policy_sha256']}")
-        target = Path(POLICIES_SUBDIR) / f"{digest}{''.join(found.suffixes[-1:]) or '.safetensors'}"
+        try:
+            policy = load_model(found, data["agent"])
+        except (ValueError, PolicyFileError, OSError) as exc:
+            raise ResultError(f"scores.{i}.policy_file", f"{str(found)!r} is not a policy file: {exc}") from None
+        missing = [a for a in data["agents"] if a not in policy.agents]
+        if policy.metadata.get("env_id") not in (None, data["env_id"]) or missing:
+            raise ResultError(f"scores.{i}.policy_file", f"{str(found)!r} is a policy of "
+                              f"{policy.metadata.get('env_id')!r} for {list(policy.agents)}, not of {data['env_id']!r} "
+                              f"for {data['agents']}")
+        networks.append(policy.net)
+        if found.suffix == ".zip":
+            converted = board / POLICIES_SUBDIR / f".converted-{digest}.safetensors"
+            save_policy(policy.net, converted)
+            digest = sha256_file(converted)
+            found = converted
+            s["policy_sha256"] = digest
+        target = Path(POLICIES_SUBDIR) / f"{digest}.safetensors"
         copies.append((found, board / target))
         s["policy_file"] = target.as_posix()
-    entries, _ = load_entries(board)
-    mine = identity(data)
-    for p, other in entries:
-        if identity(other) == mine:
-            raise ResultError("(file)", f"duplicate: {p.name} already scores the same policies of the same agents "
-                              "with the same protocol")
-    dest = results / entry_name(data)
-    if dest.exists():
-        raise ResultError("(file)", f"{dest} already exists; refusing to overwrite it")
-    for source, target in copies:
-        if not target.exists():
-            with atomic_path(target, suffix=target.suffix) as tmp:
-                shutil.copyfile(source, tmp)
-    with atomic_path(dest) as tmp:
-        tmp.write_text(json.dumps(data, indent=2, allow_nan=False) + "\n")
+    return copies, networks
+
+
+@contextlib.contextmanager
+def _board_lock(board: Path):
+    """One submission at a time per board: an exclusive ``flock`` on its ``results/`` folder
+    (no lock file is left behind), so that two submissions of the same evaluation cannot both
+    pass the duplicate check; the lock dies with the process that holds it."""
+    import fcntl
+
+    fd = os.open(board / RESULTS_SUBDIR, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)
+
+
+def submit(path, directory=None, remeasure: bool = True) -> Path:
+    """Validate the result at ``path`` and add it to the board; return its new path.
+
+    Raises :class:`ResultError` for a malformed, inconsistent or duplicate result, for code,
+    for a policy file that is missing, does not have its recorded sha256 or does not load as a
+    policy of the entry, for training claims its policy files contradict, and (``remeasure``)
+    for scores that the GS does not reproduce exactly; the board is left untouched in every
+    failure (atomic writes, never an overwrite, one submission at a time)."""
+    from ials_zoo.leaderboard.verify import remeasure_result
+
+    path = Path(path)
+    board = board_path(directory)
+    results = board / RESULTS_SUBDIR
+    remove_stale_temporaries(results)
+    remove_stale_temporaries(board / POLICIES_SUBDIR)
+    data = load_result(path)
+    kind = data["policy"]["kind"]
+    if kind == "callable":
+        raise ResultError("policy.kind", "a callable policy is code; the board holds policy files (weights + JSON) "
+                          "and reference policies only")
+    copies, converted = [], []
+    try:
+        if kind == "model":
+            copies, networks = _check_policies(data, path, board)
+            converted = [c for c, _ in copies if c.name.startswith(".converted-")]
+            data["provenance"] = training_provenance(data, networks)
+        else:
+            data.pop("provenance", None)
+        validate_result(data)
+        if remeasure:
+            reports = remeasure_result(data, [str(c) for c, _ in copies] or None)
+            bad = [r for r in reports if not r["ok"]]
+            if bad:
+                raise ResultError("scores", f"re-measured on the GS, seed {bad[0]['seed']} scores "
+                                  f"{bad[0]['measured']!r}, not the claimed {bad[0]['claimed']!r} (episodes "
+                                  f"{bad[0]['differences'][:5]} differ)")
+        with _board_lock(board):
+            entries, _ = load_entries(board)
+            mine = identity(data)
+            for p, other in entries:
+                if identity(other) == mine:
+                    raise ResultError("(file)", f"duplicate: {p.name} already scores the same policies of the same "
+                                      "agents with the same protocol")
+            dest = results / entry_name(data)
+            if dest.exists():
+                raise ResultError("(file)", f"{dest} already exists; refusing to overwrite it")
+            for source, target in copies:
+                if not target.exists():
+                    with atomic_path(target, suffix=target.suffix) as tmp:
+                        shutil.copyfile(source, tmp)
+            with atomic_path(dest) as tmp:
+                tmp.write_text(json.dumps(data, indent=2, allow_nan=False) + "\n")
+    finally:
+        for c in converted:
+            with contextlib.suppress(FileNotFoundError):
+                c.unlink()
     return dest
 
 
-__all__ = ["ARCHIVE_SUBDIR", "BOARD_ENV", "POLICIES_SUBDIR", "RESULTS_SUBDIR", "board_path", "entry_name",
-           "identity", "load_entries", "resolve_policy_file", "submit"]
+__all__ = ["ARCHIVE_SUBDIR", "BOARD_ENV", "POLICIES_SUBDIR", "PROVENANCE_EXTERNAL", "PROVENANCE_OURS",
+           "RESULTS_SUBDIR", "board_path", "entry_name", "identity", "load_entries", "resolve_policy_file", "submit",
+           "training_provenance"]

@@ -30,6 +30,7 @@ import numpy as np
 
 from ials_zoo.leaderboard.build import MULTI, SCHEMA_VERSION, SINGLE, overall_score, protocol_of, split_env_id
 from ials_zoo.stats import bootstrap_interval
+from ials_zoo.utils import loads_untrusted_json, read_regular_file
 
 REL_TOL = 1e-9
 ABS_TOL = 1e-12
@@ -111,8 +112,13 @@ def validate_result(data) -> dict:
     if data["domain_version"] != version:
         raise ResultError("domain_version", f"{data['domain_version']} does not match env_id {env_id!r}")
     ev = data["evaluation"]
+    domain = get_domain(env_id)
+    unknown = [k for k in ev["options"] if k not in domain.gs_options]
+    if unknown:
+        raise ResultError("evaluation.options", f"{unknown} {'is not a GS option' if len(unknown) == 1 else 'are not GS options'} "
+                          f"of {env_id} (its options: {', '.join(domain.gs_options) or 'none'})")
     try:
-        agents_of_domain = get_domain(env_id).agents(**ev["options"])
+        agents_of_domain = domain.agents(**ev["options"])
     except Exception as exc:  # the domain's package failed to import, or bad options
         raise ResultError("env_id", f"domain {env_id!r} is not available with these options: {exc}") from None
     for field in ("agents", "trained_agents"):
@@ -140,6 +146,13 @@ def validate_result(data) -> dict:
         raise ResultError("evaluation.protocol", f"{ev['protocol']!r}, but these seeds, options and agents make "
                           f"it {want!r}")
     kind = data["policy"]["kind"]
+    if kind in ("random", "scripted"):
+        # a reference policy is a reference entry: nothing was trained, and it is named as itself
+        if data["training"] is not None or data["algorithm"] != kind or data["trained_agents"]:
+            raise ResultError("training", f"the reference policy {kind!r} makes a reference entry: training null, "
+                              f"algorithm {kind!r}, no trained agents")
+    if "provenance" in data and kind != "model":
+        raise ResultError("provenance", "only trained policies have a provenance")
     for i, s in enumerate(data["scores"]):
         where = f"scores.{i}"
         if len(s["returns"]) != ev["episodes"]:
@@ -179,7 +192,7 @@ def validate_result(data) -> dict:
                 _close(data["per_agent_scores"][a], v) for a, v in want_agents.items()):
             raise ResultError("per_agent_scores", "does not match the per-agent returns")
 
-    _check_metrics(data, get_domain(env_id).metrics)
+    _check_metrics(data, domain.metrics)
 
     training = data["training"]
     if training is None:
@@ -217,32 +230,27 @@ def _check_metrics(data: dict, known: dict) -> None:
                           "and the top level is their mean with a t interval over seeds)")
 
 
-def _refuse_constant(name):
-    raise ValueError(f"{name} is not a number JSON allows")
-
-
 def parse_result_text(text: str, where: str) -> dict:
+    """JSON as :func:`~ials_zoo.utils.loads_untrusted_json` parses it (depth, integer size and
+    NaN limits), or a :class:`ResultError` naming ``where``."""
     try:
-        return json.loads(text, parse_constant=_refuse_constant)
-    except ValueError as exc:
+        return loads_untrusted_json(text)
+    except (ValueError, UnicodeDecodeError) as exc:
         raise ResultError("(file)", f"{where} is not valid JSON: {exc}") from None
 
 
-def load_result(path: str | os.PathLike) -> dict:
+def load_result(path: str | os.PathLike, follow_links: bool = True) -> dict:
     """Read and validate a result file (a :class:`ResultError` naming the file for malformed
-    JSON, a file over :data:`MAX_RESULT_BYTES`, or an inconsistent result)."""
+    JSON, a file over :data:`MAX_RESULT_BYTES`, anything but a regular file -- a fifo, a
+    device, and with ``follow_links=False`` a symbolic link -- or an inconsistent result)."""
     path = Path(path)
     try:
-        size = path.stat().st_size
-    except OSError as exc:
-        raise ResultError("(file)", f"cannot read {str(path)!r}: {exc}") from None
-    if path.is_dir():
-        raise ResultError("(file)", f"{str(path)!r} is a folder, not a result file")
-    if size > MAX_RESULT_BYTES:
-        raise ResultError("(file)", f"{str(path)!r} has {size:,} bytes; a result may have at most {MAX_RESULT_BYTES:,}")
+        raw = read_regular_file(path, MAX_RESULT_BYTES, follow_links=follow_links)
+    except ValueError as exc:
+        raise ResultError("(file)", f"{exc}; a result is a regular file of at most {MAX_RESULT_BYTES:,} bytes") from None
     try:
-        text = path.read_text()
-    except (OSError, UnicodeDecodeError) as exc:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
         raise ResultError("(file)", f"cannot read {str(path)!r}: {exc}") from None
     return validate_result(parse_result_text(text, repr(str(path))))
 

@@ -20,11 +20,14 @@ def _equal(a: float, b: float) -> bool:
 
 def verify(path, policies=None, progress: bool = False, directory=None) -> list[dict]:
     """Re-score the result at ``path``; one report per training seed: ``seed``, ``claimed``,
-    ``measured``, ``ok`` (every episode equal), ``differences`` (episodes that differ).
+    ``measured``, ``ok`` (every episode equal, every physical metric equal), ``differences``
+    (what differs). The training record in each policy file must agree with the result's
+    (:func:`~ials_zoo.leaderboard.store.training_provenance`).
 
     ``policies``: the policy file of each seed, when the recorded ones are not found (next to
     the result, as given, or in the board)."""
-    from ials_zoo.evaluation import evaluate, evaluate_joint, sha256_file
+    from ials_zoo.evaluation import load_model, sha256_file
+    from ials_zoo.leaderboard.store import training_provenance
 
     path = Path(path)
     data = load_result(path)
@@ -37,12 +40,10 @@ def verify(path, policies=None, progress: bool = False, directory=None) -> list[
         board = board_path(directory)
     except ValueError:
         board = None
-    ev = data["evaluation"]
-    reports = []
-    for i, s in enumerate(data["scores"]):
-        if kind in ("random", "scripted"):
-            spec = kind
-        else:
+    files = None
+    if kind == "model":
+        files = []
+        for i, s in enumerate(data["scores"]):
             given = policies[i] if policies else s["policy_file"]
             found = resolve_policy_file(given, path, board)
             if found is None:
@@ -51,7 +52,23 @@ def verify(path, policies=None, progress: bool = False, directory=None) -> list[
             if digest != s["policy_sha256"]:
                 raise ValueError(f"scores.{i}.policy_sha256: {str(found)!r} has sha256 {digest}, the result "
                                  f"claims {s['policy_sha256']}")
-            spec = str(found)
+            files.append(str(found))
+        provenance = training_provenance(data, [load_model(f, data["agent"]).net for f in files])
+        if data.get("provenance", provenance) != provenance:
+            raise ResultError("provenance", f"the entry says {data['provenance']!r}, its policy files say {provenance!r}")
+    return remeasure_result(data, files, progress)
+
+
+def remeasure_result(data: dict, files: list[str] | None, progress: bool = False) -> list[dict]:
+    """Evaluate every seed's policy (``files``, or the reference policy) again with the entry's
+    protocol; one report per seed (see :func:`verify`)."""
+    from ials_zoo.evaluation import evaluate, evaluate_joint
+
+    kind = data["policy"]["kind"]
+    ev = data["evaluation"]
+    reports = []
+    for i, s in enumerate(data["scores"]):
+        spec = kind if kind in ("random", "scripted") else files[i]
         if data["track"] == MULTI:
             res = evaluate_joint(data["env_id"], spec, agents=data["agents"], seeds=ev["seeds"],
                                  deterministic=ev["deterministic"], progress=progress, **ev["options"])
@@ -63,10 +80,14 @@ def verify(path, policies=None, progress: bool = False, directory=None) -> list[
             for a in data["agents"]:
                 diffs += [f"{a}:{e}" for e, (x, y) in enumerate(zip(s["per_agent_returns"][a], res.per_agent_returns[a]))
                           if not _equal(x, y)]
+        for name, claimed in (s.get("metrics") or {}).items():
+            measured = (res.metrics or {}).get(name)
+            if measured is None or not all(_equal(claimed[k], measured[k]) for k in ("mean", "ci_low", "ci_high")):
+                diffs.append(f"metrics.{name}")
         ok = not diffs and _equal(s["mean"], res.mean)
         reports.append({"seed": s["seed"], "claimed": s["mean"], "measured": res.mean,
                         "ci": [res.ci_low, res.ci_high], "ok": bool(ok), "differences": diffs})
     return reports
 
 
-__all__ = ["verify"]
+__all__ = ["remeasure_result", "verify"]

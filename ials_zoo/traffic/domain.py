@@ -33,6 +33,7 @@ DOMAIN = Domain(
     episode_length=300,
     frame_stack=1,
     agent_options=("grid",),
+    gs_options=("grid", "max_cycles", "inflow_probability", "warmup_steps", "internal_links"),
     one_simulation_per_process=True,
     null_influence=0,
     # untrained AIP: each lane gets a car w.p. 0.1 per step, the GS inflow rate (SPEC §3)

@@ -48,6 +48,7 @@ DOMAIN = Domain(
     episode_length=R.DEFAULT_MAX_CYCLES,
     frame_stack=8,
     agent_options=("robots",),
+    gs_options=("item_probability", "max_cycles", "item_lifetime", "robots"),
     null_influence=R.NONE,
     untrained_probs=((0.25, 0.25, 0.25, 0.25),) * R.N_SOURCES,
     scaling=("robots", ((4, 4), (6, 6), (10, 10))),

@@ -1,0 +1,277 @@
+"""Trust, round two: each test reproduces a way an entry could lie or a file could break the
+board (issue 18), and fails on the code before the fix."""
+
+from __future__ import annotations
+
+import copy
+import json
+import multiprocessing
+import os
+import time
+
+import numpy as np
+import pytest
+
+from ials_zoo import leaderboard as lb
+from ials_zoo.evaluation import evaluate
+from ials_zoo.leaderboard.validate import ResultError
+from ials_zoo.policy import PolicyFileError, PolicyNetwork, load_policy_file, save_policy
+from ials_zoo.stats import bootstrap_interval
+
+ENV, AGENT = "warehouse_v0", "robot_20"
+
+
+@pytest.fixture(scope="module")
+def scripted():
+    return lb.reference_result(ENV, AGENT, "scripted", episodes=20)
+
+
+@pytest.fixture
+def board(tmp_path):
+    d = tmp_path / "leaderboard"
+    (d / "results").mkdir(parents=True)
+    return d
+
+
+def _write(folder, data, name="r.json"):
+    p = folder / name
+    p.write_text(data if isinstance(data, str) else json.dumps(data))
+    return p
+
+
+def _trained_policy(folder, training: dict | None, seed=0, name="policy.safetensors", algorithm="ppo_single"):
+    """A policy file as our trainers write it: weights plus a header with the training record."""
+    rng = np.random.default_rng(seed)
+    layers = [(rng.normal(size=(1, 37, 8)).astype(np.float32), np.zeros((1, 8), np.float32)),
+              (rng.normal(size=(1, 8, 4)).astype(np.float32), np.zeros((1, 4), np.float32))]
+    meta = {"env_id": ENV, "seed": seed}
+    if training is not None:
+        meta.update(algorithm=algorithm, training=training)
+    return save_policy(PolicyNetwork([AGENT], 37, 4, layers, metadata=meta), folder / name)
+
+
+TRAINING = {"simulator": "gs", "aip": None, "seeds": [0], "env_steps": 4096, "wall_clock_seconds": 12.5,
+            "aip_seconds": 0.0, "hyperparameters": {}}
+
+
+def _model_result(folder, training=TRAINING, claimed=None, episodes=20):
+    path = _trained_policy(folder, training)
+    ev = evaluate(ENV, AGENT, str(path), episodes=episodes)
+    return lb.make_result([ev], algorithm="ppo_single", training_seeds=[0], training=dict(claimed or training))
+
+
+def _recompute(result):
+    """A forger's result: every mean and interval recomputed, so that validate accepts it."""
+    for s in result["scores"]:
+        s["mean"], s["ci_low"], s["ci_high"] = bootstrap_interval(s["returns"])
+    result["score"] = lb.overall_score(result["scores"])
+    return result
+
+
+# -- 1. an entry is what it claims to be ------------------------------------------------------
+
+def test_a_reference_cannot_pose_as_a_trained_entry(scripted):
+    forged = copy.deepcopy(scripted)
+    forged["algorithm"] = "DIALS (ours)"
+    forged["training"] = dict(TRAINING, env_steps=1000, wall_clock_seconds=3)
+    forged["trained_agents"] = [AGENT]
+    with pytest.raises(ResultError, match="reference"):
+        lb.validate_result(forged)
+
+
+def test_a_training_record_is_bound_to_its_policy_file(tmp_path, board):
+    faked = _model_result(tmp_path, claimed=dict(TRAINING, env_steps=1))
+    with pytest.raises(ResultError, match="env_steps"):
+        lb.submit(_write(tmp_path, faked), board)
+    honest = _model_result(tmp_path)
+    entry = lb.load_result(lb.submit(_write(tmp_path, honest, "h.json"), board))
+    assert entry["provenance"] == "ials_zoo"
+    assert all(r["ok"] for r in lb.verify(board / "results" / next(iter(os.listdir(board / "results"))),
+                                          directory=board))
+
+
+def test_policies_our_trainers_did_not_make_are_labelled_external(tmp_path, board):
+    result = _model_result(tmp_path, training=None, claimed=TRAINING)
+    entry = lb.load_result(lb.submit(_write(tmp_path, result), board))
+    assert entry["provenance"] == "external"
+    assert "external: training claims unverified" in lb.show(board)
+
+
+def test_a_forged_score_is_refused_at_submit(tmp_path, board, scripted):
+    forged = copy.deepcopy(scripted)
+    forged["scores"][0]["returns"] = [r + 5.0 for r in forged["scores"][0]["returns"]]
+    lb.validate_result(_recompute(forged))  # a consistent file ...
+    with pytest.raises(ResultError, match="re-measured"):  # ... that the GS does not reproduce
+        lb.submit(_write(tmp_path, forged), board)
+    assert not os.listdir(board / "results")
+
+
+@pytest.mark.parametrize("options", [{"seeds": [1]}, {"progress": True}, {"learners": ["robot_0"]},
+                                     {"deterministic": True}, {"policy": "x"}, {"agent": AGENT},
+                                     {"env_id": ENV}, {"episodes": 3}, {"render_mode": "human"}])
+def test_evaluation_options_are_the_domains_gs_options(scripted, options):
+    forged = copy.deepcopy(scripted)
+    forged["evaluation"]["options"] = options
+    forged["evaluation"]["protocol"] = "variant"
+    with pytest.raises(ResultError, match="not a GS option"):
+        lb.validate_result(forged)
+
+
+def test_a_policy_file_must_load_as_a_policy(tmp_path, board):
+    from ials_zoo.evaluation import sha256_file
+
+    result = _model_result(tmp_path)
+    fake = tmp_path / "passwd"
+    fake.write_text("root:x:0:0:root:/root:/bin/bash\n")
+    result["scores"][0]["policy_file"] = str(fake)
+    result["scores"][0]["policy_sha256"] = sha256_file(fake)
+    with pytest.raises(ResultError, match="not a policy file"):
+        lb.submit(_write(tmp_path, result), board)
+    assert not list((board).rglob("*.safetensors"))
+
+
+def test_an_sb3_entry_is_converted_and_verifies_from_the_board(tmp_path, board):
+    from stable_baselines3 import PPO
+
+    from ials_zoo.influence.ials import make_ials_vec_env
+
+    venv = make_ials_vec_env(ENV, AGENT, n_envs=2, predictor="uniform", seed=0)
+    model = PPO("MlpPolicy", venv, n_steps=8, batch_size=16, device="cpu", policy_kwargs={"net_arch": [16]})
+    model.save(tmp_path / "model.zip")
+    (tmp_path / "model.meta.json").write_text(json.dumps({"env_id": ENV, "agent": AGENT, "frame_stack": 1,
+                                                         "sb3_class": "PPO"}))
+    ev = evaluate(ENV, AGENT, str(tmp_path / "model.zip"), episodes=20)
+    result = lb.make_result([ev], algorithm="ppo_single", training_seeds=[0], training=TRAINING)
+    entry_path = lb.submit(_write(tmp_path, result), board)
+    entry = lb.load_result(entry_path)
+    assert entry["scores"][0]["policy_file"].endswith(".safetensors") and entry["provenance"] == "external"
+    load_policy_file(board / entry["scores"][0]["policy_file"])
+    (tmp_path / "model.zip").unlink()  # the board alone re-scores it
+    assert all(r["ok"] for r in lb.verify(entry_path, directory=board))
+    assert not [p for p in (board / "policies").iterdir() if p.name.startswith(".")]
+
+
+# -- 2. no entry and no file breaks the board ------------------------------------------------
+
+def test_huge_integers_and_deep_nesting_are_refused_by_name(tmp_path, scripted):
+    huge = json.dumps(scripted).replace('"notes": ""', '"notes": "", "x": 1' + "0" * 400)
+    with pytest.raises(ResultError, match="does not fit a float"):
+        lb.load_result(_write(tmp_path, huge))
+    returns = copy.deepcopy(scripted)
+    returns["scores"][0]["returns"] = ["HUGE"] * 20
+    text = json.dumps(returns).replace('"HUGE"', "1" + "0" * 400)
+    with pytest.raises(ResultError, match="does not fit a float"):
+        lb.load_result(_write(tmp_path, text, "r2.json"))
+    deep = "[" * 100_000 + "]" * 100_000
+    with pytest.raises(ResultError, match="nested"):
+        lb.load_result(_write(tmp_path, deep, "r3.json"))
+
+
+def test_user_text_cannot_break_or_rewrite_the_rendered_board(tmp_path, board):
+    training = dict(TRAINING, simulator="gs | injected | row |\n| fake | 999 |", wall_clock_seconds=1e300)
+    policy = _trained_policy(tmp_path, training, algorithm="$\\foo$")
+    result = lb.make_result([evaluate(ENV, AGENT, str(policy), episodes=20)], algorithm="$\\foo$",
+                            training_seeds=[0], training=training)
+    lb.submit(_write(tmp_path, result), board)
+    readme = lb.render(board).read_text()  # mathtext would fail on $\foo$; 1e300 s is just long
+    assert "| fake | 999 |" not in readme and "\\| injected" in readme
+    assert "$\\foo$" in lb.show(board)
+
+
+def test_links_fifos_and_devices_on_the_board_are_named_and_skipped(tmp_path, board, scripted):
+    lb.submit(_write(tmp_path, scripted), board)
+    results = board / "results"
+    os.symlink("/dev/zero", results / "zero.json")
+    os.mkfifo(results / "fifo.json")
+    secret = tmp_path / "secret.txt"
+    secret.write_text("API_KEY=hunter2")
+    os.symlink(secret, board / "writeup.md")
+    start = time.monotonic()
+    table = lb.show(board)
+    readme = lb.render(board).read_text()
+    assert time.monotonic() - start < 30  # a fifo is never waited on
+    assert "skipped zero.json" in table and "skipped fifo.json" in table and "scripted" in table
+    assert "hunter2" not in readme and "writeup.md" in readme and "scripted" in readme
+
+
+def test_policy_and_aip_files_with_deep_or_wrong_headers_are_refused(tmp_path):
+    import torch
+
+    from ials_zoo.influence.files import load_predictor_set
+    from ials_zoo.policy import HEADER_KEY
+
+    path = _trained_policy(tmp_path, TRAINING)
+    from safetensors.numpy import load_file, save_file
+
+    tensors = load_file(path)
+    from safetensors import safe_open
+
+    with safe_open(str(path), framework="np") as f:
+        header = json.loads(f.metadata()[HEADER_KEY])
+    for change, match in (({"deep": "[" * 100_000 + "]" * 100_000}, "nested"), ({"n_actions": 4.7}, "integer")):
+        bad = dict(header)
+        for k, v in change.items():
+            bad[k] = v
+        text = json.dumps(bad)
+        if "deep" in change:
+            text = text.replace('"' + change["deep"] + '"', change["deep"])
+        save_file(tensors, tmp_path / "bad.safetensors", metadata={HEADER_KEY: text})
+        with pytest.raises(PolicyFileError, match=match):
+            load_policy_file(tmp_path / "bad.safetensors")
+    save_file({k: v.astype(np.int64) for k, v in tensors.items()}, tmp_path / "int.safetensors",
+              metadata={HEADER_KEY: json.dumps(header)})
+    with pytest.raises(PolicyFileError, match="floating point"):
+        load_policy_file(tmp_path / "int.safetensors")
+    # AIP sets: a deep metadata_json, members that are not a list, a future format, duplicates
+    from ials_zoo.influence.multi import shipped_set_path
+
+    payload = torch.load(shipped_set_path(ENV), weights_only=True)
+    cases = [({"members": 5}, "members"), ({"format_version": 99}, "format version"),
+             ({"members": payload["members"][:1] * 2}, "two members"),
+             ({"members": [dict(payload["members"][0], metadata_json="[" * 100_000 + "]" * 100_000)]}, "nested")]
+    for change, match in cases:
+        torch.save(dict(payload, **change), tmp_path / "set.pt")
+        with pytest.raises(ValueError, match=match):
+            load_predictor_set(tmp_path / "set.pt")
+
+
+# -- 4. concurrency -------------------------------------------------------------------------
+
+def _submit_quietly(path, board, queue):
+    """Submit with a slow look at the board: both processes look before either writes, the
+    window in which an unlocked submit accepts both."""
+    import ials_zoo.leaderboard.store as store
+
+    original = store.load_entries
+
+    def slow(*args, **kwargs):
+        out = original(*args, **kwargs)
+        time.sleep(1.0)
+        return out
+
+    store.load_entries = slow
+    try:
+        lb.submit(path, board)
+        queue.put("accepted")
+    except ResultError as exc:
+        queue.put(f"rejected: {exc}")
+
+
+def test_two_submissions_of_one_evaluation_at_once_accept_exactly_one(tmp_path, board, scripted):
+    paths = []
+    for i in range(2):
+        r = dict(copy.deepcopy(scripted), notes=f"try {i}")
+        paths.append(_write(tmp_path, r, f"r{i}.json"))
+    ctx = multiprocessing.get_context("fork")
+    for _ in range(2):
+        for p in (board / "results").iterdir():
+            p.unlink()
+        queue = ctx.Queue()
+        procs = [ctx.Process(target=_submit_quietly, args=(p, board, queue)) for p in paths]
+        for p in procs:
+            p.start()
+        for p in procs:
+            p.join(120)
+        answers = sorted(queue.get(timeout=5) for _ in procs)
+        assert answers[0] == "accepted" and "duplicate" in answers[1], answers
+        assert len(os.listdir(board / "results")) == 1
