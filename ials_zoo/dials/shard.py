@@ -155,6 +155,15 @@ class AgentShard:
                     new.h = old.h.copy()
                 venv.predictor = new
 
+    def predictors(self) -> dict:
+        """The weights of the AIP each agent's IALS samples from now: ``{agent: {name: array}}``
+        (what DIALS's refresh must have replaced)."""
+        if self.spec.learner == "batched":
+            held = dict(zip(self.env.core.predictor.agents, self.env.core.predictor.predictors))
+        else:
+            held = {a: self.models[a]._ials_venv.predictor for a in self.agents}
+        return {a: {k: np.asarray(v).copy() for k, v in p._arrays().items()} for a, p in held.items()}
+
     def actor_layers(self) -> list:
         """Every agent's actor weights, stacked: ``[(W [A, in, out], b [A, out]), ...]``."""
         if self.spec.learner == "batched":
