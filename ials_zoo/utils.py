@@ -154,6 +154,20 @@ def check_seed(seed, name: str = "seed", upper: int = SEED_MAX, allow_none: bool
     return int(seed)
 
 
+def check_reset_options(options, known=()) -> dict:
+    """``reset(options=...)`` as PettingZoo allows it: None or a dict of the keys an env knows
+    (ours know none); a TypeError/ValueError naming what is wrong, never a silent ignore."""
+    if options is None:
+        return {}
+    if not isinstance(options, dict):
+        raise TypeError(f"reset options must be a dict or None, got {type(options).__name__} {options!r}")
+    unknown = sorted(str(k) for k in options if k not in known)
+    if unknown:
+        raise ValueError(f"unknown reset option(s) {unknown}; this env knows {sorted(known) or 'none'} (GS "
+                         "options such as item_lifetime or grid are given when the env is made)")
+    return dict(options)
+
+
 def check_output_file(path, option: str = "--out") -> Path:
     """Check, before any long work, that a file can be written at ``path``: not a folder, and
     its folder exists (or can be made) and is writable. A ValueError naming ``option``."""

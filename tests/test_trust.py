@@ -275,3 +275,77 @@ def test_two_submissions_of_one_evaluation_at_once_accept_exactly_one(tmp_path, 
         answers = sorted(queue.get(timeout=5) for _ in procs)
         assert answers[0] == "accepted" and "duplicate" in answers[1], answers
         assert len(os.listdir(board / "results")) == 1
+
+
+# -- 5. small silent acceptances --------------------------------------------------------------
+
+@pytest.mark.parametrize("env_id", ["warehouse_v0", "traffic_grid_v0"])
+@pytest.mark.parametrize("options", [{"itme_lifetime": 3}, "notadict", []])
+def test_reset_refuses_options_it_does_not_know(env_id, options):
+    from ials_zoo.core.domains import get_domain
+
+    small = {"robots": (2, 2)} if env_id == "warehouse_v0" else {"grid": (2, 2)}
+    env = get_domain(env_id).parallel_env(**small)
+    try:
+        env.reset(seed=0, options={})  # PettingZoo's empty options are fine
+        with pytest.raises((TypeError, ValueError), match="reset option"):
+            env.reset(seed=0, options=options)
+    finally:
+        env.close()
+
+
+def test_data_sets_of_nan_d_sets_or_fractional_influences_are_refused(tmp_path):
+    from ials_zoo.influence.dataset import InfluenceDataset, collect
+
+    ds = collect(ENV, "robot_0", steps=200, seed=0, gs_options={"robots": (2, 2)}, progress=False)
+    nan = {k: v.astype(np.float64) for k, v in ds.dsets.items()}
+    nan["dset"][0, 0, 0] = np.nan
+    with pytest.raises(ValueError, match="bits"):
+        InfluenceDataset(ds.region, nan, ds.influences, ds.metadata)
+    with pytest.raises(ValueError, match="whole class numbers"):
+        InfluenceDataset(ds.region, ds.dsets, ds.influences + 0.5, ds.metadata)
+
+
+def test_the_multi_agent_ials_refuses_a_string_of_agents_and_unknown_predictors():
+    from ials_zoo.influence.multi import make_ials_parallel_env
+
+    with pytest.raises(TypeError, match="list of agent ids"):
+        make_ials_parallel_env("warehouse_v0", agents="robot_0", predictor="uniform", robots=(2, 2))
+    with pytest.raises(ValueError, match="robot_9"):
+        make_ials_parallel_env("warehouse_v0", agents=["robot_0"], robots=(2, 2),
+                               predictor={"robot_0": "uniform", "robot_9": "uniform"})
+
+
+def _claim_in_child(path, queue, slow=False):
+    import ials_zoo.baselines.runs as runs
+
+    if slow:  # a slow start after looking at the folder: both runs look before either writes
+        original = runs.remove_stale_temporaries
+
+        def remove_stale_temporaries(*args, **kwargs):
+            time.sleep(1.0)
+            return original(*args, **kwargs)
+
+        runs.remove_stale_temporaries = remove_stale_temporaries
+    try:
+        run = runs.RunFolder(path)
+        queue.put("claimed")
+        time.sleep(2.0)  # still running while the other one tries
+        run.release()
+    except ValueError as exc:
+        queue.put(str(exc))
+
+
+def test_two_training_runs_cannot_share_an_out_dir(tmp_path):
+    """Two runs start on one empty folder at the same moment: one claims it, the other is
+    refused at once (a lock held for the run's life); once the first ends the folder is free
+    to resume or overwrite."""
+    ctx = multiprocessing.get_context("fork")
+    queue = ctx.Queue()
+    children = [ctx.Process(target=_claim_in_child, args=(tmp_path / "run", queue, True)) for _ in range(2)]
+    for c in children:
+        c.start()
+    for c in children:
+        c.join(30)
+    answers = [queue.get(timeout=5) for _ in children]
+    assert answers.count("claimed") == 1 and any("in use by another run" in a for a in answers), answers

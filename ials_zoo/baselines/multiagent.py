@@ -31,7 +31,7 @@ class MultiPPOSettings(PPOSettings):
     hidden: str = arg("64,64", "hidden layers of every actor and critic, comma-separated")
     normalize_advantage: bool = arg(True, "normalise advantages per agent and minibatch")
     normalize_reward: bool = arg(False, "divide rewards by the running std of each agent's discounted return")
-    frame_stack: int | None = arg(None, "observations a policy reads (default: the domain's)")
+    frame_stack: int | None = arg(None, "observations a policy reads (default: the domain's multi-agent choice)")
 
 
 def check_multi_ppo(args) -> list[int]:
@@ -48,8 +48,9 @@ def check_multi_ppo(args) -> list[int]:
 
 
 def frame_stack_of(args, domain) -> int:
-    """The observations a policy reads: ``--frame-stack`` or the domain's."""
-    return int(args.frame_stack or domain.frame_stack)
+    """The observations a policy reads: ``--frame-stack``, else the domain's multi-agent
+    choice (:attr:`DIALSSettings.frame_stack`), else the domain's own."""
+    return int(args.frame_stack or domain.dials.frame_stack or domain.frame_stack)
 
 
 def ppo_config(args, copies: int) -> dict:

@@ -32,6 +32,7 @@ from pathlib import Path
 from ials_zoo.utils import atomic_write_text, remove_stale_temporaries
 
 STATUS = "status.json"
+LOCK = ".lock"
 FINISHED, RUNNING, FAILED, INTERRUPTED, KILLED = "finished", "running", "failed", "interrupted", "killed"
 
 
@@ -77,6 +78,39 @@ class RunFolder:
         self.settings = json.loads(json.dumps(settings or {}, default=str))
         if self.path.exists() and not self.path.is_dir():
             raise ValueError(f"--out-dir {str(self.path)!r} is a file, not a folder")
+        self._lock_fd = None
+        self._claim()
+        try:
+            self._open(resume, overwrite)
+        except BaseException:
+            self.release()
+            raise
+
+    def _claim(self) -> None:
+        """Hold an exclusive lock on ``<folder>/.lock`` (flock, with this process's pid in it)
+        for the run's life: a second run on the same folder is refused at once, and the lock
+        dies with the process however it dies."""
+        import fcntl
+
+        self.path.mkdir(parents=True, exist_ok=True)
+        fd = os.open(self.path / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.read(fd, 64).decode(errors="replace").strip() or "?"
+            os.close(fd)
+            raise ValueError(f"{self.path} is in use by another run (pid {holder}); use another --out-dir") from None
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{os.getpid()}\n".encode())
+        self._lock_fd = fd
+
+    def release(self) -> None:
+        """Give the folder up (at the end of :meth:`running`; a dead process gives it up too)."""
+        if self._lock_fd is not None:
+            os.close(self._lock_fd)
+            self._lock_fd = None
+
+    def _open(self, resume: bool, overwrite: bool) -> None:
         state = run_state(self.path)
         used = self.path.is_dir() and any(not p.name.startswith(".") for p in self.path.iterdir())
         self.resuming = False
@@ -98,7 +132,9 @@ class RunFolder:
             if not overwrite:
                 raise ValueError(f"{self.path} already holds {what}; pass --resume to continue it or "
                                  "--overwrite to replace it, or use another --out-dir")
-            shutil.rmtree(self.path)
+            for p in self.path.iterdir():  # all but the lock this run holds
+                if p.name != LOCK:
+                    shutil.rmtree(p) if p.is_dir() and not p.is_symlink() else p.unlink()
         self.path.mkdir(parents=True, exist_ok=True)
         remove_stale_temporaries(self.path, max_age_seconds=0)
         self._started = time.time()
@@ -130,6 +166,8 @@ class RunFolder:
             raise
         else:
             self.set_state(FINISHED)
+        finally:
+            self.release()
 
 
 class Clock:

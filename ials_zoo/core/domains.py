@@ -68,6 +68,8 @@ class DIALSSettings:
             the samples per update divided by this).
         collect_steps: GS steps per data collection (all regions at once).
         refresh: default steps per agent between AIP refreshes (0 = train once, at the start).
+        frame_stack: observations a multi-agent (IPPO, DIALS) policy reads by default (None:
+            the domain's ``frame_stack``); chosen from the PPO ablation.
     """
 
     aip_arch: str = "mlp"
@@ -78,6 +80,7 @@ class DIALSSettings:
     copies: int = 8
     collect_steps: int = 10_000
     refresh: int = 0
+    frame_stack: int | None = None
 
 
 @dataclass(frozen=True)

@@ -55,6 +55,8 @@ class InfluenceDataset:
             raise ValueError(
                 f"influences must have shape [episodes, T, {self.region.n_sources}], got {u.shape}"
             )
+        if u.dtype.kind not in "iub" and u.size and not (np.isfinite(u).all() and (u == np.round(u)).all()):
+            raise ValueError("influences must be whole class numbers (no NaN, no fractions such as 1.5)")
         self.influences = u.astype(np.int64, copy=False)
         if set(self.dsets) != set(DSET_KINDS):
             raise ValueError(f"dsets must hold exactly the kinds {DSET_KINDS}, got {sorted(self.dsets)}")
@@ -63,6 +65,8 @@ class InfluenceDataset:
             want = (u.shape[0], u.shape[1], self.region.dset_size(kind))
             if d.shape != want:
                 raise ValueError(f"d-set {kind!r} has shape {d.shape}, expected {want}")
+            if d.size and not np.isin(d, (0, 1)).all():
+                raise ValueError(f"d-set {kind!r} must hold bits (0 or 1); found other values (NaN, fractions, ...)")
             self.dsets[kind] = d.astype(np.uint8, copy=False)
         classes = np.asarray(self.region.influence_classes)
         if u.size and ((u < 0).any() or (u >= classes).any()):

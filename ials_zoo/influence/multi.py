@@ -38,7 +38,7 @@ from ials_zoo.core.region import INFLUENCE_KEY, check_dset_kind
 from ials_zoo.influence.ials import PRETRAINED_DIR, cache_dir, resolve_predictor
 from ials_zoo.influence.predictors import InfluencePredictor
 from ials_zoo.influence.stacked import StackedPredictor
-from ials_zoo.utils import check_seed
+from ials_zoo.utils import check_reset_options, check_seed
 
 SET_SUFFIX = "__all.pt"
 
@@ -226,6 +226,7 @@ class IALSParallelEnv(ParallelEnv):
                 for i, a in enumerate(self.agents)}
 
     def reset(self, seed=None, options=None):
+        check_reset_options(options)
         seed = check_seed(seed)
         if seed is None:
             seed = self._seed
@@ -273,7 +274,14 @@ def make_multi_agent_ials(env_id: str, agents=None, n_envs: int = 1, predictor="
     from ials_zoo.core.domains import get_domain
 
     domain = get_domain(env_id)
+    if isinstance(agents, str):
+        raise TypeError(f"agents must be a list of agent ids (or None for all), got the string {agents!r}; "
+                        f"did you mean [{agents!r}]?")
     agents = domain.check_agents(agents, **options)
+    if isinstance(predictor, dict):
+        unknown = sorted(set(predictor) - set(agents))
+        if unknown:
+            raise ValueError(f"predictors given for {unknown}, which are not among the agents {agents}")
     preds = resolve_predictor_set(predictor, env_id, agents, dset_kind, seed, options)
     ls = domain.local_simulator(agents, n_envs=n_envs, **options)
     try:

@@ -54,13 +54,25 @@ CHANGES = {
     "gamma 0.95": {"gamma": 0.95},
     "no advantage normalisation": {"normalize_advantage": False},
     "frame stack 1": {"frame_stack": 1},
+    # round 2: the changes that helped in round 1, together
+    "reward normalisation + gamma 0.95": {"normalize_reward": True, "gamma": 0.95},
+    "reward normalisation + gamma 0.95 + hidden 128-128": {"normalize_reward": True, "gamma": 0.95,
+                                                           "hidden": "128,128"},
+    "frame stack 1 + gamma 0.95": {"frame_stack": 1, "gamma": 0.95},
+    "frame stack 1 + gamma 0.95 + reward normalisation": {"frame_stack": 1, "gamma": 0.95, "normalize_reward": True},
+    "frame stack 1 + gamma 0.95 + hidden 128-128": {"frame_stack": 1, "gamma": 0.95, "hidden": "128,128"},
 }
 """Cell name -> the settings it changes (``old defaults`` replaces them all)."""
 
-def domain_cells(domain) -> list[str]:
-    """The cells of a domain: every change, and a policy that reads one observation where the
-    domain's policies read several (frame stack)."""
-    return [c for c in CHANGES if c != "frame stack 1" or domain.frame_stack > 1]
+ROUND_2 = [c for c in CHANGES if " + " in c]
+
+
+def domain_cells(domain, round_: int = 1) -> list[str]:
+    """The cells of a domain in round 1 (every single change) or round 2 (the helpful changes
+    together); a policy that reads one observation only where the domain's policies read
+    several (frame stack)."""
+    cells = [c for c in CHANGES if (c in ROUND_2) == (round_ == 2)]
+    return [c for c in cells if "frame stack 1" not in c or domain.frame_stack > 1]
 
 
 def cell_settings(env_id: str, cell: str) -> dict:
@@ -155,6 +167,8 @@ def main(argv=None) -> int:
     parser.add_argument("--budget", type=int, default=51_200, help="environment steps per agent")
     parser.add_argument("--episodes", type=int, default=10, help="GS episodes of each final score")
     parser.add_argument("--cells", default="all", help="comma-separated cell names, or 'all' (the domain's)")
+    parser.add_argument("--round", type=int, default=1, choices=(1, 2),
+                        help="1: one change at a time; 2: the helpful changes together")
     parser.add_argument("--out", default="runs/ablation", help="run folder")
     parser.add_argument("--table", default=None, help="also write the table here")
     parser.add_argument("--report", action="store_true", help="only write the table from finished runs")
@@ -162,7 +176,7 @@ def main(argv=None) -> int:
     from ials_zoo.core.domains import get_domain
 
     domain = get_domain(args.env)
-    cells = domain_cells(domain) if args.cells == "all" else args.cells.split(",")
+    cells = domain_cells(domain, args.round) if args.cells == "all" else args.cells.split(",")
     for cell in cells:
         cell_settings(args.env, cell)
     if args.seeds < 1 or args.budget < 1 or args.episodes < 1:

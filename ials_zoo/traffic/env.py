@@ -12,7 +12,7 @@ from ials_zoo.traffic import network
 from ials_zoo.traffic.cores import PHASE_NAMES, observation
 from ials_zoo.traffic.lease import SimHandle
 from ials_zoo.traffic.network import APPROACHES, N_CELLS
-from ials_zoo.utils import check_seed
+from ials_zoo.utils import check_reset_options, check_seed
 
 SUMO_SEED_MAX = 2**31 - 2
 """The largest seed SUMO takes as it is (it reduces seeds modulo 2**31 - 1)."""
@@ -278,7 +278,8 @@ class TrafficGridEnv(ParallelEnv):
 
     # -- episode
     def reset(self, seed=None, options=None):
-        """Start an episode (``options`` is accepted for the PettingZoo API and unused)."""
+        """Start an episode (``options``: none are known; PettingZoo's API)."""
+        check_reset_options(options)
         seed = check_seed(seed, upper=SUMO_SEED_MAX)
         if seed is not None:
             self._seed_rng = np.random.default_rng(seed)

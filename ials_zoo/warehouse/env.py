@@ -9,7 +9,7 @@ from pettingzoo.utils import parallel_to_aec
 from pettingzoo.utils.conversions import parallel_to_aec_wrapper
 
 from ials_zoo.core.region import INFLUENCE_KEY, RegionSpec
-from ials_zoo.utils import check_seed
+from ials_zoo.utils import check_reset_options, check_seed
 from ials_zoo.warehouse import regions as R
 
 # Flat copies of the region tables: 1-d fancy indexing is cheaper than 2-d in the hot loop.
@@ -230,7 +230,8 @@ class WarehouseEnv(ParallelEnv):
         return np.concatenate([pos, ages]).astype(np.float32)
 
     def reset(self, seed: int | None = None, options: dict | None = None):
-        """Start an episode. ``seed`` makes it reproducible; ``options`` is ignored."""
+        """Start an episode. ``seed`` makes it reproducible; ``options``: none are known (PettingZoo's API)."""
+        check_reset_options(options)
         seed = check_seed(seed)
         if seed is not None or self._rng is None:
             self._rng = np.random.default_rng(seed)
