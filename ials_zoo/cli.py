@@ -46,7 +46,12 @@ def _available() -> dict:
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse with the zoo's error line: ``ials-zoo <command>: <message>``, exit 2."""
+    """argparse with the zoo's error line: ``ials-zoo <command>: <message>``, exit 2, and no
+    abbreviated options (``--total-time`` is a typo, not ``--total-timesteps``)."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
 
     def error(self, message):
         self.print_usage(sys.stderr)
@@ -56,10 +61,22 @@ class _Parser(argparse.ArgumentParser):
 def build_parser(load: str | None = None) -> argparse.ArgumentParser:
     parser = _Parser(prog="ials-zoo", description=__doc__.split("\n\n")[0].replace("\n", " "))
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    parser.commands = {}
     for name, (module, help_text) in _available().items():
         p = sub.add_parser(name, help=help_text, description=help_text)
+        parser.commands[name] = p
         if name == load:
             importlib.import_module(module).configure(p)
+    return parser
+
+
+def _deepest(parser, argv: list[str]):
+    """The (sub)parser that reads the end of ``argv``: an unknown option is that parser's error
+    (its usage), not the top level's."""
+    for token in argv:
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction) and token in action.choices:
+                return _deepest(action.choices[token], argv[argv.index(token) + 1:])
     return parser
 
 
@@ -86,8 +103,14 @@ def main(argv: list[str] | None = None) -> int:
 
     argv = sys.argv[1:] if argv is None else argv
     command = next((a for a in argv if not a.startswith("-")), None)
-    parser = build_parser(load=command)
-    args = parser.parse_args(argv)
+    try:
+        parser = build_parser(load=command)
+        args, extra = parser.parse_known_args(argv)
+    except KeyboardInterrupt:  # Ctrl-C while starting up: no traceback
+        print("ials-zoo: interrupted", file=sys.stderr)
+        return 130
+    if extra:
+        _deepest(parser, argv).error(f"unrecognized arguments: {' '.join(extra)}")
     if args.command is None:
         parser.print_help()
         return 2

@@ -62,6 +62,23 @@ def die_with_parent(sig: int = signal.SIGKILL, ignore_sigint: bool = False) -> N
             os._exit(1)
 
 
+@contextlib.contextmanager
+def sigint_ignored_at_birth():
+    """Start children inside this block: they are born ignoring ``SIGINT`` (the disposition
+    survives ``exec``), so a Ctrl-C while a fresh interpreter is still importing prints no
+    traceback from it; Ctrl-C stays the parent's to handle (it stops its workers)."""
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 def _pool_initializer(initializer, initargs) -> None:
     die_with_parent(ignore_sigint=True)
     if initializer is not None:
@@ -134,4 +151,5 @@ def process_state(pid: int) -> str | None:
         return None
 
 
-__all__ = ["WorkerError", "die_with_parent", "keep_freed_memory", "process_state", "recv_from", "shutdown_pool", "spawn_pool"]
+__all__ = [
+    "sigint_ignored_at_birth","WorkerError", "die_with_parent", "keep_freed_memory", "process_state", "recv_from", "shutdown_pool", "spawn_pool"]

@@ -155,16 +155,19 @@ def check_seed(seed, name: str = "seed", upper: int = SEED_MAX, allow_none: bool
 
 
 def check_reset_options(options, known=()) -> dict:
-    """``reset(options=...)`` as PettingZoo allows it: None or a dict of the keys an env knows
-    (ours know none); a TypeError/ValueError naming what is wrong, never a silent ignore."""
+    """``reset(options=...)``: None or a dict (anything else is a TypeError). Keys the env does
+    not know are warned about by name, not refused: PettingZoo's own API test resets with
+    ``options={"options": 1}`` and requires envs to accept it."""
     if options is None:
         return {}
     if not isinstance(options, dict):
         raise TypeError(f"reset options must be a dict or None, got {type(options).__name__} {options!r}")
     unknown = sorted(str(k) for k in options if k not in known)
     if unknown:
-        raise ValueError(f"unknown reset option(s) {unknown}; this env knows {sorted(known) or 'none'} (GS "
-                         "options such as item_lifetime or grid are given when the env is made)")
+        import warnings
+
+        warnings.warn(f"reset option(s) {unknown} are not used: this env knows {sorted(known) or 'none'} (GS options "
+                      "such as item_lifetime or grid are given when the env is made)", UserWarning, stacklevel=3)
     return dict(options)
 
 

@@ -23,13 +23,15 @@ from ials_zoo.utils import atomic_write_text
 def add_dataclass_args(parser: argparse.ArgumentParser, cls) -> argparse.ArgumentParser:
     """Add one ``--field-name`` option per field of the dataclass ``cls``.
 
-    The help text of a field is its ``metadata["help"]``; booleans get ``--x/--no-x``."""
+    The help text of a field is its ``metadata["help"]`` (or what that callable returns, for
+    defaults read from the domains when the parser is built); booleans get ``--x/--no-x``."""
     hints = typing.get_type_hints(cls)
     for f in dataclasses.fields(cls):
         name = "--" + f.name.replace("_", "-")
         aliases = list(f.metadata.get("aliases", ()))
         default = f.default if f.default is not dataclasses.MISSING else None
-        help_text = f"{f.metadata.get('help', '')} (default: {default!r})"
+        help_text = f.metadata.get("help", "")
+        help_text = f"{help_text() if callable(help_text) else help_text} (default: {default!r})"
         typ = hints[f.name]
         origin = typing.get_origin(typ)
         if origin is typing.Union or str(origin) == "<class 'types.UnionType'>":
@@ -52,7 +54,7 @@ def dataclass_from_namespace(cls, ns: argparse.Namespace):
 
 def parse_args(cls, argv=None, description: str | None = None):
     """Parse a baseline's command line into its dataclass."""
-    parser = argparse.ArgumentParser(description=description)
+    parser = argparse.ArgumentParser(description=description, allow_abbrev=False)
     add_dataclass_args(parser, cls)
     return dataclass_from_namespace(cls, parser.parse_args(argv))
 
@@ -75,8 +77,9 @@ def run_cli(module) -> int:
     return 0
 
 
-def arg(default, help: str, **kw):
-    """A dataclass field with a help text (and optional ``aliases``)."""
+def arg(default, help, **kw):
+    """A dataclass field with a help text (a string, or a callable returning one) and optional
+    ``aliases``."""
     return dataclasses.field(default=default, metadata={"help": help, **kw})
 
 

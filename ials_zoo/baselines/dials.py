@@ -57,6 +57,18 @@ from ials_zoo.baselines.multiagent import MultiPPOSettings
 REFRESH_WORDS = ("default", "once", "never")
 
 
+def _per_domain(describe) -> str:
+    """``"<env_id> <what>, ..."`` for every known domain (help texts read from the data)."""
+    from ials_zoo.core.domains import domain_ids, get_domain
+
+    return ", ".join(f"{env_id} {describe(get_domain(env_id))}" for env_id in domain_ids())
+
+
+def _refresh_text(domain) -> str:
+    refresh = domain.dials.refresh
+    return "once" if refresh == 0 else "never" if refresh is None else f"every {refresh:,}"
+
+
 @dataclass
 class Args(MultiPPOSettings):
     """Arguments of :func:`main` (``python -m baselines.dials --help``)."""
@@ -65,12 +77,14 @@ class Args(MultiPPOSettings):
     agents: str = arg("all", "learning agents, comma-separated, or 'all'")
     seed: int = arg(0, "run seed")
     total_timesteps: int | None = arg(None, "environment steps per agent (default: the domain's multi-agent budget)")
-    refresh: str = arg("default", "retrain the AIPs every N steps per agent, 'once' (at the start), 'never', or "
-                       "'default' (the domain's: traffic 100000, warehouse once)")
+    refresh: str = arg("default", lambda: "retrain the AIPs every N steps per agent, 'once' (at the start), 'never', "
+                       f"or 'default' (the domain's: {_per_domain(_refresh_text)})")
     aip: str = arg("trained", "initial AIPs: trained | untrained | uniform | fixed:P | shipped | FILE.pt")
-    collect_steps: int | None = arg(None, "GS steps per data collection (default: the domain's, 10000)")
+    collect_steps: int | None = arg(None, lambda: "GS steps per data collection (default: the domain's: "
+                                    f"{_per_domain(lambda d: f'{d.dials.collect_steps:,}')})")
     aip_epochs: int | None = arg(None, "epochs per AIP (re)training (default: the domain's)")
-    n_envs: int | None = arg(None, "IALS copies per agent (default: the domain's, traffic 2, warehouse 16)")
+    n_envs: int | None = arg(None, lambda: f"IALS copies per agent (default: the domain's: "
+                             f"{_per_domain(lambda d: str(d.dials.copies))})")
     learner: str = arg("batched", "batched (one torch program) | sb3 (one SB3 PPO per agent)")
     workers: int | None = arg(None, "worker processes (default: one per core; 0: this process)")
     backend: str = arg("process", "process | ray")
@@ -217,6 +231,7 @@ def main(args: Args | None = None) -> dict:
         ppo_config,
         save_aips,
         settings_of,
+        whole_updates,
         write_curve,
     )
     from ials_zoo.baselines.runs import Clock, RunFolder, load_training_state, save_training_state
@@ -230,7 +245,7 @@ def main(args: Args | None = None) -> dict:
     torch.set_num_threads(1)
     total = int(args.total_timesteps or domain.study.multi_agent_budget)
     per_update = args.samples_per_update
-    total = max(per_update, total // per_update * per_update)
+    total = whole_updates(total, per_update)
     eval_every = int(args.eval_every or max(per_update, total // 10))
     collect_steps = int(args.collect_steps or domain.dials.collect_steps)
     epochs = int(args.aip_epochs or domain.dials.aip_epochs)

@@ -67,6 +67,7 @@ def main(args: Args | None = None) -> dict:
         policy_file,
         ppo_config,
         settings_of,
+        whole_updates,
         write_curve,
     )
     from ials_zoo.baselines.runs import Clock, RunFolder, load_training_state, save_training_state
@@ -101,7 +102,7 @@ def main(args: Args | None = None) -> dict:
     torch.set_num_threads(1)
     ppo = ppo_config(args, args.n_envs)
     per_update = args.samples_per_update
-    total = max(per_update, int(args.total_timesteps or domain.study.multi_agent_budget) // per_update * per_update)
+    total = whole_updates(int(args.total_timesteps or domain.study.multi_agent_budget), per_update)
     eval_every = int(args.eval_every or max(per_update, total // 10))
     frame_stack = frame_stack_of(args, domain)
     obs_size = int(np.prod(domain.observation_space.shape))

@@ -47,6 +47,19 @@ def check_multi_ppo(args) -> list[int]:
     return _hidden(args.hidden)
 
 
+def whole_updates(total: int, per_update: int) -> int:
+    """The budget per agent as whole PPO updates: a budget below one update is refused, one
+    between updates is rounded down and said so (never silently changed)."""
+    total = int(total)
+    if total < per_update:
+        raise ValueError(f"--total-timesteps {total:,} is less than one PPO update ({per_update:,} samples per agent: "
+                         "--samples-per-update); give at least that")
+    if total % per_update:
+        print(f"note: --total-timesteps {total:,} rounded down to {total // per_update * per_update:,}, a whole number "
+              f"of PPO updates of {per_update:,} samples per agent", flush=True)
+    return total // per_update * per_update
+
+
 def frame_stack_of(args, domain) -> int:
     """The observations a policy reads: ``--frame-stack``, else the domain's multi-agent
     choice (:attr:`DIALSSettings.frame_stack`), else the domain's own."""
@@ -155,4 +168,4 @@ def settings_of(args, skip=("resume", "overwrite", "progress", "out_dir", "submi
 
 
 __all__ = ["JointActor", "MultiPPOSettings", "TrainingLog", "atomic_path", "check_multi_ppo", "joint_policy",
-           "frame_stack_of", "merge_shard_stats", "policy_file", "ppo_config", "save_aips", "settings_of", "write_curve"]
+           "frame_stack_of", "merge_shard_stats", "whole_updates", "policy_file", "ppo_config", "save_aips", "settings_of", "write_curve"]

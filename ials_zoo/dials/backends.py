@@ -21,7 +21,7 @@ import traceback
 from urllib.parse import urlparse
 
 from ials_zoo.dials.shard import AgentShard, ShardSpec
-from ials_zoo.processes import WorkerError, die_with_parent, process_state
+from ials_zoo.processes import WorkerError, die_with_parent, process_state, sigint_ignored_at_birth
 
 BACKENDS = ("process", "ray")
 UNRESPONSIVE_SECONDS = 20.0
@@ -102,7 +102,8 @@ class ProcessBackend:
                 conn, child = ctx.Pipe()
                 beat_r, beat_w = ctx.Pipe(duplex=False)
                 proc = ctx.Process(target=_process_worker, args=(child, beat_w, spec), daemon=True)
-                proc.start()
+                with sigint_ignored_at_birth():
+                    proc.start()
                 child.close()
                 beat_w.close()
                 self.workers.append((conn, beat_r, proc, spec))

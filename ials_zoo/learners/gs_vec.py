@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ials_zoo.processes import WorkerError, die_with_parent, recv_from
+from ials_zoo.processes import WorkerError, die_with_parent, recv_from, sigint_ignored_at_birth
 
 
 class _Copies:
@@ -96,7 +96,8 @@ class GSVecEnv:
                 parent, child = ctx.Pipe()
                 proc = ctx.Process(target=_worker, args=(child, env_id, self.agents, options, [int(x) for x in share]),
                                    daemon=True)
-                proc.start()
+                with sigint_ignored_at_birth():
+                    proc.start()
                 child.close()
                 self._workers.append((parent, proc, len(share)))
             for conn, proc, _ in self._workers:

@@ -39,6 +39,8 @@ import traceback
 import weakref
 from multiprocessing.connection import Connection
 
+from ials_zoo.processes import sigint_ignored_at_birth
+
 BACKENDS = ("auto", "inprocess", "worker")
 HEARTBEAT_SECONDS = 0.5
 CORES_MODULE = "ials_zoo.traffic.cores"
@@ -187,14 +189,15 @@ class SimHandle:
         env = dict(os.environ)
         env.setdefault("OMP_NUM_THREADS", "1")
         try:
-            self._proc = subprocess.Popen(
-                [sys.executable, "-m", "ials_zoo.traffic._worker", str(r_child), str(w_child), str(beat_w)],
-                pass_fds=(r_child, w_child, beat_w),
-                stdin=subprocess.DEVNULL,
-                stdout=subprocess.DEVNULL,
-                env=env,
-                close_fds=True,
-            )
+            with sigint_ignored_at_birth():
+                self._proc = subprocess.Popen(
+                    [sys.executable, "-m", "ials_zoo.traffic._worker", str(r_child), str(w_child), str(beat_w)],
+                    pass_fds=(r_child, w_child, beat_w),
+                    stdin=subprocess.DEVNULL,
+                    stdout=subprocess.DEVNULL,
+                    env=env,
+                    close_fds=True,
+                )
         finally:
             for fd in (r_child, w_child, beat_w):
                 os.close(fd)
