@@ -11,8 +11,8 @@ from ials_zoo.influence.predictors import (
     FixedPredictor,
     GRUPredictor,
     UniformPredictor,
-    random_init_predictor,
     save_predictor,
+    untrained_predictor,
 )
 from ials_zoo.warehouse import regions as R
 
@@ -103,7 +103,7 @@ def test_collect_in_several_processes_is_the_concatenation_of_its_shares():
 def test_ials_env_api():
     from gymnasium.utils.env_checker import check_env
 
-    env = make_ials(ENV, AGENT, predictor="random-init", seed=0)
+    env = make_ials(ENV, AGENT, predictor="untrained", seed=0)
     assert isinstance(env, IALSEnv) and isinstance(env.predictor, GRUPredictor)
     check_env(env, skip_render_check=True)
     obs, info = env.reset(seed=5)
@@ -208,21 +208,21 @@ def test_predictor_names_and_errors(tmp_path):
         make_ials(ENV, AGENT, predictor="fixed:lots")
     with pytest.raises(ValueError, match=r"\[0, 1\]"):
         make_ials(ENV, AGENT, predictor="fixed:2")
-    other = save_predictor(random_init_predictor(R.region_spec("robot_3")), tmp_path / "r3.pt")
+    other = save_predictor(untrained_predictor(R.region_spec("robot_3")), tmp_path / "r3.pt")
     with pytest.raises(ValueError, match="agent 'robot_3'.*not for agent 'robot_20'"):
         make_ials(ENV, AGENT, predictor=str(other))
     with pytest.raises(ValueError, match="robot_3, not warehouse_v0/robot_20"):
-        make_ials(ENV, AGENT, predictor=random_init_predictor(R.region_spec("robot_3")))
+        make_ials(ENV, AGENT, predictor=untrained_predictor(R.region_spec("robot_3")))
     with pytest.raises(ValueError, match="another region setting"):
-        make_ials(ENV, AGENT, predictor=random_init_predictor(R.region_spec(AGENT)), item_lifetime=8)
+        make_ials(ENV, AGENT, predictor=untrained_predictor(R.region_spec(AGENT)), item_lifetime=8)
     with pytest.raises(ValueError, match="reads the 'dset' d-set, not 'full'"):
-        make_ials(ENV, AGENT, predictor=random_init_predictor(R.region_spec(AGENT)), dset_kind="full")
+        make_ials(ENV, AGENT, predictor=untrained_predictor(R.region_spec(AGENT)), dset_kind="full")
     with pytest.raises(ValueError, match="n_envs"):
         make_ials_vec_env(ENV, AGENT, n_envs=0, predictor="untrained")
 
 
 def test_predictor_object_is_copied_per_env():
-    pred = random_init_predictor(R.region_spec(AGENT), dset_kind="full", seed=4)
+    pred = untrained_predictor(R.region_spec(AGENT), dset_kind="full", seed=4)
     a = make_ials(ENV, AGENT, predictor=pred, seed=0)
     b = make_ials(ENV, AGENT, predictor=pred, seed=0)
     assert a.predictor is not b.predictor
@@ -241,7 +241,7 @@ def test_trained_uses_the_cache(tmp_path, monkeypatch):
 
     monkeypatch.setenv("IALS_ZOO_CACHE", str(tmp_path))
     region = R.region_spec(AGENT, item_probability=0.05)
-    pred = random_init_predictor(region, seed=9)
+    pred = untrained_predictor(region, seed=9)
     path = ials._cache_path(region, "gru", "dset")
     assert path.parent == tmp_path / "aip"
     save_predictor(pred, path)
@@ -287,7 +287,7 @@ def test_trained_architecture_choice_uses_the_cache(tmp_path, monkeypatch):
 
     monkeypatch.setenv("IALS_ZOO_CACHE", str(tmp_path))
     region = R.region_spec(AGENT)
-    mlp = random_init_predictor(region, arch="mlp", seed=1)
+    mlp = untrained_predictor(region, arch="mlp", seed=1)
     save_predictor(mlp, ials._cache_path(region, "mlp", "dset"))
     env = make_ials(ENV, AGENT, predictor="trained:mlp")
     np.testing.assert_array_equal(env.predictor.w1, mlp.w1)

@@ -19,8 +19,8 @@ from ials_zoo.influence.predictors import (
     cross_entropy_per_source,
     evaluate_cross_entropy,
     load_predictor,
-    random_init_predictor,
     save_predictor,
+    untrained_predictor,
 )
 
 D = 6
@@ -139,7 +139,7 @@ def test_sample_follows_the_probabilities():
 
 
 def test_gru_state_resets_and_advances():
-    pred = random_init_predictor(_region(), arch="gru", seed=1)
+    pred = untrained_predictor(_region(), arch="gru", seed=1)
     x = np.ones((2, D), np.uint8)
     pred.reset(2)
     a = pred.probs_padded(x).copy()
@@ -194,8 +194,8 @@ def test_predictor_file_roundtrip(tmp_path, kind):
     region = _region()
     data = synthetic(E=6)
     pred = {
-        "gru": lambda: random_init_predictor(region, "gru", seed=2),
-        "mlp": lambda: random_init_predictor(region, "mlp", dset_kind="full", seed=2),
+        "gru": lambda: untrained_predictor(region, "gru", seed=2),
+        "mlp": lambda: untrained_predictor(region, "mlp", dset_kind="full", seed=2),
         "fixed": lambda: FixedPredictor(region, 0.25),
         "uniform": lambda: UniformPredictor(region, probs=[[0.3, 0.7], [0.25] * 4]),
         "marginal": lambda: MarginalPredictor.fit(data),
@@ -210,7 +210,7 @@ def test_predictor_file_roundtrip(tmp_path, kind):
 
 
 def test_predictor_file_errors(tmp_path):
-    pred = random_init_predictor(_region(), "gru", seed=0)
+    pred = untrained_predictor(_region(), "gru", seed=0)
     path = save_predictor(pred, tmp_path / "p.pt")
     with pytest.raises(ValueError, match=r"agent 'a0'.*not for agent 'robot_3'"):
         load_predictor(path, agent="robot_3")
@@ -263,7 +263,7 @@ def test_network_sampling_follows_its_probabilities(classes):
         "synthetic_v0", "a0", tuple(f"s{i}" for i in range(len(classes))), classes,
         {"dset": tuple(f"d{i}" for i in range(D)), "full": tuple(f"f{i}" for i in range(D))},
     )
-    pred = random_init_predictor(region, arch="mlp", seed=3)
+    pred = untrained_predictor(region, arch="mlp", seed=3)
     pred.w_out *= 8  # sharpen the random net so the probabilities are far from uniform
     n = 20_000
     d = np.tile((np.arange(D) % 2).astype(np.uint8), (n, 1))

@@ -21,8 +21,8 @@ from ials_zoo.influence.predictors import (
     UniformPredictor,
     evaluate_cross_entropy,
     load_predictor,
-    random_init_predictor,
     save_predictor,
+    untrained_predictor,
 )
 
 
@@ -54,7 +54,7 @@ __all__ = [
     "load_predictor",
     "make_ials",
     "make_ials_vec_env",
-    "random_init_predictor",
+    "untrained_predictor",
     "save_predictor",
     "train_predictor",
 ]

@@ -37,8 +37,8 @@ from ials_zoo.influence.predictors import (
     MarginalPredictor,
     UniformPredictor,
     load_predictor,
-    random_init_predictor,
     save_predictor,
+    untrained_predictor,
 )
 from ials_zoo.influence.specs import parse_predictor
 from ials_zoo.utils import check_seed
@@ -384,7 +384,7 @@ def resolve_predictor(
             elif spec.kind == "uniform":
                 pred = UniformPredictor(region, dset_kind=kind, probs=domain.untrained_probs)
             elif spec.kind == "untrained":
-                pred = random_init_predictor(region, arch=domain.default_predictor, dset_kind=kind,
+                pred = untrained_predictor(region, arch=domain.default_predictor, dset_kind=kind,
                                              seed=0 if seed is None else seed)
             elif spec.kind == "fixed":
                 pred = FixedPredictor(region, spec.p, dset_kind=kind, null_class=domain.null_influence)
@@ -427,7 +427,7 @@ def make_ials(
         agent: the agent whose region is simulated, e.g. ``"robot_20"``.
         predictor: an :class:`InfluencePredictor`, a path, or a name (module docstring).
         dset_kind: d-set the AIP reads (``"dset"`` default, ``"full"`` for the ablation).
-        seed: seeds the first ``reset`` (LS and AIP sampling) and ``"random-init"`` weights.
+        seed: seeds the first ``reset`` (LS and AIP sampling) and ``"untrained"`` weights.
         **options: domain options, passed to the local simulator (and to the GS when an AIP
             has to be trained on demand), e.g. ``item_lifetime=8``.
     """

@@ -229,7 +229,7 @@ def init_arrays(arch: str, d: int, hidden: int, n_logits: int, seed: int = 0) ->
 
     A GRU's weights and biases are ``U(-1/sqrt(H), 1/sqrt(H))``; a linear layer's are
     ``U(-1/sqrt(fan_in), 1/sqrt(fan_in))``. Training starts from exactly these, so the
-    "random-init" predictor of a seed is the trained one's starting point.
+    untrained predictor of a seed is the trained one's starting point.
     """
     rng = np.random.default_rng(seed)
 
@@ -256,10 +256,10 @@ def init_arrays(arch: str, d: int, hidden: int, n_logits: int, seed: int = 0) ->
     raise ValueError(f"unknown AIP architecture {arch!r}; expected one of {sorted(ARCHS)}")
 
 
-def random_init_predictor(region, arch="gru", dset_kind="dset", hidden=64, seed=0):
-    """A randomly initialised (untrained) network AIP: SPEC §3's other "untrained" variant."""
+def untrained_predictor(region, arch="gru", dset_kind="dset", hidden=64, seed=0):
+    """A randomly initialised network AIP: the paper's untrained-IALS (SPEC §3)."""
     if arch not in ARCHS:
         raise ValueError(f"unknown AIP architecture {arch!r}; expected one of {sorted(ARCHS)}")
     pred = ARCHS[arch](region, dset_kind=dset_kind, hidden=hidden, seed=seed)
-    pred.metadata.update({"variant": "random-init", "seed": int(seed)})
+    pred.metadata.update({"variant": "untrained", "seed": int(seed)})
     return pred

@@ -20,7 +20,7 @@ from ials_zoo.influence.networks import (
     GRUPredictor,
     MLPPredictor,
     init_arrays,
-    random_init_predictor,
+    untrained_predictor,
 )
 
 __all__ = [
@@ -37,6 +37,6 @@ __all__ = [
     "evaluate_cross_entropy",
     "init_arrays",
     "load_predictor",
-    "random_init_predictor",
+    "untrained_predictor",
     "save_predictor",
 ]

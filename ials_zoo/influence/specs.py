@@ -7,7 +7,7 @@ A *predictor spec* names the AIP of an IALS:
 ``trained:gru``      the same with a given architecture (memory / no-memory AIP, paper §5.4)
 ``trained:mlp``
 ``untrained``        the domain's AIP network at a random initialisation (the paper's
-                     untrained-IALS); alias ``random-init``
+                     untrained-IALS)
 ``uniform``          fixed per-class probabilities (``Domain.untrained_probs``, SPEC §3)
 ``fixed:P``          F-IALS: each source "active" with probability P, in [0, 1]
 ``marginal``         F-IALS with the empirical marginal of the trained AIP's data
@@ -75,7 +75,7 @@ def parse_predictor(text) -> PredictorSpec:
     if name in ("trained", "untrained", "uniform", "marginal"):
         return PredictorSpec(name)
     if name in ("random-init", "random_init"):
-        return PredictorSpec("untrained")
+        raise ValueError(f"predictor {text!r} is now called 'untrained' (a randomly initialised network)")
     if name.startswith("trained:"):
         arch = name.split(":", 1)[1]
         if arch not in ("gru", "mlp"):

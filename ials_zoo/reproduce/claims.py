@@ -40,17 +40,6 @@ CE_ROWS = (("untrained", "untrained (randomly initialised network, the paper's)"
            ("marginal", "marginal"))
 
 
-def normalize_ce(ce: dict) -> dict:
-    """Cross-entropy rows under today's names: reports written before the influence package
-    renamed its rows called the random network "random-init" and the fixed probabilities
-    "untrained"; now they are "untrained" and "uniform"."""
-    if "random-init" in ce and "uniform" not in ce:
-        ce = dict(ce)
-        ce["uniform"] = ce.pop("untrained")
-        ce["untrained"] = ce.pop("random-init")
-    return ce
-
-
 def _load(path: Path):
     try:
         return json.loads(Path(path).read_text())
@@ -227,7 +216,7 @@ def training_claims(env_id: str, summary: dict, aip_report: dict | None) -> list
                     "measured": fx["score_ratio_to_gs"], "holds": fx["score_ratio_to_gs"] >= TARGET_SCORE_RATIO,
                     "paper": "yes in traffic, no in the warehouse"})
     if aip_report:
-        ce = normalize_ce(aip_report["cross_entropy"])
+        ce = aip_report["cross_entropy"]
         t, u = ce["trained"]["test"], ce["untrained"]["test"]
         out.append({"id": "ce", "claim": "AIP test CE trained << untrained", "measured": (t, u),
                     "ratio": t / max(u, 1e-12), "holds": t < u,

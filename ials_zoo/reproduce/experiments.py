@@ -250,7 +250,7 @@ def biased_policy(env_id: str, seed: int = 0, p: float = 0.7):
 def _ablation_direction(train, test_sets: dict, arch: str, epochs, seed: int) -> dict:
     """AIPs on the d-set and the full observation (+ references) trained on ``train``, scored
     on its own test split and on each data set of ``test_sets``."""
-    from ials_zoo.influence.predictors import MarginalPredictor, UniformPredictor, random_init_predictor
+    from ials_zoo.influence.predictors import MarginalPredictor, UniformPredictor, untrained_predictor
     from ials_zoo.influence.train import train_predictor, untrained_probs
 
     train_idx, test_idx = train.split(0.1, seed=seed)
@@ -261,7 +261,7 @@ def _ablation_direction(train, test_sets: dict, arch: str, epochs, seed: int) ->
         reports[kind] = {k: rep[k] for k in ("cross_entropy", "train_seconds", "hyperparameters")}
     preds["marginal"] = MarginalPredictor.fit(train, episodes=train_idx)
     preds["uniform"] = UniformPredictor(train.region, probs=untrained_probs(train.region))
-    preds["untrained"] = random_init_predictor(train.region, arch=arch, seed=seed)
+    preds["untrained"] = untrained_predictor(train.region, arch=arch, seed=seed)
     return {"cross_entropy": off_policy_cross_entropy(preds, train, test_idx, test_sets), "training": reports}
 
 

@@ -26,7 +26,6 @@ from ials_zoo.reproduce.claims import (  # noqa: F401 - names of the former sing
     load_runs,
     memory_claims,
     memory_stats,
-    normalize_ce,
     paper_steps_per_second,
     reference_scores,
     summarize_dials,
@@ -151,7 +150,7 @@ def training_section(key, summary, aip_report, refs, png_name, budget_note) -> l
     paper = PAPER.get(env_id, {})
     L += [""]
     if aip_report:
-        ce = normalize_ce(aip_report["cross_entropy"])
+        ce = aip_report["cross_entropy"]
         L += ["AIP (trained once for this study, timed here):", "",
               "| | measured | paper (SPEC §4) |", "|---|---|---|",
               f"| data collection (s) | {_f(aip_report['dataset'].get('collect_seconds'), 1)} "
