@@ -306,3 +306,18 @@ def test_influence_rates_tell_a_fixed_probability_apart_from_none():
     assert some["observation_mean"] > none["observation_mean"]
     with pytest.raises(ValueError, match="episodes"):
         influence_rates("traffic_grid_v0", "tls_12", "fixed:0.5", episodes=0)
+
+
+def test_nothing_is_trained_behind_the_callers_back(tmp_path, monkeypatch, capsys):
+    """make_ials (and gymnasium.make through it) never collects data or trains: without a
+    shipped or cached AIP it says how to get one; predictor='train' opts in."""
+    monkeypatch.setenv("IALS_ZOO_CACHE", str(tmp_path))
+    with pytest.raises(FileNotFoundError, match="predictor='train'"):
+        make_ials(ENV, "robot_3", robots=(2, 2))
+    with pytest.raises(FileNotFoundError, match="train-aip"):
+        gymnasium.make("ials_zoo/IALS-warehouse_v0", agent="robot_3", robots=(2, 2))
+    assert not list(tmp_path.rglob("*.pt")) and "collecting" not in capsys.readouterr().out
+    from ials_zoo.influence.specs import parse_predictor
+
+    assert parse_predictor("train").train_if_missing and not parse_predictor("trained").train_if_missing
+    assert str(parse_predictor("train:gru")) == "train:gru"

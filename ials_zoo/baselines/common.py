@@ -165,7 +165,7 @@ def predictor_record(venv, simulator: str, env_id: str, agent: str) -> dict | No
     file = None
     if os.path.exists(simulator):
         file = simulator
-    elif predictor_for(simulator) in ("trained", "marginal"):
+    elif predictor_for(simulator).startswith(("trained", "marginal")):
         from ials_zoo.influence.ials import pretrained_path
 
         shipped = pretrained_path(env_id, agent)

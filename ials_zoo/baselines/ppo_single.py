@@ -151,6 +151,8 @@ def make_training_env(args: Args, agent: str):
     from ials_zoo.influence.ials import make_ials_vec_env
 
     kw = dict(options) if args.dset_kind is None else dict(options, dset_kind=args.dset_kind)
+    if predictor.startswith("trained"):  # a training command may train its AIP (and says so)
+        predictor = "train" + predictor[len("trained"):]
     venv = make_ials_vec_env(args.env_id, agent, n_envs=args.n_envs, predictor=predictor,
                              seed=args.seed, **kw)
     return venv, predictor_record(venv, args.simulator, args.env_id, agent)

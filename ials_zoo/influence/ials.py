@@ -316,11 +316,12 @@ def trained_predictor(
     dset_kind: str = "dset",
     arch: str | None = None,
     options: dict | None = None,
-    train_if_missing: bool = True,
+    train_if_missing: bool = False,
     progress: bool = True,
     steps: int = DEFAULT_COLLECT_STEPS,
 ) -> InfluencePredictor:
-    """The trained AIP of ``agent``: shipped, else cached, else collected + trained + cached.
+    """The trained AIP of ``agent``: shipped, else cached, else (``train_if_missing`` only)
+    collected + trained + cached; without it a FileNotFoundError says how to train one.
 
     A shipped/cached AIP is used only if it was trained for exactly this region setting
     (``RegionSpec`` incl. its params), d-set kind and architecture (default: the domain's).
@@ -339,7 +340,8 @@ def trained_predictor(
     if not train_if_missing:
         raise FileNotFoundError(
             f"no trained influence predictor for {env_id}/{agent} ({dset_kind!r} d-set, "
-            f"options {options}); run `ials-zoo train-aip --env {env_id} --agent {agent}`"
+            f"options {options}); train one with `ials-zoo train-aip --env {env_id} --agent {agent}` "
+            "and pass its file, or ask for predictor='train' to have it collected and trained now (minutes)"
         )
     from ials_zoo.influence.dataset import collect
     from ials_zoo.influence.train import format_report, train_predictor
@@ -380,7 +382,8 @@ def resolve_predictor(
         else:
             region = domain.region_spec(agent, **options)
             if spec.kind == "trained":
-                pred = trained_predictor(env_id, agent, kind, arch=spec.arch, options=options)
+                pred = trained_predictor(env_id, agent, kind, arch=spec.arch, options=options,
+                                         train_if_missing=spec.train_if_missing)
             elif spec.kind == "uniform":
                 pred = UniformPredictor(region, dset_kind=kind, probs=domain.untrained_probs)
             elif spec.kind == "untrained":

@@ -55,7 +55,7 @@ def _set_cache_path(env_id, regions, arch, dset_kind) -> Path:
 
 
 def trained_predictor_set(env_id: str, agents=None, dset_kind: str = "dset", options: dict | None = None,
-                          train_if_missing: bool = True, progress: bool = True, steps: int | None = None) -> dict:
+                          train_if_missing: bool = False, progress: bool = True, steps: int | None = None) -> dict:
     """``{agent: AIP}`` of every agent: shipped, else cached, else trained (module docstring).
     A shipped or cached set is used only if it was trained for exactly these regions (their
     ``RegionSpec`` incl. params) and d-set kind."""
@@ -73,8 +73,9 @@ def trained_predictor_set(env_id: str, agents=None, dset_kind: str = "dset", opt
             if all(a in found and found[a].region == regions[a] and found[a].dset_kind == dset_kind for a in agents):
                 return {a: found[a] for a in agents}
     if not train_if_missing:
-        raise FileNotFoundError(f"no trained AIPs for the agents of {env_id} (options {options}); run "
-                                f"`ials-zoo train-aip --env {env_id} --agent all --out FILE.pt`")
+        raise FileNotFoundError(f"no trained AIPs for the agents of {env_id} (options {options}); train them with "
+                                f"`ials-zoo train-aip --env {env_id} --agent all --out FILE.pt` and pass the file, "
+                                "or ask for predictor='train' to have them collected and trained now (minutes)")
     from ials_zoo.influence.dataset import collect_all
     from ials_zoo.influence.train import train_predictors
 
@@ -113,7 +114,7 @@ def resolve_predictor_set(predictor, env_id: str, agents, dset_kind: str | None 
             found = load_predictor_set(spec.path, env_id=env_id)
             return resolve_predictor_set(found, env_id, agents, dset_kind, seed, options)
         if spec.kind == "trained" and spec.arch is None:
-            found = trained_predictor_set(env_id, agents, kind, options)
+            found = trained_predictor_set(env_id, agents, kind, options, train_if_missing=spec.train_if_missing)
             return [found[a] for a in agents]
     return [resolve_predictor(predictor, env_id, a, dset_kind, seed, options) for a in agents]
 

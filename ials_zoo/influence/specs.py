@@ -3,9 +3,12 @@
 A *predictor spec* names the AIP of an IALS:
 
 ==================  ==========================================================================
-``trained``          the AIP shipped with the package, else cached, else trained on demand
+``trained``          the AIP shipped with the package, else cached (else an error saying how to
+                     train one: nothing is trained behind the caller's back)
 ``trained:gru``      the same with a given architecture (memory / no-memory AIP, paper §5.4)
 ``trained:mlp``
+``train``            as ``trained``, but collect GS data and train the AIP when none is shipped
+``train:gru|mlp``    or cached (minutes; it says so, and caches the result)
 ``untrained``        the domain's AIP network at a random initialisation (the paper's
                      untrained-IALS)
 ``uniform``          fixed per-class probabilities (``Domain.untrained_probs``, SPEC §3)
@@ -25,7 +28,8 @@ import math
 import os
 from dataclasses import dataclass
 
-PREDICTOR_SPECS = "trained, trained:gru, trained:mlp, untrained, uniform, fixed:P, marginal or a .pt file"
+PREDICTOR_SPECS = ("trained, trained:gru, trained:mlp, train, train:gru, train:mlp, untrained, uniform, fixed:P, "
+                   "marginal or a .pt file")
 SIMULATOR_SPECS = "gs, ials, untrained-ials, uniform, fixed:P, marginal, trained:gru|mlp or a .pt file"
 SIMULATOR_ALIASES = {"ials": "trained", "untrained-ials": "untrained"}
 GS = "gs"
@@ -40,16 +44,19 @@ class PredictorSpec:
         arch: ``gru``/``mlp`` for ``trained:ARCH``, else None.
         p: the probability of ``fixed:P``.
         path: the file of ``file``.
+        train_if_missing: ``train[:ARCH]``: a ``trained`` AIP that may be trained on demand.
     """
 
     kind: str
     arch: str | None = None
     p: float | None = None
     path: str | None = None
+    train_if_missing: bool = False
 
     def __str__(self) -> str:
-        if self.kind == "trained" and self.arch:
-            return f"trained:{self.arch}"
+        if self.kind == "trained":
+            word = "train" if self.train_if_missing else "trained"
+            return f"{word}:{self.arch}" if self.arch else word
         if self.kind == "fixed":
             return f"fixed:{self.p:g}"
         if self.kind == "file":
@@ -76,11 +83,13 @@ def parse_predictor(text) -> PredictorSpec:
         return PredictorSpec(name)
     if name in ("random-init", "random_init"):
         raise ValueError(f"predictor {text!r} is now called 'untrained' (a randomly initialised network)")
-    if name.startswith("trained:"):
-        arch = name.split(":", 1)[1]
+    if name == "train":
+        return PredictorSpec("trained", train_if_missing=True)
+    if name.startswith(("trained:", "train:")):
+        word, arch = name.split(":", 1)
         if arch not in ("gru", "mlp"):
-            raise ValueError(f"bad predictor {text!r}; expected 'trained:gru' or 'trained:mlp'")
-        return PredictorSpec("trained", arch=arch)
+            raise ValueError(f"bad predictor {text!r}; expected '{word}:gru' or '{word}:mlp'")
+        return PredictorSpec("trained", arch=arch, train_if_missing=word == "train")
     if name.startswith("fixed:"):
         try:
             p = float(name.split(":", 1)[1])
