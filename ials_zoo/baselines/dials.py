@@ -224,6 +224,7 @@ def main(args: Args | None = None) -> dict:
     from ials_zoo.baselines.common import format_seconds
     from ials_zoo.baselines.multiagent import (
         TrainingLog,
+        final_results,
         frame_stack_of,
         joint_policy,
         merge_shard_stats,
@@ -238,7 +239,7 @@ def main(args: Args | None = None) -> dict:
     from ials_zoo.dials.backends import InProcessBackend, make_backend
     from ials_zoo.dials.shard import ShardSpec, split_agents
     from ials_zoo.evaluation import evaluate_joint
-    from ials_zoo.leaderboard import make_result, now_iso, write_result
+    from ials_zoo.leaderboard import now_iso
 
     args = args or Args()
     domain, agents, options, refresh, copies = check_args(args)
@@ -379,18 +380,14 @@ def main(args: Args | None = None) -> dict:
             path = policy_file(out, net)
         finally:
             backend.close()
-        from ials_zoo.evaluation import load_model
-
-        final = evaluate(args.final_eval_episodes, progress=args.progress, net=load_model(path))
-        final.policy_file = "policy.safetensors"
-        result = make_result([final], algorithm="dials", training=training, training_seeds=[args.seed],
-                             learning_curves=[{"seed": args.seed, "points": curve}], trained_agents=agents,
-                             submitter=args.submitter, notes=args.notes)
-        write_result(out / "result.json", result)
+        result, deterministic = final_results(out, args.env_id, path, "dials", training, curve, agents, args.seed,
+                                              args.final_eval_episodes, options, args.submitter, args.notes,
+                                              args.progress)
     s = result["score"]
     print(f"dials: GS score (mean over {len(agents)} agents) {s['mean']:.3f} [{s['ci_low']:.3f}, {s['ci_high']:.3f}] "
           f"after {steps:,} steps per agent; wall-clock {format_seconds(training['wall_clock_seconds'] + aip_seconds)} "
-          f"(of which AIP collection and training {format_seconds(aip_seconds)}); wrote {out}/result.json", flush=True)
+          f"(of which AIP collection and training {format_seconds(aip_seconds)}); deterministic "
+          f"{deterministic['score']['mean']:.3f}; wrote {out}/result.json", flush=True)
     return result
 
 

@@ -61,6 +61,7 @@ def main(args: Args | None = None) -> dict:
     from ials_zoo.baselines.multiagent import (
         TrainingLog,
         check_multi_ppo,
+        final_results,
         frame_stack_of,
         joint_policy,
         merge_shard_stats,
@@ -72,8 +73,8 @@ def main(args: Args | None = None) -> dict:
     )
     from ials_zoo.baselines.runs import Clock, RunFolder, load_training_state, save_training_state
     from ials_zoo.core.domains import domain_ids, get_domain
-    from ials_zoo.evaluation import evaluate_joint, load_model
-    from ials_zoo.leaderboard import make_result, now_iso, write_result
+    from ials_zoo.evaluation import evaluate_joint
+    from ials_zoo.leaderboard import now_iso
     from ials_zoo.learners.batched_ppo import BatchedPPO, PPOConfig
     from ials_zoo.learners.gs_vec import GSVecEnv
     from ials_zoo.learners.rollout import RolloutTrainer
@@ -174,17 +175,13 @@ def main(args: Args | None = None) -> dict:
             path = policy_file(out, policy_net())
         finally:
             env.close()
-        final = evaluate_joint(args.env_id, load_model(path), episodes=args.final_eval_episodes,
-                               progress=args.progress, **options)
-        final.policy_file = "policy.safetensors"
-        result = make_result([final], algorithm="ippo", training=training, training_seeds=[args.seed],
-                             learning_curves=[{"seed": args.seed, "points": curve}], trained_agents=agents,
-                             submitter=args.submitter, notes=args.notes)
-        write_result(out / "result.json", result)
+        result, deterministic = final_results(out, args.env_id, path, "ippo", training, curve, agents, args.seed,
+                                              args.final_eval_episodes, options, args.submitter, args.notes,
+                                              args.progress)
     s = result["score"]
     print(f"ippo: GS score (mean over {len(agents)} agents) {s['mean']:.3f} [{s['ci_low']:.3f}, {s['ci_high']:.3f}] "
-          f"after {steps:,} steps per agent; wall-clock {format_seconds(training['wall_clock_seconds'])}; wrote "
-          f"{out}/result.json", flush=True)
+          f"after {steps:,} steps per agent; wall-clock {format_seconds(training['wall_clock_seconds'])}; "
+          f"deterministic {deterministic['score']['mean']:.3f}; wrote {out}/result.json", flush=True)
     return result
 
 

@@ -154,6 +154,31 @@ def save_aips(path: Path, predictors: dict) -> None:
     save_predictor_set(predictors.values(), path)
 
 
+DETERMINISTIC_RESULT = "result_deterministic.json"
+
+
+def final_results(out: Path, env_id: str, policy_path: Path, algorithm: str, training: dict, curve: list,
+                  agents: list, seed: int, episodes: int, options: dict, submitter: str = "", notes: str = "",
+                  progress: bool = False) -> tuple[dict, dict]:
+    """The final joint policy scored on the GS twice, with the protocol's seeds: sampling its
+    actions (``result.json``, the score) and taking each agent's most likely action
+    (``result_deterministic.json``); both results are written and returned."""
+    from ials_zoo.evaluation import evaluate_joint, load_model
+    from ials_zoo.leaderboard import make_result, write_result
+
+    results = []
+    for deterministic, name in ((False, "result.json"), (True, DETERMINISTIC_RESULT)):
+        ev = evaluate_joint(env_id, load_model(policy_path), episodes=episodes, deterministic=deterministic,
+                            progress=progress, **options)
+        ev.policy_file = "policy.safetensors"
+        result = make_result([ev], algorithm=algorithm, training=training, training_seeds=[seed],
+                             learning_curves=[{"seed": seed, "points": curve}], trained_agents=agents,
+                             submitter=submitter, notes=notes)
+        write_result(Path(out) / name, result)
+        results.append(result)
+    return results[0], results[1]
+
+
 def policy_file(out: Path, net) -> Path:
     from ials_zoo.policy import save_policy
 
@@ -168,4 +193,4 @@ def settings_of(args, skip=("resume", "overwrite", "progress", "out_dir", "submi
 
 
 __all__ = ["JointActor", "MultiPPOSettings", "TrainingLog", "atomic_path", "check_multi_ppo", "joint_policy",
-           "frame_stack_of", "merge_shard_stats", "whole_updates", "policy_file", "ppo_config", "save_aips", "settings_of", "write_curve"]
+           "DETERMINISTIC_RESULT", "final_results", "frame_stack_of", "merge_shard_stats", "whole_updates", "policy_file", "ppo_config", "save_aips", "settings_of", "write_curve"]

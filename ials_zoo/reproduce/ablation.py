@@ -92,6 +92,7 @@ def _slug(cell: str) -> str:
 def run_cell(env_id: str, cell: str, seed: int, budget: int, episodes: int, out: Path) -> dict:
     """Train and score one (cell, seed); returns its record (also ``record.json``)."""
     from ials_zoo.baselines.ippo import Args, main
+    from ials_zoo.baselines.multiagent import DETERMINISTIC_RESULT
     from ials_zoo.evaluation import evaluate_joint
 
     folder = out / env_id / _slug(cell) / f"s{seed}"
@@ -103,9 +104,14 @@ def run_cell(env_id: str, cell: str, seed: int, budget: int, episodes: int, out:
                 eval_episodes=episodes, final_eval_episodes=episodes, out_dir=str(folder / "run"),
                 overwrite=True, progress=False, **settings)
     result = main(args)
-    det = evaluate_joint(env_id, str(folder / "run" / "policy.safetensors"), episodes=episodes, deterministic=True)
+    det_path = folder / "run" / DETERMINISTIC_RESULT
+    if det_path.is_file():
+        det_mean = json.loads(det_path.read_text())["score"]["mean"]
+    else:
+        det_mean = evaluate_joint(env_id, str(folder / "run" / "policy.safetensors"), episodes=episodes,
+                                  deterministic=True).mean
     record = {"env_id": env_id, "cell": cell, "seed": seed, "budget": budget, "settings": settings,
-              "score": result["score"]["mean"], "deterministic": det.mean,
+              "score": result["score"]["mean"], "deterministic": det_mean,
               "wall_clock_seconds": result["training"]["wall_clock_seconds"],
               "curve": [(p["env_steps"], p["mean"]) for p in result["learning_curves"][0]["points"]]}
     atomic_write_text(record_path, json.dumps(record, indent=2) + "\n")
