@@ -34,6 +34,13 @@ class MultiPPOSettings(PPOSettings):
     frame_stack: int | None = arg(None, "observations a policy reads (default: the domain's multi-agent choice)")
 
 
+PREVIOUS_PPO_SETTINGS = {"learning_rate": 2.5e-4, "anneal_lr": True, "n_epochs": 3, "samples_per_update": 128,
+                         "batch_size": 64, "hidden": "64,64", "ent_coef": 0.01, "gamma": 0.99,
+                         "normalize_advantage": True, "normalize_reward": False, "frame_stack": None}
+"""The multi-agent PPO settings before the ablation of ``ials_zoo.reproduce.ablation`` (SPEC §3
+with the authors' buffer of 128): kept to measure against (``ials-zoo bench``, the ablation)."""
+
+
 def check_multi_ppo(args) -> list[int]:
     """Clear errors for the PPO settings; returns the hidden sizes."""
     from ials_zoo.baselines.ppo_single import _hidden
@@ -193,4 +200,4 @@ def settings_of(args, skip=("resume", "overwrite", "progress", "out_dir", "submi
 
 
 __all__ = ["JointActor", "MultiPPOSettings", "TrainingLog", "atomic_path", "check_multi_ppo", "joint_policy",
-           "DETERMINISTIC_RESULT", "final_results", "frame_stack_of", "merge_shard_stats", "whole_updates", "policy_file", "ppo_config", "save_aips", "settings_of", "write_curve"]
+           "DETERMINISTIC_RESULT", "PREVIOUS_PPO_SETTINGS", "final_results", "frame_stack_of", "merge_shard_stats", "whole_updates", "policy_file", "ppo_config", "save_aips", "settings_of", "write_curve"]

@@ -30,6 +30,7 @@ import time
 
 import numpy as np
 
+from ials_zoo.baselines.multiagent import PREVIOUS_PPO_SETTINGS
 from ials_zoo.core.domains import domain_ids, get_domain
 from ials_zoo.utils import atomic_write_text
 
@@ -189,19 +190,22 @@ def _multi_agent_seconds(env_id: str, steps: int, seed: int, predictors, copies:
         core.close()
 
 
-def _learner_seconds(env_id: str, copies: int, seed: int, updates: int = 5) -> tuple[float, float]:
+def _learner_seconds(env_id: str, copies: int, seed: int, updates: int = 5,
+                     settings: dict | None = None) -> tuple[float, float]:
     """(seconds per agent-step of action selection, per agent-sample of a PPO update) of the
-    batched learner of every agent, at the multi-agent baselines' settings."""
+    batched learner of every agent, at the multi-agent baselines' settings (default) or at
+    ``settings`` (e.g. :data:`~ials_zoo.baselines.multiagent.PREVIOUS_PPO_SETTINGS`)."""
     import torch
 
     from ials_zoo.baselines import dials
-    from ials_zoo.baselines.multiagent import ppo_config
+    from ials_zoo.baselines.multiagent import frame_stack_of, ppo_config
     from ials_zoo.learners.batched_ppo import BatchedPPO, PPOConfig
 
     domain = get_domain(env_id)
     agents = domain.agents()
-    cfg = PPOConfig(**ppo_config(dials.Args(env_id=env_id), copies))
-    width = int(np.prod(domain.observation_space.shape)) * domain.frame_stack
+    args = dials.Args(env_id=env_id, **(settings or {}))
+    cfg = PPOConfig(**ppo_config(args, copies))
+    width = int(np.prod(domain.observation_space.shape)) * frame_stack_of(args, domain)
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
@@ -241,10 +245,10 @@ def bench_domain(env_id: str, steps: int | None, batch: int, predictor, seed: in
     print(f"[{env_id}] preparing the AIPs of {len(agents)} agents ({predictor}) ...", flush=True)
     aips = dict(zip(agents, resolve_predictor_set(predictor, env_id, agents, seed=seed)))
     runs: dict[str, list] = {k: [] for k in ("gs_one", "ials_one", "ials_batched", "gs_all", "ials_parallel",
-                                             "ials_dials", "act", "update")}
+                                             "ials_dials", "act", "update", "act_previous", "update_previous")}
     from tqdm.auto import tqdm
 
-    with tqdm(total=repeats * 7, desc=f"bench {env_id}", unit="measurement") as bar:
+    with tqdm(total=repeats * 8, desc=f"bench {env_id}", unit="measurement") as bar:
         for r in range(repeats):
             s = seed + r
             for key, fn in (
@@ -255,12 +259,14 @@ def bench_domain(env_id: str, steps: int | None, batch: int, predictor, seed: in
                 ("ials_parallel", lambda: _parallel_env_seconds(env_id, steps, s, aips)),
                 ("ials_dials", lambda: _multi_agent_seconds(env_id, steps, s, aips, copies)),
                 ("learner", lambda: _learner_seconds(env_id, copies, s)),
+                ("learner_previous", lambda: _learner_seconds(env_id, copies, s, settings=PREVIOUS_PPO_SETTINGS)),
             ):
                 bar.set_postfix_str(key)
                 value = fn()
-                if key == "learner":
-                    runs["act"].append(value[0])
-                    runs["update"].append(value[1])
+                if key.startswith("learner"):
+                    suffix = key[len("learner"):]
+                    runs["act" + suffix].append(value[0])
+                    runs["update" + suffix].append(value[1])
                 else:
                     runs[key].append(value)
                 bar.update(1)
@@ -281,7 +287,10 @@ def bench_domain(env_id: str, steps: int | None, batch: int, predictor, seed: in
             "ials_parallel_env_cost_vs_gs": summary(v["ials_parallel"] / gs_all_agent),
             "ials_dials_cost_vs_gs": summary(v["ials_dials"] / gs_all_agent)},
         "learner": {"act_us_per_agent_step": summary(v["act"] * 1e6),
-                    "update_us_per_agent_sample": summary(v["update"] * 1e6)},
+                    "update_us_per_agent_sample": summary(v["update"] * 1e6),
+                    "previous_settings": {"act_us_per_agent_step": summary(v["act_previous"] * 1e6),
+                                          "update_us_per_agent_sample": summary(v["update_previous"] * 1e6)},
+                    "update_cost_vs_previous": summary(v["update"] / v["update_previous"])},
     }
 
 
@@ -307,7 +316,9 @@ def _print_domain(row: dict) -> None:
           f"{_fmt(ea['ials_dials_cost_vs_gs'], '.2f')}   ({row['copies']} copies per agent)")
     print("  the batched PPO learner of every agent:")
     print(f"    act, µs per agent-step    {_fmt(ln['act_us_per_agent_step'], '.2f')}")
-    print(f"    update, µs per sample     {_fmt(ln['update_us_per_agent_sample'], '.2f')}")
+    print(f"    update, µs per sample     {_fmt(ln['update_us_per_agent_sample'], '.2f')}   "
+          f"vs previous settings {_fmt(ln['update_cost_vs_previous'], '.2f', 'x')} "
+          f"({_fmt(ln['previous_settings']['update_us_per_agent_sample'], '.2f')} µs)")
 
 
 

@@ -28,12 +28,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ials_zoo.baselines.multiagent import PREVIOUS_PPO_SETTINGS
 from ials_zoo.stats import t_interval
 from ials_zoo.utils import atomic_write_text
 
-OLD_DEFAULTS = {"learning_rate": 2.5e-4, "anneal_lr": True, "n_epochs": 3, "samples_per_update": 128,
-                "batch_size": 64, "hidden": "64,64", "ent_coef": 0.01, "gamma": 0.99, "normalize_advantage": True,
-                "normalize_reward": False}
+OLD_DEFAULTS = {k: v for k, v in PREVIOUS_PPO_SETTINGS.items() if k != "frame_stack"}
 """The multi-agent PPO settings before the ablation (SPEC §3 with the authors' buffer of 128)."""
 
 BASE = dict(OLD_DEFAULTS, learning_rate=1e-3, anneal_lr=False, n_epochs=10, samples_per_update=512,
