@@ -338,8 +338,16 @@ def main(args: Args | None = None) -> dict:
                 due = next_refresh()
                 if due is not None and due <= steps < total:
                     net = policy_net() if steps > 0 else None
+                    if bar is not None:
+                        bar.set_postfix_str(f"AIP round {refreshes}: GS collection + training")
+                    print(f"dials: AIP round {refreshes} at {steps:,} steps per agent: {collect_steps:,} GS steps of "
+                          f"{'the joint policy' if net else 'uniformly random agents'}, then {len(agents)} "
+                          f"{domain.dials.aip_arch.upper()} AIPs x {epochs} epochs ...", flush=True)
                     aips, rep = refresh_aips(args.env_id, agents, options, net, args.seed + refreshes, collect_steps,
                                              domain, epochs, aips, progress=False)
+                    print(f"dials: AIP round {refreshes} done: collection {rep['collect_seconds']:.0f} s, training "
+                          f"{rep['train_seconds']:.0f} s, mean test cross-entropy {rep['mean_test_cross_entropy']:.3f}",
+                          flush=True)
                     aip_seconds += rep["collect_seconds"] + rep["train_seconds"]
                     aip_split["collect"] += rep["collect_seconds"]
                     aip_split["train"] += rep["train_seconds"]
