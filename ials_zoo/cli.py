@@ -28,6 +28,7 @@ SUBCOMMANDS = {
     "leaderboard": ("ials_zoo.commands.leaderboard", "submit, show, render, verify results"),
     "reproduce": ("ials_zoo.commands.reproduce", "reproduce the paper's experiments"),
     "rates": ("ials_zoo.commands.rates", "how much influence an IALS injects, per predictor"),
+    "fidelity": ("ials_zoo.commands.fidelity", "does the multi-agent IALS reproduce the GS's influence over time?"),
 }
 
 

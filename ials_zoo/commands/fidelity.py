@@ -1,0 +1,51 @@
+"""``ials-zoo fidelity``: does the multi-agent IALS reproduce the GS's influence over whole
+trajectories, under several joint policies? (:mod:`ials_zoo.influence.fidelity`)
+
+    ials-zoo fidelity --env warehouse_v0
+    ials-zoo fidelity --env traffic_grid_v0 --episodes 20 --policies random,constant,scripted
+    ials-zoo fidelity --env warehouse_v0 --policies random,leaderboard/policies/<sha>.safetensors --out f.md
+"""
+
+from __future__ import annotations
+
+
+def configure(parser):
+    parser.add_argument("--env", required=True, help="domain id")
+    parser.add_argument("--policies", default="random,constant,scripted",
+                        help="joint policies, comma-separated: random, constant, scripted (GS only) or policy files")
+    parser.add_argument("--episodes", type=int, default=20, help="episodes per policy and simulator")
+    parser.add_argument("--agents", default=None, help="agents to report, comma-separated (default: a corner, an "
+                        "edge and the domain's default agent)")
+    parser.add_argument("--predictor", default="trained", help="the IALS's AIPs (a predictor spec or an AIP set file)")
+    parser.add_argument("--tolerance", type=float, default=0.1, help="relative difference that holds anyway")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--out", default=None, help="also write the Markdown report here (atomic)")
+
+
+def run(args) -> int:
+    import os
+
+    from ials_zoo.core.domains import get_domain
+    from ials_zoo.influence.fidelity import fidelity_report, markdown
+    from ials_zoo.utils import atomic_write_text, check_output_file, check_seed
+
+    domain = get_domain(args.env)
+    if args.episodes < 2:
+        raise ValueError(f"--episodes must be >= 2 (intervals over episodes), got {args.episodes}")
+    if not args.tolerance >= 0:
+        raise ValueError(f"--tolerance must be >= 0, got {args.tolerance}")
+    check_seed(args.seed, "--seed")
+    policies = [p.strip() for p in args.policies.split(",") if p.strip()]
+    for p in policies:
+        if p not in ("random", "constant", "scripted") and not os.path.isfile(p):
+            raise ValueError(f"--policies: {p!r} is neither random, constant, scripted nor a policy file")
+    watched = None if args.agents is None else domain.check_agents(args.agents)
+    if args.out:
+        check_output_file(args.out)
+    report = fidelity_report(args.env, policies, episodes=args.episodes, seed=args.seed, watched=watched,
+                             predictor=args.predictor, tolerance=args.tolerance)
+    text = markdown(report)
+    print(text)
+    if args.out:
+        atomic_write_text(args.out, text + "\n")
+    return 0

@@ -1,0 +1,229 @@
+"""Does the multi-agent IALS reproduce the GS? The influence over whole trajectories, under
+several joint policies, agent by agent.
+
+Usage::
+
+    ials-zoo fidelity --env <domain id> [--episodes 20] [--policies random,constant,FILE.safetensors]
+
+Every agent of the GS acts with one joint policy; the multi-agent IALS (every agent on its own
+local simulator, interacting only through its AIP) runs the same joint policy. For a few
+agents (the first and second of the domain's row-major list, a corner and an edge agent of a
+grid, and the domain's default agent, a central one) the report gives, per episode and then
+as a mean with a 95% interval over episodes, in the GS and in the IALS:
+
+* ``active``: the share of steps at which an influence source is active (``u_t`` not the
+  domain's null class: a neighbour on a shared cell, a car entering a lane);
+* ``persistence``: P(u_t = u_{t-1} | u_{t-1} active): does an active source stay active (a
+  neighbour that lingers, a platoon of cars)?
+* ``arrivals``: how many times per episode a source becomes active or changes class (one
+  lingering neighbour is one arrival in the GS; an AIP that forgets its own samples turns it
+  into many);
+* ``run_length``: the mean length of a source's active runs (stays);
+* ``gap``: the mean number of steps between a source's successive arrivals (platoons of cars
+  show as short gaps; where an arrival lasts one step, as a car entering a lane, this and
+  ``persistence`` are how the temporal structure shows);
+* ``return``: the agent's own episodic return.
+
+A row "holds" when the 95% interval of the GS - IALS difference (Welch, over episodes)
+contains 0, or when the difference is within ``--tolerance`` (relative, default 10%) of the
+GS value: the tolerance comes from the sampling error, stated in the report. Joint policies:
+``random`` (uniform), ``constant`` (every agent always takes action 0: lights that keep their
+phase, robots that walk to a shelf and stay there, the lingering case), a joint policy file
+(e.g. the board's), ``scripted`` (the GS only: scripted controllers have no IALS form).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ials_zoo.core.domains import get_domain
+
+METRICS = ("active", "persistence", "arrivals", "run_length", "gap", "return")
+
+
+@dataclass
+class Trajectories:
+    """Per episode and agent: the influence ``u`` [T, M] and the agent's return."""
+
+    influence: dict = field(default_factory=dict)  # agent -> list of [T, M] arrays
+    returns: dict = field(default_factory=dict)  # agent -> list of floats
+
+
+def _joint_actions(policy, agents, n_actions, rng, obs, stack):
+    if policy == "random":
+        return rng.integers(n_actions, size=len(agents))
+    if policy == "constant":
+        return np.zeros(len(agents), np.int64)
+    return policy.act_all(stack)
+
+
+def run(env, agents: Sequence[str], watched: Sequence[str], policy, episodes: int, seed: int,
+        n_actions: int) -> Trajectories:
+    """Run ``episodes`` of a ParallelEnv (GS or multi-agent IALS) with a joint ``policy``
+    (``"random"``, ``"constant"`` or a :class:`~ials_zoo.evaluation.NetworkPolicy`) and record
+    the ``watched`` agents' influence and returns."""
+    from ials_zoo.evaluation import FrameStack
+
+    out = Trajectories({a: [] for a in watched}, {a: [] for a in watched})
+    frames = FrameStack(getattr(policy, "frame_stack", 1))
+    rng = np.random.default_rng(seed)
+    for e in range(episodes):
+        if not isinstance(policy, str):
+            policy.reset(seed + e)
+        obs, _ = env.reset(seed=seed + e)
+        x = frames.reset(np.stack([obs[a] for a in agents]))
+        us = {a: [] for a in watched}
+        totals = dict.fromkeys(watched, 0.0)
+        while env.agents:
+            acts = _joint_actions(policy, agents, n_actions, rng, obs, x)
+            obs, rewards, _, _, infos = env.step({a: int(u) for a, u in zip(agents, acts)})
+            for a in watched:
+                us[a].append(np.asarray(infos[a]["influence"], np.int64).ravel())
+                totals[a] += float(rewards[a])
+            if env.agents:
+                x = frames.step(np.stack([obs[a] for a in agents]))
+        for a in watched:
+            out.influence[a].append(np.stack(us[a]))
+            out.returns[a].append(totals[a])
+    return out
+
+
+def episode_metrics(u: np.ndarray, null: int) -> dict:
+    """The influence metrics of one episode's ``u`` [T, M] (module docstring), pooled over the
+    region's sources."""
+    active = u != null
+    prev_active = active[:-1]
+    same = (u[1:] == u[:-1]) & prev_active
+    starts = active & np.vstack([np.ones((1, u.shape[1]), bool), (u[1:] != u[:-1])])
+    runs = []
+    for m in range(u.shape[1]):
+        length = 0
+        for t in range(u.shape[0]):
+            if active[t, m] and (t == 0 or u[t, m] == u[t - 1, m]):
+                length += 1
+            elif active[t, m]:  # a new class starts a new run
+                if length:
+                    runs.append(length)
+                length = 1
+            else:
+                if length:
+                    runs.append(length)
+                length = 0
+        if length:
+            runs.append(length)
+    gaps = [d for m in range(u.shape[1]) for d in np.diff(np.flatnonzero(starts[:, m]))]
+    return {"active": float(active.mean()),
+            "persistence": float(same.sum() / prev_active.sum()) if prev_active.any() else math.nan,
+            "arrivals": float(starts.sum()),
+            "run_length": float(np.mean(runs)) if runs else math.nan,
+            "gap": float(np.mean(gaps)) if gaps else math.nan}
+
+
+def summarise(traj: Trajectories, null: int) -> dict:
+    """``{agent: {metric: [value per episode]}}``."""
+    out = {}
+    for a, us in traj.influence.items():
+        rows = [episode_metrics(u, null) for u in us]
+        out[a] = {k: [r[k] for r in rows] for k in METRICS if k != "return"}
+        out[a]["return"] = list(traj.returns[a])
+    return out
+
+
+def compare(gs: list[float], ials: list[float], tolerance: float) -> dict:
+    """Means, the Welch 95% interval of the difference, and whether the row holds."""
+    from scipy import stats
+
+    a = np.asarray([x for x in gs if x == x], float)
+    b = np.asarray([x for x in ials if x == x], float)
+    if len(a) < 2 or len(b) < 2:
+        return {"gs": float(a.mean()) if len(a) else math.nan, "ials": float(b.mean()) if len(b) else math.nan,
+                "low": math.nan, "high": math.nan, "holds": None}
+    diff = a.mean() - b.mean()
+    va, vb = a.var(ddof=1) / len(a), b.var(ddof=1) / len(b)
+    se = math.sqrt(va + vb)
+    if se == 0:
+        low = high = diff
+    else:
+        dof = (va + vb) ** 2 / ((va ** 2 / (len(a) - 1) if va else 0) + (vb ** 2 / (len(b) - 1) if vb else 0) or 1e-300)
+        half = float(stats.t.ppf(0.975, max(dof, 1.0))) * se
+        low, high = diff - half, diff + half
+    holds = bool(low <= 0 <= high or abs(diff) <= tolerance * abs(a.mean()))
+    return {"gs": float(a.mean()), "ials": float(b.mean()), "low": float(low), "high": float(high), "holds": holds}
+
+
+def default_watched(domain, agents: Sequence[str]) -> list[str]:
+    """The first and second agents and the domain's default one (see the module docstring)."""
+    picks = [agents[0], agents[1], domain.default_agents[0]]
+    return list(dict.fromkeys(a for a in picks if a in agents))
+
+
+def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: int = 0, watched=None,
+                    predictor="trained", tolerance: float = 0.1, progress: bool = True, **options) -> dict:
+    """Run every joint policy on the GS and on the multi-agent IALS; returns
+    ``{policy name: {agent: {metric: compare(...)}}}`` and the raw per-episode values."""
+    from ials_zoo.evaluation import load_model
+    from ials_zoo.influence.multi import make_ials_parallel_env
+
+    domain = get_domain(env_id)
+    agents = domain.agents(**options)
+    watched = list(watched or default_watched(domain, agents))
+    report: dict = {"env_id": env_id, "episodes": episodes, "tolerance": tolerance, "watched": watched,
+                    "policies": {}}
+    for spec in policies:
+        name = str(spec)
+        policy = spec if spec in ("random", "constant", "scripted") else load_model(spec)
+        if progress:
+            print(f"fidelity {env_id}: {name}: GS ...", flush=True)
+        gs_env = domain.parallel_env(learners=agents, scripted_learners=(spec == "scripted"), **options)
+        try:
+            gs = run(gs_env, agents, watched, "constant" if spec == "scripted" else policy, episodes, seed,
+                     domain.n_actions)
+        finally:
+            gs_env.close()
+        gs_m = summarise(gs, domain.null_influence)
+        if spec == "scripted":
+            report["policies"][name] = {"gs_only": gs_m}
+            continue
+        if progress:
+            print(f"fidelity {env_id}: {name}: IALS ...", flush=True)
+        ials_env = make_ials_parallel_env(env_id, agents, predictor=predictor, seed=seed, **options)
+        try:
+            ials = run(ials_env, agents, watched, policy, episodes, seed, domain.n_actions)
+        finally:
+            ials_env.close()
+        ials_m = summarise(ials, domain.null_influence)
+        report["policies"][name] = {a: {k: compare(gs_m[a][k], ials_m[a][k], tolerance) for k in METRICS}
+                                    for a in watched}
+    return report
+
+
+def markdown(report: dict) -> str:
+    """The report as Markdown tables, one per joint policy."""
+    lines = [f"Fidelity of the multi-agent IALS on `{report['env_id']}`: {report['episodes']} episodes per joint "
+             f"policy, GS vs IALS, mean over episodes; a row holds when the 95% Welch interval of GS - IALS "
+             f"contains 0 or |GS - IALS| <= {report['tolerance']:.0%} of the GS value.", ""]
+    for name, rows in report["policies"].items():
+        lines += [f"**{name}**", ""]
+        if "gs_only" in rows:
+            lines += ["(scripted controllers have no IALS form: GS values only)", "",
+                      "| agent | " + " | ".join(METRICS) + " |", "|---" * (len(METRICS) + 1) + "|"]
+            for a, m in rows["gs_only"].items():
+                lines.append(f"| {a} | " + " | ".join(f"{np.nanmean(m[k]):.3f}" for k in METRICS) + " |")
+            lines.append("")
+            continue
+        lines += ["| agent | metric | GS | IALS | GS - IALS (95%) | holds |", "|---|---|---|---|---|---|"]
+        for a, metrics in rows.items():
+            for k, c in metrics.items():
+                holds = {True: "yes", False: "**no**", None: "-"}[c["holds"]]
+                lines.append(f"| {a} | {k} | {c['gs']:.3f} | {c['ials']:.3f} | [{c['low']:.3f}, {c['high']:.3f}] | "
+                             f"{holds} |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+__all__ = ["METRICS", "compare", "default_watched", "episode_metrics", "fidelity_report", "markdown", "run",
+           "summarise"]
