@@ -32,6 +32,10 @@ SUBCOMMANDS = {
 }
 
 
+_RUN_FAILURES = ("SimulationError", "WorkerDiedError", "WorkerUnresponsiveError")
+"""Run-time failures of the SUMO lease (by name: importing it here would import libsumo)."""
+
+
 def _available() -> dict:
     """The subcommands: the generic ones, then each domain's own tools (``Domain.tools``)."""
     from ials_zoo.core.domains import domain_ids, get_domain
@@ -127,6 +131,15 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"ials-zoo {args.command}: {exc}", file=sys.stderr)
         return 2
+    except RuntimeError as exc:
+        # a worker that died or stopped, a SUMO error: named by the error itself, exit 1
+        from ials_zoo.processes import WorkerError
+
+        if not isinstance(exc, WorkerError) and type(exc).__name__ not in _RUN_FAILURES or os.environ.get(
+                "IALS_ZOO_DEBUG"):
+            raise
+        print(f"ials-zoo {args.command}: {exc}", file=sys.stderr)
+        return 1
     finally:
         import signal
 

@@ -3,6 +3,7 @@ distributed training loop on every backend, and its errors.
 
 Runs use warehouse_v0 with a 2x2 grid of robots (4 learners), tiny networks and budgets."""
 
+import contextlib
 import json
 import os
 import signal
@@ -318,10 +319,31 @@ def test_a_dead_or_stopped_worker_is_named_within_seconds_and_nothing_is_left(ho
     pids = [proc.pid for _, _, proc, _ in backend.workers]
     os.kill(pids[1], signal.SIGKILL if how == "kill" else signal.SIGSTOP)
     t0 = time.monotonic()
-    with pytest.raises(WorkerError, match=f"DIALS worker 1 \\(pid {pids[1]}.*(died|stopped answering)"):
+    said = "died" if how == "kill" else "is stopped \\(SIGSTOP"
+    with pytest.raises(WorkerError, match=f"DIALS worker 1 \\(pid {pids[1]}.*{said}"):
         backend.call("train", [(128,), (128,)])
     assert time.monotonic() - t0 < 15
     assert all(_gone(p) for p in pids)
+
+
+def test_a_stopped_ray_actor_is_named_within_seconds():
+    pytest.importorskip("ray")
+    from ials_zoo.dials.backends import RayBackend
+    from ials_zoo.processes import WorkerError
+
+    backend = RayBackend(_specs())
+    try:
+        pid = backend.pids[1]
+        assert pid is not None
+        os.kill(pid, signal.SIGSTOP)
+        t0 = time.monotonic()
+        with pytest.raises(WorkerError, match=f"Ray actor 1 \\(pid {pid}\\) is stopped"):
+            backend.call("train", [(128,), (128,)])
+        assert time.monotonic() - t0 < 15
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGKILL)
+        backend.close()
 
 
 def test_killing_a_dials_run_leaves_no_worker_and_resume_finishes_it(tmp_path):

@@ -74,6 +74,13 @@ def run_cli(module) -> int:
     except (ValueError, TypeError, FileNotFoundError) as exc:
         print(f"{name}: {exc}", file=sys.stderr)
         return 2
+    except RuntimeError as exc:  # a worker died or stopped: named by the error, no traceback
+        from ials_zoo.processes import WorkerError
+
+        if not isinstance(exc, WorkerError):
+            raise
+        print(f"{name}: {exc}", file=sys.stderr)
+        return 1
     return 0
 
 

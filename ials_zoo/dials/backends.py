@@ -128,7 +128,9 @@ class ProcessBackend:
                 if conn.poll(0):
                     break
                 raise WorkerError(f"{what} died (exit code {proc.exitcode})")
-            if process_state(proc.pid) in ("T", "t") or now - last > self.unresponsive_after:
+            if process_state(proc.pid) in ("T", "t"):
+                raise WorkerError(f"{what} is stopped (SIGSTOP or a debugger: process state T)")
+            if now - last > self.unresponsive_after:
                 raise WorkerError(f"{what} stopped answering (no heartbeat for {now - last:.0f} s)")
         what = f"DIALS worker {i} (pid {proc.pid}, agents {spec.agents[0]}..{spec.agents[-1]})"
         try:
@@ -210,17 +212,36 @@ class RayBackend:
         try:
             self.actors = [actor.remote(spec) for spec in specs]
             ray.get([a.__ray_ready__.remote() for a in self.actors])
+            here = socket.gethostname()
+            # an actor on another machine cannot be watched from here (its process state)
+            self.pids = [pid if host == here else None for pid, host in ray.get([a.where.remote() for a in self.actors])]
         except BaseException:
             self.close()
             raise
 
     def call(self, method: str, args: list | None = None) -> list:
         args = args or [()] * len(self.actors)
+        refs = [getattr(a, method).remote(*x) for a, x in zip(self.actors, args)]
         try:
-            return self.ray.get([getattr(a, method).remote(*x) for a, x in zip(self.actors, args)])
+            pending = list(refs)
+            while pending:  # never wait forever: a stopped local actor is named in seconds
+                _, pending = self.ray.wait(pending, num_returns=len(pending), timeout=0.5)
+                if pending:
+                    self._check_stopped()
+            return self.ray.get(refs)
         except self.ray.exceptions.RayError as exc:
             self.close()
             raise WorkerError(f"a DIALS Ray actor failed: {exc}") from None
+        except BaseException:
+            self.close()
+            raise
+
+    def _check_stopped(self) -> None:
+        """A WorkerError naming an actor whose process (on this machine) is stopped."""
+        for i, pid in enumerate(self.pids):
+            if pid is not None and process_state(pid) in ("T", "t"):
+                raise WorkerError(f"DIALS Ray actor {i} (pid {pid}) is stopped (SIGSTOP or a debugger: process "
+                                  "state T)")
 
     def close(self):
         for a in getattr(self, "actors", []):

@@ -155,6 +155,13 @@ class AgentShard:
                     new.h = old.h.copy()
                 venv.predictor = new
 
+    def where(self) -> tuple[int, str]:
+        """This shard's process id and host (so that a backend can watch it)."""
+        import os
+        import socket
+
+        return os.getpid(), socket.gethostname()
+
     def predictors(self) -> dict:
         """The weights of the AIP each agent's IALS samples from now: ``{agent: {name: array}}``
         (what DIALS's refresh must have replaced)."""
