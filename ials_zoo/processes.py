@@ -151,5 +151,73 @@ def process_state(pid: int) -> str | None:
         return None
 
 
-__all__ = [
-    "sigint_ignored_at_birth","WorkerError", "die_with_parent", "keep_freed_memory", "process_state", "recv_from", "shutdown_pool", "spawn_pool"]
+def _proc_table() -> dict[int, tuple[int, str]]:
+    """``{pid: (parent pid, start time)}`` of every process, from ``/proc``."""
+    table = {}
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+            table[int(entry)] = (int(fields[1]), fields[19])
+        except (OSError, IndexError, ValueError):
+            continue
+    return table
+
+
+def _descendants(root: int, table: dict) -> dict[int, str]:
+    children: dict[int, list[int]] = {}
+    for pid, (ppid, _) in table.items():
+        children.setdefault(ppid, []).append(pid)
+    out, todo = {}, list(children.get(root, []))
+    while todo:
+        pid = todo.pop()
+        out[pid] = table[pid][1]
+        todo += children.get(pid, [])
+    return out
+
+
+def _reaper(parent: int, fd: int) -> None:
+    """The watchdog of :func:`reap_descendants_when_gone`: every second, remember the parent's
+    descendants; when the parent's pipe closes (it died or exited), kill those still alive."""
+    import select
+
+    me, known = os.getpid(), {}
+    while True:
+        ready, _, _ = select.select([fd], [], [], 1.0)
+        if ready and not os.read(fd, 1):
+            break
+        known.update({pid: start for pid, start in _descendants(parent, _proc_table()).items() if pid != me})
+    table = _proc_table()
+    for pid, start in known.items():
+        if pid in table and table[pid][1] == start:  # the same process, not a reused pid
+            with contextlib.suppress(OSError):
+                os.kill(pid, signal.SIGKILL)
+
+
+def reap_descendants_when_gone() -> None:
+    """Start a watchdog that kills this process's descendants once this process is gone, however
+    it goes (``kill -9`` included), for children we do not start ourselves and so cannot ask
+    to die with us (a local Ray cluster's raylet, GCS and agents). Linux only; at most one per
+    process."""
+    import subprocess
+
+    global _REAPER
+    if _REAPER is not None or not sys.platform.startswith("linux"):
+        return
+    r, w = os.pipe()
+    with sigint_ignored_at_birth():
+        _REAPER = subprocess.Popen([sys.executable, "-c", f"from ials_zoo.processes import _reaper; _reaper({os.getpid()}, {r})"],
+                                   pass_fds=(r,), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                   start_new_session=True)
+    os.close(r)
+    _REAPER_PIPE.append(w)  # held open for this process's life; its closing is the signal
+
+
+_REAPER = None
+_REAPER_PIPE: list[int] = []
+
+
+__all__ = ["WorkerError", "die_with_parent", "keep_freed_memory", "process_state", "reap_descendants_when_gone",
+           "recv_from", "shutdown_pool", "sigint_ignored_at_birth", "spawn_pool"]

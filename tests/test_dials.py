@@ -9,6 +9,7 @@ import os
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -376,3 +377,42 @@ def test_killing_a_dials_run_leaves_no_worker_and_resume_finishes_it(tmp_path):
     result = json.loads((out / "result.json").read_text())
     assert result["training"]["env_steps"] == 4096
     assert json.loads((out / "status.json").read_text())["state"] == "finished"
+
+
+def test_kill_9_of_a_ray_run_leaves_no_ray_process():
+    """The local Ray cluster a run starts (raylet, GCS, dashboard and runtime-env agents, the
+    actors) dies with the run even after kill -9 (a watchdog reaps it); nothing is left."""
+    pytest.importorskip("ray")
+    from ials_zoo.processes import _descendants, _proc_table
+
+    cmd = [sys.executable, "-m", "baselines.dials", "--env", ENV, "--agents", ",".join(AGENTS), "--env-options",
+           json.dumps(OPTIONS), "--total-timesteps", "100000", "--samples-per-update", "128", "--batch-size", "64",
+           "--n-envs", "2", "--collect-steps", "200", "--aip-epochs", "1", "--eval-episodes", "1",
+           "--final-eval-episodes", "1", "--workers", "2", "--backend", "ray", "--no-progress", "--out-dir",
+           str(Path(tempfile.mkdtemp()) / "run")]
+    root = Path(__file__).resolve().parents[1]
+    proc = subprocess.Popen(cmd, cwd=root, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 120
+        family = {}
+        while time.monotonic() < deadline:
+            family = _descendants(proc.pid, _proc_table())
+            if sum("ray::AgentShard" in _cmdline(p) for p in family) >= 2:
+                break
+            time.sleep(0.5)
+        assert sum("ray::AgentShard" in _cmdline(p) for p in family) >= 2, "no Ray actors within 120 s"
+        time.sleep(2.0)
+        family = _descendants(proc.pid, _proc_table())
+    finally:
+        proc.kill()
+        proc.wait()
+    left = [p for p in family if not _gone(p, within=30.0)]
+    assert not left, [(p, _cmdline(p)) for p in left]
+
+
+def _cmdline(pid: int) -> str:
+    try:
+        with open(f"/proc/{pid}/cmdline", "rb") as f:
+            return f.read().replace(b"\0", b" ").decode(errors="replace")
+    except OSError:
+        return ""

@@ -21,7 +21,13 @@ import traceback
 from urllib.parse import urlparse
 
 from ials_zoo.dials.shard import AgentShard, ShardSpec
-from ials_zoo.processes import WorkerError, die_with_parent, process_state, sigint_ignored_at_birth
+from ials_zoo.processes import (
+    WorkerError,
+    die_with_parent,
+    process_state,
+    reap_descendants_when_gone,
+    sigint_ignored_at_birth,
+)
 
 BACKENDS = ("process", "ray")
 UNRESPONSIVE_SECONDS = 20.0
@@ -207,6 +213,9 @@ class RayBackend:
             kwargs = {"include_dashboard": False, "log_to_driver": False}
             if address is None:
                 kwargs["num_cpus"] = max(len(specs), 1)
+                # the local Ray we start (raylet, GCS, agents) dies with us, even after kill -9;
+                # a cluster we only connect to is left alone
+                reap_descendants_when_gone()
             ray.init(address=address, **kwargs)
         actor = ray.remote(num_cpus=1)(AgentShard)
         try:
