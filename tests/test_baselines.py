@@ -268,3 +268,14 @@ def test_env_options_reach_training_and_evaluation(tmp_path):
     assert load_result(tmp_path / "r.json")["scores"][0]["returns"] == memory.returns
     with pytest.raises(ValueError, match="JSON object"):
         ppo_single.main(ppo_single.Args(env_id=ENV, env_options="[1]", out_dir=str(out)))
+
+
+def test_ppo_single_on_the_shipped_aip_charges_only_what_it_did(tmp_path):
+    """--simulator ials with the shipped AIP: the run's wall-clock is its own training; the AIP's
+    recorded cost is kept in training.aip, not charged, and its file is named portably."""
+    out = tmp_path / "run"
+    result = ppo_single.main(ppo_single.Args(simulator="ials", out_dir=str(out), **TINY))
+    aip = result["training"]["aip"]
+    assert aip["charged"] is False and aip["collection_seconds"] + aip["training_seconds"] > 0
+    assert result["training"]["aip_seconds"] == 0.0
+    assert aip["file"].startswith("ials_zoo/influence/pretrained/") and not aip["file"].startswith("/")

@@ -10,6 +10,7 @@ import json
 import os
 import time
 import typing
+from pathlib import Path
 
 import numpy as np
 
@@ -155,14 +156,17 @@ def simulator_label(simulator: str, aip: dict | None) -> str:
     return label(simulator, (aip or {}).get("variant"))
 
 
-def predictor_record(venv, simulator: str, env_id: str, agent: str) -> dict | None:
+def predictor_record(venv, simulator: str, env_id: str, agent: str, made_now: bool = True) -> dict | None:
     """What the training record says about the AIP behind an IALS vec env (None on the GS).
 
     The IALS vec env exposes its predictor as ``venv.predictor``; a trained AIP's
     ``metadata`` holds its training report, with ``dataset.collect_seconds`` (Algorithm 1)
-    and ``train_seconds``: their sum is added to the training wall-clock, as in the paper's
-    plots. Predictors that need neither (untrained, fixed) count 0; so does ``marginal``,
-    whose metadata does not carry the data collection time (documented limitation)."""
+    and ``train_seconds``: their sum is added to the training wall-clock (as in the paper's
+    plots) when this run made the AIP (``made_now``; ``charged`` in the record), and only
+    recorded when it was shipped or cached. Predictors that need neither (untrained, fixed)
+    count 0; so does ``marginal``, whose metadata does not carry the data collection time
+    (documented limitation). A shipped file is named relative to the package, not by an
+    absolute path of this machine."""
     if simulator == GS:
         return None
     pred = getattr(venv, "predictor", None)
@@ -176,7 +180,7 @@ def predictor_record(venv, simulator: str, env_id: str, agent: str) -> dict | No
         from ials_zoo.influence.ials import pretrained_path
 
         shipped = pretrained_path(env_id, agent)
-        file = str(shipped) if shipped.is_file() else None
+        file = shipped if shipped.is_file() and not made_now else None
     sha = None
     if file:
         from ials_zoo.evaluation import sha256_file
@@ -186,12 +190,25 @@ def predictor_record(venv, simulator: str, env_id: str, agent: str) -> dict | No
     return {
         "variant": str(meta.get("variant") or predictor_for(simulator)),
         "class": type(pred).__name__ if pred is not None else None,
-        "file": str(file) if file else None,
+        "file": _portable(file) if file else None,
+        "charged": bool(made_now),
         "sha256": sha,
         "collection_seconds": float(collect or 0.0),
         "training_seconds": float(train or 0.0),
         "metadata": _jsonable(meta),
     }
+
+
+def _portable(path) -> str:
+    """A file inside the installed package as ``ials_zoo/<path in the package>``; any other
+    file as given."""
+    import ials_zoo
+
+    package = Path(ials_zoo.__file__).resolve().parent
+    try:
+        return "ials_zoo/" + Path(path).resolve().relative_to(package).as_posix()
+    except ValueError:
+        return str(path)
 
 
 def _jsonable(obj):

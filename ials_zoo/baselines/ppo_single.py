@@ -151,11 +151,23 @@ def make_training_env(args: Args, agent: str):
     from ials_zoo.influence.ials import make_ials_vec_env
 
     kw = dict(options) if args.dset_kind is None else dict(options, dset_kind=args.dset_kind)
-    if predictor.startswith("trained"):  # a training command may train its AIP (and says so)
+    # an AIP file is charged (the study trains one per run, and the paper's IALS cost includes
+    # it); a shipped or cached AIP only when this run had to make it
+    made_now = True
+    if predictor.startswith("trained"):
+        made_now = False  # a training command may train its AIP (and says so)
+        from ials_zoo.influence.ials import trained_predictor
+        from ials_zoo.influence.specs import parse_predictor
+
+        try:
+            trained_predictor(args.env_id, agent, args.dset_kind or "dset", arch=parse_predictor(predictor).arch,
+                              options=options, progress=False)
+        except FileNotFoundError:
+            made_now = True  # none shipped or cached: this run collects the data and trains it
         predictor = "train" + predictor[len("trained"):]
     venv = make_ials_vec_env(args.env_id, agent, n_envs=args.n_envs, predictor=predictor,
                              seed=args.seed, **kw)
-    return venv, predictor_record(venv, args.simulator, args.env_id, agent)
+    return venv, predictor_record(venv, args.simulator, args.env_id, agent, made_now=made_now)
 
 
 def default_out_dir(args: Args, agent: str) -> Path:
@@ -197,7 +209,9 @@ def main(args: Args | None = None) -> dict:
 
     with run.running():
         venv, aip = make_training_env(args, agent)
-        aip_seconds = (aip["collection_seconds"] + aip["training_seconds"]) if aip else 0.0
+        # only what this run did is on its clock; a shipped or cached AIP's own cost is recorded
+        # in training.aip, not charged
+        aip_seconds = (aip["collection_seconds"] + aip["training_seconds"]) if aip and aip["charged"] else 0.0
         venv = VecMonitor(as_float_box(venv))
         if frame_stack > 1:
             venv = VecFrameStack(venv, frame_stack)
@@ -229,7 +243,9 @@ def main(args: Args | None = None) -> dict:
     print(f"ppo_single: GS score of {agent} {s['mean']:.3f} [{s['ci_low']:.3f}, {s['ci_high']:.3f}] "
           f"({result['evaluation']['episodes']} episodes) after {training['env_steps']:,} steps; wall-clock "
           f"{format_seconds(total)} (training" + (f" + AIP {format_seconds(training['aip_seconds'])}" if aip_seconds else "")
-          + f"); wrote {out}/result.json", flush=True)
+          + ")" + (f"; the AIP was made earlier (its own {format_seconds(aip['collection_seconds'] + aip['training_seconds'])}"
+                   " not counted)" if aip and not aip["charged"] and aip["collection_seconds"] + aip["training_seconds"] else "")
+          + f"; wrote {out}/result.json", flush=True)
     return result
 
 
