@@ -19,7 +19,9 @@ import pytest
 ENV = "warehouse_v0"
 OPTIONS = {"robots": [2, 2]}
 AGENTS = ["robot_0", "robot_1", "robot_2", "robot_3"]
+# small PPO updates (the defaults' 512 samples x 10 epochs would make these tests slow)
 TINY = dict(env_id=ENV, agents=",".join(AGENTS), env_options=json.dumps(OPTIONS), total_timesteps=256, n_envs=2,
+            samples_per_update=128, batch_size=64, n_epochs=3,
             collect_steps=200, aip_epochs=1, eval_episodes=1, final_eval_episodes=2, progress=False)
 
 
@@ -242,6 +244,7 @@ def test_ippo_on_the_gs_is_the_same_with_or_without_worker_processes(tmp_path):
     def run(name, processes):
         args = ippo.Args(env_id=ENV, agents=",".join(AGENTS), env_options=json.dumps(OPTIONS), total_timesteps=256,
                          n_envs=2, gs_processes=processes, eval_episodes=1, final_eval_episodes=2, progress=False,
+                         samples_per_update=128, batch_size=64, n_epochs=3,
                          out_dir=str(tmp_path / name))
         return ippo.main(args), tmp_path / name
 
@@ -353,6 +356,7 @@ def test_killing_a_dials_run_leaves_no_worker_and_resume_finishes_it(tmp_path):
     out = tmp_path / "run"
     cmd = [sys.executable, "-m", "baselines.dials", "--env", ENV, "--agents", ",".join(AGENTS), "--env-options",
            json.dumps(OPTIONS), "--total-timesteps", "4096", "--eval-every", "256", "--n-envs", "2",
+           "--samples-per-update", "128", "--batch-size", "64", "--n-epochs", "3",
            "--collect-steps", "200", "--aip-epochs", "1", "--eval-episodes", "1", "--final-eval-episodes", "1",
            "--workers", "2", "--no-progress", "--out-dir", str(out)]
     root = Path(__file__).resolve().parents[1]
