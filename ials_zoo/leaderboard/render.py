@@ -307,10 +307,12 @@ def render(directory=None) -> Path:
         parts.append("\n(no entries yet)\n")
     archived, _ = load_entries(board, ARCHIVE_SUBDIR)
     if archived:
-        parts.append("\n## Archive (policies not kept: these entries cannot be re-scored)\n\n"
-                     "The first single-agent study's merged 3-seed entries. Their numbers are as measured then, "
-                     "but their policy files were not kept, so `verify` cannot check them; they are not "
-                     "entries of the tracks above.\n\n")
+        parts.append("\n## Archive (superseded entries, shown apart)\n\n"
+                     "Entries of earlier studies, kept as measured then and not entries of the tracks above: "
+                     "the first single-agent study's merged 3-seed entries (their policy files were not kept, "
+                     "so `verify` cannot check them) and the first DIALS study's multi-agent entries, trained "
+                     "with the PPO settings before the ablation of `docs/ablation.md` (their policies are "
+                     "in `policies/`: `ials-zoo leaderboard verify archive/<file>.json` re-scores them).\n\n")
         for key, rows in group_entries(archived).items():
             parts.append(f"\n### {key[1]} / {key[2]}\n\n")
             parts += _md_table(rows, link=ARCHIVE_SUBDIR)
