@@ -193,9 +193,17 @@ def _plot(board: Path, key: tuple, rows: list[dict]) -> str | None:
     ax.set_xlabel(f"wall-clock {unit} (training + AIP data collection and training)")
     ax.set_ylabel("GS mean episodic return" + (" (mean over agents)" if section == MULTI else ""))
     ax.set_title(f"{env_id} / {who}")
-    ax.legend(fontsize=7)
+    return _save_figure(fig, board, key, "")
+
+
+def _save_figure(fig, board: Path, key: tuple, suffix: str) -> str:
+    """Legend, layout, an atomic PNG in ``<board>/plots/``; returns its path in the board."""
+    import matplotlib.pyplot as plt
+
+    section, env_id, who = key
+    fig.axes[0].legend(fontsize=7)
     fig.tight_layout()
-    name = f"{env_id}__{who.replace(' ', '-')}{'__multi' if section == MULTI else ''}.png"
+    name = f"{env_id}__{who.replace(' ', '-')}{'__multi' if section == MULTI else ''}{suffix}.png"
     with atomic_path(board / "plots" / name, suffix=".png") as tmp:
         fig.savefig(tmp, dpi=100, format="png")
     plt.close(fig)
@@ -230,13 +238,7 @@ def _profile_plot(board: Path, key: tuple, rows: list[dict]) -> str | None:
     ax.set_xlabel("score tau (episode return" + (", mean over agents)" if section == MULTI else ")"))
     ax.set_ylabel("fraction of episodes (all seeds) scoring above tau")
     ax.set_title(f"{env_id} / {who}: performance profiles")
-    ax.legend(fontsize=7)
-    fig.tight_layout()
-    name = f"{env_id}__{who.replace(' ', '-')}{'__multi' if section == MULTI else ''}__profile.png"
-    with atomic_path(board / "plots" / name, suffix=".png") as tmp:
-        fig.savefig(tmp, dpi=100, format="png")
-    plt.close(fig)
-    return f"plots/{name}"
+    return _save_figure(fig, board, key, "__profile")
 
 
 def _md_table(rows, link: str | None = "results") -> list[str]:
