@@ -187,7 +187,7 @@ def submit(path, directory=None, remeasure: bool = True) -> Path:
     policy of the entry, for training claims its policy files contradict, and (``remeasure``)
     for scores that the GS does not reproduce exactly; the board is left untouched in every
     failure (atomic writes, never an overwrite, one submission at a time)."""
-    from ials_zoo.leaderboard.verify import remeasure_result
+    from ials_zoo.leaderboard.remeasure import remeasure_result
 
     path = Path(path)
     board = board_path(directory)
