@@ -358,7 +358,7 @@ def test_two_training_runs_cannot_share_an_out_dir(tmp_path):
 
 def test_ctrl_c_while_starting_prints_no_traceback(tmp_path):
     """SIGINT at several moments of a command's start-up (0.5-2.5 s: the parser, the
-    baseline's imports, the workers' spawn): the command ends with status 130 and no traceback,
+    baseline's imports, the workers' spawn): the command ends interrupted (130) and no traceback,
     from itself or from a half-started worker. (Before ``import ials_zoo`` has finished, about
     the first 0.3 s, Python's own handler still prints one.)"""
     import signal
@@ -375,4 +375,6 @@ def test_ctrl_c_while_starting_prints_no_traceback(tmp_path):
         os.killpg(proc.pid, signal.SIGINT)  # as a terminal's Ctrl-C: the whole process group
         _, err = proc.communicate(timeout=60)
         assert "Traceback" not in err, (delay, err)
-        assert proc.returncode in (130, 0), (delay, proc.returncode, err)
+        # 130, or killed by the SIGINT itself (-2) when the interrupt lands as Python hands the
+        # exit status back: both say "interrupted"; 0 if it had already finished
+        assert proc.returncode in (130, -signal.SIGINT, 0), (delay, proc.returncode, err)
