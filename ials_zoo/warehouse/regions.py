@@ -367,7 +367,11 @@ def advance_items(ages: np.ndarray, occupied, appear: np.ndarray, item_lifetime)
     Returns:
         the number of items collected (removed by a robot).
     """
-    return advance_items_counted(ages, occupied, appear, item_lifetime)[0]
+    before = np.count_nonzero(ages)
+    ages[occupied] = 0
+    collected = before - np.count_nonzero(ages)
+    _age_and_appear(ages, appear, item_lifetime)
+    return collected
 
 
 def advance_items_counted(ages: np.ndarray, occupied, appear: np.ndarray, item_lifetime) -> tuple[int, int]:
@@ -376,11 +380,15 @@ def advance_items_counted(ages: np.ndarray, occupied, appear: np.ndarray, item_l
     ages[occupied] = 0
     collected = before - np.count_nonzero(ages)
     collected_age = age_before - int(ages.sum())
+    _age_and_appear(ages, appear, item_lifetime)
+    return collected, collected_age
+
+
+def _age_and_appear(ages: np.ndarray, appear: np.ndarray, item_lifetime) -> None:
     ages += ages > 0
     if item_lifetime is not None:
         ages[ages > item_lifetime] = 0
     ages += appear & (ages == 0)
-    return collected, collected_age
 
 
 # ----------------------------------------------------------------------------- scalar tables
