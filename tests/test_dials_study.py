@@ -45,8 +45,7 @@ def test_every_planned_run_passes_its_baselines_argument_check(tmp_path):
         p = dict(job.params)
         module = import_module(f"ials_zoo.baselines.{p.pop('algorithm')}")
         args = module.Args(**p)
-        if hasattr(module, "check_args"):
-            module.check_args(args)  # raises on anything a run would refuse
+        module.check_args(args)  # raises on anything a run would refuse
 
 
 @pytest.mark.parametrize("kw, word", [({"dials_variants": ("dials", "bogus")}, "dials_variants"),

@@ -50,17 +50,38 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import torch
 
 from ials_zoo.baselines.common import arg, parse_env_options, run_cli
-from ials_zoo.baselines.multiagent import MultiPPOSettings
+from ials_zoo.baselines.driver import RunPlan, check_run_args, run
+from ials_zoo.baselines.multiagent import (
+    JointActor,
+    MultiPPOSettings,
+    check_multi_ppo,
+    frame_stack_of,
+    merge_shard_stats,
+    ppo_config,
+    save_aips,
+    settings_of,
+    whole_updates,
+)
+from ials_zoo.core.domains import domain_ids, get_domain
+from ials_zoo.dials.backends import BACKENDS, InProcessBackend, check_ray_address, make_backend
+from ials_zoo.dials.shard import LEARNERS, ShardSpec, split_agents
+from ials_zoo.evaluation import sha256_file
+from ials_zoo.influence.dataset import collect_all
+from ials_zoo.influence.files import load_predictor_set
+from ials_zoo.influence.multi import resolve_predictor_set, shipped_set_path
+from ials_zoo.influence.networks import ARCHS
+from ials_zoo.influence.specs import parse_predictor
+from ials_zoo.influence.train import train_predictors
+from ials_zoo.utils import check_seed
 
 REFRESH_WORDS = ("default", "once", "never")
 
 
 def _per_domain(describe) -> str:
     """``"<env_id> <what>, ..."`` for every known domain (help texts read from the data)."""
-    from ials_zoo.core.domains import domain_ids, get_domain
-
     return ", ".join(f"{env_id} {describe(get_domain(env_id))}" for env_id in domain_ids())
 
 
@@ -121,13 +142,6 @@ def parse_refresh(text: str, default: int) -> int | None:
 
 def check_args(args: Args):
     """Clear errors before anything starts; returns (domain, agents, options, refresh, copies)."""
-    from ials_zoo.baselines.multiagent import check_multi_ppo, ppo_config
-    from ials_zoo.core.domains import domain_ids, get_domain
-    from ials_zoo.dials.backends import BACKENDS, check_ray_address
-    from ials_zoo.dials.shard import LEARNERS
-    from ials_zoo.influence.specs import parse_predictor
-    from ials_zoo.utils import check_seed
-
     if args.env_id is None:
         raise ValueError(f"name the domain to train on: --env, one of {', '.join(domain_ids())}")
     domain = get_domain(args.env_id)
@@ -137,8 +151,6 @@ def check_args(args: Args):
     check_multi_ppo(args)
     refresh = parse_refresh(args.refresh, domain.dials.refresh)
     if args.aip == "shipped":
-        from ials_zoo.influence.multi import shipped_set_path
-
         if not shipped_set_path(args.env_id).is_file():
             raise ValueError(f"--aip shipped: no AIPs ship for {args.env_id}")
         if refresh is not None:
@@ -149,10 +161,8 @@ def check_args(args: Args):
             raise ValueError(f"--aip {args.aip!r}: file not found")
         if spec.kind not in ("trained", "file") and refresh is not None:
             raise ValueError(f"--aip {args.aip} is a fixed AIP: use --refresh never (retraining would replace it)")
-    for name in ("eval_episodes", "final_eval_episodes"):
-        if getattr(args, name) < 1:
-            raise ValueError(f"{name} must be >= 1, got {getattr(args, name)}")
-    for name in ("n_envs", "total_timesteps", "collect_steps", "aip_epochs", "eval_every"):
+    check_run_args(args)
+    for name in ("collect_steps", "aip_epochs"):
         v = getattr(args, name)
         if v is not None and v < 1:
             raise ValueError(f"{name} must be >= 1, got {v}")
@@ -178,7 +188,6 @@ def default_workers(n_agents: int) -> int:
 
 def initial_aips(args, env_id, agents, options, seed) -> tuple[dict, float]:
     """``({agent: AIP}, seconds to charge)`` before round 0's collection (if any)."""
-    from ials_zoo.influence.multi import resolve_predictor_set, shipped_set_path
 
     if args.aip in ("trained", "untrained"):  # "trained": replaced by round 0's AIPs
         preds = resolve_predictor_set("untrained", env_id, agents, seed=seed, options=options)
@@ -195,10 +204,6 @@ def initial_aips(args, env_id, agents, options, seed) -> tuple[dict, float]:
 def refresh_aips(env_id, agents, options, net, seed, steps, domain, epochs, old, progress, collect_workers=1):
     """Collect every region's data with the joint policy ``net`` (None: uniform random) and
     retrain every AIP (warm start from ``old`` when it holds networks of the same shape)."""
-    from ials_zoo.baselines.multiagent import JointActor
-    from ials_zoo.influence.dataset import collect_all
-    from ials_zoo.influence.networks import ARCHS
-    from ials_zoo.influence.train import train_predictors
 
     d = domain.dials
     policy = None if net is None else JointActor(net, seed)
@@ -216,193 +221,138 @@ def refresh_aips(env_id, agents, options, net, seed, steps, domain, epochs, old,
                    "mean_test_cross_entropy": report["mean_test_cross_entropy"], "warm_start": bool(warm)}
 
 
+class ShardsLearner:
+    """The driver's adapter for DIALS: the agents split into shards (:mod:`ials_zoo.dials.shard`),
+    each training its agents' PPO on their own IALS in a worker (``backend``), with the AIPs
+    retrained on GS data from the joint policy at the refresh points (``refresh``)."""
+
+    reports_aip_time = True
+
+    def __init__(self, args: Args, domain, agents, options, refresh, copies, workers, ppo, frame_stack, updates,
+                 training: dict, out: Path):
+        self.args, self.out, self.domain, self.agents, self.options = args, out, domain, agents, options
+        self.refresh = refresh
+        self.copies, self.workers, self.ppo, self.frame_stack, self.updates = copies, workers, ppo, frame_stack, updates
+        self.training, self.simulator = training, training["simulator"]
+        self.collect_steps = int(args.collect_steps or domain.dials.collect_steps)
+        self.epochs = int(args.aip_epochs or domain.dials.aip_epochs)
+        self.chunks = split_agents(agents, workers)
+        self.charged_seconds, self.refreshes, self.aip_split = 0.0, 0, {"collect": 0.0, "train": 0.0}
+        self.aips, self.state, self.backend = None, None, None
+
+    def load(self, state, info):
+        args = self.args
+        if state is None:
+            self.aips, self.charged_seconds = initial_aips(args, args.env_id, self.agents, self.options, args.seed)
+            if args.aip != "trained":
+                self.training["aip"] = _fixed_aip_record(args.aip, args.env_id, self.aips, self.charged_seconds)
+            return
+        self.aips = load_predictor_set(self.out / "aips.pt", env_id=args.env_id)
+        self.state = state
+        self.charged_seconds, self.refreshes = float(info["aip_seconds"]), int(info["refreshes"])
+        self.aip_split = info.get("aip_split", self.aip_split)
+        self.training["aip"] = info.get("aip")
+
+    def start(self, steps):
+        args = self.args
+        specs = [ShardSpec(args.env_id, chunk, self.options, args.seed, self.copies, self.frame_stack, args.learner,
+                           self.ppo, self.updates, {a: self.aips[a] for a in chunk}) for chunk in self.chunks]
+        self.backend = (InProcessBackend(specs) if self.workers == 0
+                        else make_backend(args.backend, specs, args.ray_address))
+        if self.state is not None:
+            by_agent = {a: s for s in self.state["shards"] for a in s["agents"]}
+            self.backend.call("load_state", [(_shard_state(by_agent, c),) for c in self.chunks])
+            self.state = None
+
+    def actor_layers(self):
+        per_shard = self.backend.call("actor_layers")
+        return [(np.concatenate([ls[i][0] for ls in per_shard]), np.concatenate([ls[i][1] for ls in per_shard]))
+                for i in range(len(per_shard[0]))]
+
+    def _next_refresh(self):
+        """Steps per agent at which the AIPs are next retrained (None: never again)."""
+        if self.args.aip != "trained" or self.refresh is None:
+            return None
+        if self.refreshes == 0:
+            return 0
+        return self.refreshes * self.refresh if self.refresh > 0 else None
+
+    def next_stop(self, steps):
+        due = self._next_refresh()
+        return due if due is not None and due > steps else None
+
+    def before_training(self, steps, total, policy, note):
+        due = self._next_refresh()
+        if due is None or due > steps:
+            return
+        args, d, n = self.args, self.domain.dials, self.refreshes
+        net = policy() if steps > 0 else None
+        note(f"AIP round {n}: GS collection + training")
+        print(f"dials: AIP round {n} at {steps:,} steps per agent: {self.collect_steps:,} GS steps of "
+              f"{'the joint policy' if net else 'uniformly random agents'}, then {len(self.agents)} "
+              f"{d.aip_arch.upper()} AIPs x {self.epochs} epochs ...", flush=True)
+        self.aips, rep = refresh_aips(args.env_id, self.agents, self.options, net, args.seed + n, self.collect_steps,
+                                      self.domain, self.epochs, self.aips, progress=False)
+        print(f"dials: AIP round {n} done: collection {rep['collect_seconds']:.0f} s, training "
+              f"{rep['train_seconds']:.0f} s, mean test cross-entropy {rep['mean_test_cross_entropy']:.3f}", flush=True)
+        self.charged_seconds += rep["collect_seconds"] + rep["train_seconds"]
+        self.aip_split["collect"] += rep["collect_seconds"]
+        self.aip_split["train"] += rep["train_seconds"]
+        self.backend.call("set_predictors", [(self.aips,)] * len(self.chunks))
+        self.refreshes += 1
+        self.training["aip"] = {"variant": "trained", "file": None, "sha256": None,
+                                "collection_seconds": self.aip_split["collect"],
+                                "training_seconds": self.aip_split["train"], "refreshes": self.refreshes,
+                                "last": dict(rep, at_steps_per_agent=steps)}
+
+    def train(self, steps, target, advance):
+        stats = self.backend.call("train", [(target,)] * len(self.chunks))
+        return dict(merge_shard_stats(stats, [len(c) for c in self.chunks]), aip_refreshes=self.refreshes)
+
+    def checkpoint(self, out):
+        save_aips(out / "aips.pt", self.aips)
+        shard_states = self.backend.call("state")
+        return ({"shards": [dict(s, agents=c) for s, c in zip(shard_states, self.chunks)]},
+                {"aip_seconds": self.charged_seconds, "refreshes": self.refreshes, "aip_split": self.aip_split,
+                 "aip": self.training["aip"]})
+
+    def close(self):
+        if self.backend is not None:
+            self.backend.close()
+
+
 def main(args: Args | None = None) -> dict:
     """Train with DIALS; returns the result dict (also written to result.json)."""
-    import torch
-
-    import ials_zoo
-    from ials_zoo.baselines.common import format_seconds
-    from ials_zoo.baselines.multiagent import (
-        TrainingLog,
-        final_results,
-        frame_stack_of,
-        joint_policy,
-        merge_shard_stats,
-        policy_file,
-        ppo_config,
-        save_aips,
-        settings_of,
-        whole_updates,
-        write_curve,
-    )
-    from ials_zoo.baselines.runs import Clock, RunFolder, load_training_state, save_training_state
-    from ials_zoo.dials.backends import InProcessBackend, make_backend
-    from ials_zoo.dials.shard import ShardSpec, split_agents
-    from ials_zoo.evaluation import evaluate_joint
-    from ials_zoo.leaderboard import now_iso
-
     args = args or Args()
     domain, agents, options, refresh, copies = check_args(args)
     torch.set_num_threads(1)
-    total = int(args.total_timesteps or domain.study.multi_agent_budget)
     per_update = args.samples_per_update
-    total = whole_updates(total, per_update)
+    total = whole_updates(int(args.total_timesteps or domain.study.multi_agent_budget), per_update)
     eval_every = int(args.eval_every or max(per_update, total // 10))
-    collect_steps = int(args.collect_steps or domain.dials.collect_steps)
-    epochs = int(args.aip_epochs or domain.dials.aip_epochs)
     workers = default_workers(len(agents)) if args.workers is None else min(args.workers, len(agents))
     frame_stack = frame_stack_of(args, domain)
-    obs_size = int(np.prod(domain.observation_space.shape))
     out = Path(args.out_dir or f"runs/{args.env_id}__dials__s{args.seed}")
-    run = RunFolder(out, resume=args.resume, overwrite=args.overwrite, settings=settings_of(args))
     ppo = ppo_config(args, copies)
-    refresh_text = {None: "never", 0: "once, at the start"}.get(refresh) or f"every {refresh:,} steps"
-    print(f"dials: {len(agents)} agents of {args.env_id} learn at once, each on its own IALS "
-          f"({args.learner} PPO, {workers} worker{'s' if workers != 1 else ''}, {args.backend} backend); AIPs: "
-          f"{args.aip}, retrained {refresh_text}\n  {total:,} steps per agent; writing {out}/"
-          + (" (resuming)" if run.resuming else ""), flush=True)
-
-    meta = {"algorithm": "dials", "env_id": args.env_id, "env_options": options, "seed": args.seed,
-            "package_version": ials_zoo.__version__, "created": now_iso()}
     training = {"simulator": _label(args.aip, refresh), "aip": None, "seeds": [args.seed], "env_steps": 0,
                 "wall_clock_seconds": 0.0, "aip_seconds": 0.0, "workers": max(workers, 1), "backend": args.backend,
                 "hyperparameters": dict(settings_of(args), agents=agents, refresh_steps=refresh,
-                                        total_timesteps=total, eval_every=eval_every, collect_steps=collect_steps,
-                                        aip_epochs=epochs, ppo=ppo, learner=args.learner)}
-    with run.running():
-        log = TrainingLog(out / "progress.csv")
-        steps, curve, aip_seconds, refreshes, clock_offset = 0, [], 0.0, 0, 0.0
-        aip_split = {"collect": 0.0, "train": 0.0}
-        if run.resuming:
-            state, info = load_training_state(out)
-            from ials_zoo.influence.files import load_predictor_set
-
-            aips = load_predictor_set(out / "aips.pt", env_id=args.env_id)
-            steps, curve = int(info["steps"]), info["curve"]
-            aip_seconds, refreshes, clock_offset = float(info["aip_seconds"]), int(info["refreshes"]), float(info["clock"])
-            aip_split = info.get("aip_split", aip_split)
-            training["aip"] = info.get("aip")
-        else:
-            aips, aip_seconds = initial_aips(args, args.env_id, agents, options, args.seed)
-            state = None
-            if args.aip != "trained":
-                training["aip"] = _fixed_aip_record(args.aip, args.env_id, aips, aip_seconds)
-        # AIP time spent in this process is on the clock as it runs; a shipped set's is charged
-        clock = Clock(offset=clock_offset if run.resuming else aip_seconds)
-        chunks = split_agents(agents, workers)
-        specs = [ShardSpec(args.env_id, chunk, options, args.seed, copies, frame_stack, args.learner, ppo,
-                           total // per_update, {a: aips[a] for a in chunk}) for chunk in chunks]
-        backend = InProcessBackend(specs) if workers == 0 else make_backend(args.backend, specs, args.ray_address)
-        try:
-            if state is not None:
-                by_agent = {a: s for s in state["shards"] for a in s["agents"]}
-                backend.call("load_state", [(_shard_state(by_agent, c),) for c in chunks])
-
-            def policy_net():
-                layers_per_shard = backend.call("actor_layers")
-                layers = [(np.concatenate([ls[i][0] for ls in layers_per_shard]),
-                           np.concatenate([ls[i][1] for ls in layers_per_shard])) for i in range(len(layers_per_shard[0]))]
-                return joint_policy(agents, layers, obs_size, domain.n_actions, frame_stack,
-                                    dict(meta, training=training, learning_curve=curve))
-
-            def evaluate(n_episodes, progress=False, net=None):
-                with clock.pause():
-                    return evaluate_joint(args.env_id, net or policy_net(), episodes=n_episodes, progress=progress,
-                                          **options)
-
-            def checkpoint():
-                with clock.pause():
-                    save_aips(out / "aips.pt", aips)
-                    shard_states = backend.call("state")
-                    save_training_state(out, {"shards": [dict(s, agents=c) for s, c in zip(shard_states, chunks)]},
-                                        {"steps": steps, "curve": curve, "aip_seconds": aip_seconds,
-                                         "refreshes": refreshes, "clock": clock.seconds, "aip_split": aip_split,
-                                         "aip": training["aip"]})
-
-            bar = None
-            if args.progress:
-                from tqdm.auto import tqdm
-
-                bar = tqdm(total=total, initial=steps, unit="step/agent", dynamic_ncols=True, desc="dials")
-            next_eval = curve[-1]["env_steps"] + eval_every if curve else 0
-
-            def next_refresh():
-                """Steps per agent at which the AIPs are next retrained (None: never again)."""
-                if args.aip != "trained" or refresh is None:
-                    return None
-                if refreshes == 0:
-                    return 0
-                return refreshes * refresh if refresh > 0 else None
-
-            while True:
-                due = next_refresh()
-                if due is not None and due <= steps < total:
-                    net = policy_net() if steps > 0 else None
-                    if bar is not None:
-                        bar.set_postfix_str(f"AIP round {refreshes}: GS collection + training")
-                    print(f"dials: AIP round {refreshes} at {steps:,} steps per agent: {collect_steps:,} GS steps of "
-                          f"{'the joint policy' if net else 'uniformly random agents'}, then {len(agents)} "
-                          f"{domain.dials.aip_arch.upper()} AIPs x {epochs} epochs ...", flush=True)
-                    aips, rep = refresh_aips(args.env_id, agents, options, net, args.seed + refreshes, collect_steps,
-                                             domain, epochs, aips, progress=False)
-                    print(f"dials: AIP round {refreshes} done: collection {rep['collect_seconds']:.0f} s, training "
-                          f"{rep['train_seconds']:.0f} s, mean test cross-entropy {rep['mean_test_cross_entropy']:.3f}",
-                          flush=True)
-                    aip_seconds += rep["collect_seconds"] + rep["train_seconds"]
-                    aip_split["collect"] += rep["collect_seconds"]
-                    aip_split["train"] += rep["train_seconds"]
-                    backend.call("set_predictors", [(aips,)] * len(chunks))
-                    refreshes += 1
-                    training["aip"] = {"variant": "trained", "file": None, "sha256": None,
-                                       "collection_seconds": aip_split["collect"],
-                                       "training_seconds": aip_split["train"], "refreshes": refreshes,
-                                       "last": dict(rep, at_steps_per_agent=steps)}
-                if steps >= next_eval or steps >= total:
-                    ev = evaluate(args.eval_episodes)
-                    curve.append({"env_steps": steps, "wall_clock_seconds": clock.seconds, "mean": ev.mean,
-                                  "ci_low": ev.ci_low, "ci_high": ev.ci_high})
-                    write_curve(out, {"env_id": args.env_id, "algorithm": "dials", "seed": args.seed,
-                                      "simulator": training["simulator"]}, curve)
-                    checkpoint()
-                    if bar is not None:
-                        bar.set_postfix(gs=f"{ev.mean:.2f}")
-                    next_eval = steps + eval_every
-                if steps >= total:
-                    break
-                target = min(total, next_eval)
-                nr = next_refresh()
-                if nr is not None and nr > steps:
-                    target = min(target, nr)
-                target = max(steps + per_update, target // per_update * per_update)
-                stats = backend.call("train", [(target,)] * len(chunks))
-                steps = target
-                row = merge_shard_stats(stats, [len(c) for c in chunks])
-                log.add(dict(row, steps_per_agent=steps, wall_clock_seconds=round(clock.seconds, 3),
-                             aip_refreshes=refreshes))
-                if bar is not None:
-                    bar.update(steps - bar.n)
-            if bar is not None:
-                bar.close()
-            training.update(env_steps=steps, wall_clock_seconds=clock.seconds - aip_seconds, aip_seconds=aip_seconds)
-            net = policy_net()
-            path = policy_file(out, net)
-        finally:
-            backend.close()
-        result, deterministic = final_results(out, args.env_id, path, "dials", training, curve, agents, args.seed,
-                                              args.final_eval_episodes, options, args.submitter, args.notes,
-                                              args.progress)
-    s = result["score"]
-    print(f"dials: GS score (mean over {len(agents)} agents) {s['mean']:.3f} [{s['ci_low']:.3f}, {s['ci_high']:.3f}] "
-          f"after {steps:,} steps per agent; wall-clock {format_seconds(training['wall_clock_seconds'] + aip_seconds)} "
-          f"(of which AIP collection and training {format_seconds(aip_seconds)}); deterministic "
-          f"{deterministic['score']['mean']:.3f}; wrote {out}/result.json", flush=True)
-    return result
+                                        total_timesteps=total, eval_every=eval_every,
+                                        collect_steps=int(args.collect_steps or domain.dials.collect_steps),
+                                        aip_epochs=int(args.aip_epochs or domain.dials.aip_epochs), ppo=ppo,
+                                        learner=args.learner)}
+    plan = RunPlan("dials", args.env_id, agents, options, args.seed, total, per_update, eval_every, args.eval_episodes,
+                   args.final_eval_episodes, frame_stack, out, settings_of(args), training, args.resume,
+                   args.overwrite, args.progress, args.submitter, args.notes)
+    learner = ShardsLearner(args, domain, agents, options, refresh, copies, workers, ppo, frame_stack,
+                            total // per_update, training, out)
+    refresh_text = {None: "never", 0: "once, at the start"}.get(refresh) or f"every {refresh:,} steps"
+    return run(plan, learner, f"dials: {len(agents)} agents of {args.env_id} learn at once, each on its own IALS "
+               f"({args.learner} PPO, {workers} worker{'s' if workers != 1 else ''}, {args.backend} backend); AIPs: "
+               f"{args.aip}, retrained {refresh_text}", domain)
 
 
 def _fixed_aip_record(aip: str, env_id: str, aips: dict, charged: float) -> dict:
     """``training.aip`` of AIPs that DIALS does not train (untrained, fixed, shipped, a file)."""
-    from ials_zoo.evaluation import sha256_file
-    from ials_zoo.influence.multi import shipped_set_path
 
     path = shipped_set_path(env_id) if aip == "shipped" else (aip if aip.endswith(".pt") else None)
     first = next(iter(aips.values()))

@@ -24,9 +24,24 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import torch
 
 from ials_zoo.baselines.common import arg, parse_env_options, run_cli
-from ials_zoo.baselines.multiagent import MultiPPOSettings
+from ials_zoo.baselines.driver import RunPlan, check_run_args, run
+from ials_zoo.baselines.multiagent import (
+    MultiPPOSettings,
+    check_multi_ppo,
+    frame_stack_of,
+    merge_shard_stats,
+    ppo_config,
+    settings_of,
+    whole_updates,
+)
+from ials_zoo.core.domains import domain_ids, get_domain
+from ials_zoo.learners.batched_ppo import BatchedPPO, PPOConfig
+from ials_zoo.learners.gs_vec import GSVecEnv
+from ials_zoo.learners.rollout import RolloutTrainer
+from ials_zoo.utils import check_seed
 
 
 @dataclass
@@ -52,35 +67,8 @@ class Args(MultiPPOSettings):
     notes: str = arg("", "notes for result.json")
 
 
-def main(args: Args | None = None) -> dict:
-    """Train IPPO on the GS; returns the result dict (also written to result.json)."""
-    import torch
-
-    import ials_zoo
-    from ials_zoo.baselines.common import format_seconds
-    from ials_zoo.baselines.multiagent import (
-        TrainingLog,
-        check_multi_ppo,
-        final_results,
-        frame_stack_of,
-        joint_policy,
-        merge_shard_stats,
-        policy_file,
-        ppo_config,
-        settings_of,
-        whole_updates,
-        write_curve,
-    )
-    from ials_zoo.baselines.runs import Clock, RunFolder, load_training_state, save_training_state
-    from ials_zoo.core.domains import domain_ids, get_domain
-    from ials_zoo.evaluation import evaluate_joint
-    from ials_zoo.leaderboard import now_iso
-    from ials_zoo.learners.batched_ppo import BatchedPPO, PPOConfig
-    from ials_zoo.learners.gs_vec import GSVecEnv
-    from ials_zoo.learners.rollout import RolloutTrainer
-    from ials_zoo.utils import check_seed
-
-    args = args or Args()
+def check_args(args: Args):
+    """Clear errors before anything starts; returns (domain, agents, options, worker processes)."""
     if args.env_id is None:
         raise ValueError(f"name the domain to train on: --env, one of {', '.join(domain_ids())}")
     if args.simulator != "gs":
@@ -91,107 +79,88 @@ def main(args: Args | None = None) -> dict:
     agents = domain.check_agents(None if args.agents == "all" else args.agents, **options)
     check_seed(args.seed, "seed")
     check_multi_ppo(args)
-    for name in ("n_envs", "eval_episodes", "final_eval_episodes"):
-        if getattr(args, name) < 1:
-            raise ValueError(f"{name} must be >= 1, got {getattr(args, name)}")
-    for name in ("total_timesteps", "eval_every"):
-        if getattr(args, name) is not None and getattr(args, name) < 1:
-            raise ValueError(f"{name} must be >= 1, got {getattr(args, name)}")
+    check_run_args(args)
     processes = (args.n_envs if domain.one_simulation_per_process else 0) if args.gs_processes is None else args.gs_processes
     if processes < 0:
         raise ValueError(f"gs_processes must be >= 0, got {processes}")
+    return domain, agents, options, processes
+
+
+class GSCopiesLearner:
+    """The driver's adapter for IPPO: every agent's PPO (:class:`BatchedPPO`) on ``copies``
+    GS copies in ``processes`` worker processes, one update of ``samples_per_update`` samples
+    of each agent at a time."""
+
+    simulator, charged_seconds, reports_aip_time = "gs", 0.0, False
+
+    def __init__(self, env_id, agents, options, copies, processes, ppo, frame_stack, seed, updates, obs_size, n_actions):
+        self.env_id, self.agents, self.options, self.copies, self.processes = env_id, agents, options, copies, processes
+        self.frame_stack, self.seed, self.per_update = frame_stack, seed, ppo["n_steps"] * ppo["n_envs"]
+        self.learner = BatchedPPO(agents, obs_size * frame_stack, n_actions, PPOConfig(**ppo), seed, updates)
+        self.env = self.trainer = None
+
+    def load(self, state, info):
+        if state is not None:
+            self.learner.load_state_dict(state["learner"])
+
+    def start(self, steps):
+        self.env = GSVecEnv(self.env_id, self.agents, self.copies, self.processes,
+                            seed=self.seed + 1000 * (steps // self.per_update), **self.options)
+        self.trainer = RolloutTrainer(self.learner, self.env, self.frame_stack)
+
+    def actor_layers(self):
+        return self.learner.actor_layers()
+
+    def next_stop(self, steps):
+        return None
+
+    def before_training(self, steps, total, policy, note):
+        pass
+
+    def train(self, steps, target, advance):
+        stats = []
+        while steps < target:
+            stats.append(self.trainer.collect_and_update())
+            steps += self.per_update
+            advance(self.per_update)
+        mean = {k: float(np.mean([s[k] for s in stats])) for k in stats[0]}
+        returns = self.trainer.episode_returns()
+        returns = None if returns is None else [float(x) for x in returns]
+        return merge_shard_stats([dict(mean, episode_returns=returns)], [len(self.agents)])
+
+    def checkpoint(self, out):
+        return {"learner": self.learner.state_dict()}, {}
+
+    def close(self):
+        if self.env is not None:
+            self.env.close()
+
+
+def main(args: Args | None = None) -> dict:
+    """Train IPPO on the GS; returns the result dict (also written to result.json)."""
+    args = args or Args()
+    domain, agents, options, processes = check_args(args)
     torch.set_num_threads(1)
     ppo = ppo_config(args, args.n_envs)
     per_update = args.samples_per_update
     total = whole_updates(int(args.total_timesteps or domain.study.multi_agent_budget), per_update)
     eval_every = int(args.eval_every or max(per_update, total // 10))
     frame_stack = frame_stack_of(args, domain)
-    obs_size = int(np.prod(domain.observation_space.shape))
     out = Path(args.out_dir or f"runs/{args.env_id}__ippo__s{args.seed}")
-    run = RunFolder(out, resume=args.resume, overwrite=args.overwrite,
-                    settings=settings_of(args, skip=("resume", "overwrite", "progress", "out_dir", "submitter", "notes",
-                                                     "gs_processes")))
-    print(f"ippo: {len(agents)} agents of {args.env_id} learn at once on the GS ({args.n_envs} GS cop"
-          f"{'ies' if args.n_envs > 1 else 'y'}, {processes} worker process{'es' if processes != 1 else ''})\n"
-          f"  {total:,} steps per agent; writing {out}/" + (" (resuming)" if run.resuming else ""), flush=True)
-    meta = {"algorithm": "ippo", "env_id": args.env_id, "env_options": options, "seed": args.seed,
-            "package_version": ials_zoo.__version__, "created": now_iso()}
     training = {"simulator": "gs", "aip": None, "seeds": [args.seed], "env_steps": 0, "wall_clock_seconds": 0.0,
                 "aip_seconds": 0.0, "workers": max(processes, 1),
                 "hyperparameters": dict(dataclasses.asdict(args), agents=agents, total_timesteps=total,
                                         eval_every=eval_every, ppo=ppo, gs_processes=processes)}
-    with run.running():
-        log = TrainingLog(out / "progress.csv")
-        learner = BatchedPPO(agents, obs_size * frame_stack, domain.n_actions, PPOConfig(**ppo), args.seed,
-                             total // per_update)
-        steps, curve, clock_offset = 0, [], 0.0
-        if run.resuming:
-            state, info = load_training_state(out)
-            learner.load_state_dict(state["learner"])
-            steps, curve, clock_offset = int(info["steps"]), info["curve"], float(info["clock"])
-        clock = Clock(offset=clock_offset)
-        env = GSVecEnv(args.env_id, agents, args.n_envs, processes, seed=args.seed + 1000 * (steps // per_update),
-                       **options)
-        try:
-            trainer = RolloutTrainer(learner, env, frame_stack)
-
-            def policy_net():
-                return joint_policy(agents, learner.actor_layers(), obs_size, domain.n_actions, frame_stack,
-                                    dict(meta, training=training, learning_curve=curve))
-
-            bar = None
-            if args.progress:
-                from tqdm.auto import tqdm
-
-                bar = tqdm(total=total, initial=steps, unit="step/agent", dynamic_ncols=True, desc="ippo")
-            next_eval = curve[-1]["env_steps"] + eval_every if curve else 0
-            stats: list[dict] = []
-            while True:
-                if steps >= next_eval or steps >= total:
-                    with clock.pause():
-                        ev = evaluate_joint(args.env_id, policy_net(), episodes=args.eval_episodes, **options)
-                        curve.append({"env_steps": steps, "wall_clock_seconds": clock.seconds, "mean": ev.mean,
-                                      "ci_low": ev.ci_low, "ci_high": ev.ci_high})
-                        write_curve(out, {"env_id": args.env_id, "algorithm": "ippo", "seed": args.seed,
-                                          "simulator": "gs"}, curve)
-                        save_training_state(out, {"learner": learner.state_dict()},
-                                            {"steps": steps, "curve": curve, "clock": clock.seconds})
-                    if stats:
-                        row = merge_shard_stats([dict(_mean(stats), episode_returns=_returns(trainer))], [len(agents)])
-                        log.add(dict(row, steps_per_agent=steps, wall_clock_seconds=round(clock.seconds, 3)))
-                        stats = []
-                    if bar is not None:
-                        bar.set_postfix(gs=f"{ev.mean:.2f}")
-                    next_eval = steps + eval_every
-                if steps >= total:
-                    break
-                stats.append(trainer.collect_and_update())
-                steps += per_update
-                if bar is not None:
-                    bar.update(per_update)
-            if bar is not None:
-                bar.close()
-            training.update(env_steps=steps, wall_clock_seconds=clock.seconds)
-            path = policy_file(out, policy_net())
-        finally:
-            env.close()
-        result, deterministic = final_results(out, args.env_id, path, "ippo", training, curve, agents, args.seed,
-                                              args.final_eval_episodes, options, args.submitter, args.notes,
-                                              args.progress)
-    s = result["score"]
-    print(f"ippo: GS score (mean over {len(agents)} agents) {s['mean']:.3f} [{s['ci_low']:.3f}, {s['ci_high']:.3f}] "
-          f"after {steps:,} steps per agent; wall-clock {format_seconds(training['wall_clock_seconds'])}; "
-          f"deterministic {deterministic['score']['mean']:.3f}; wrote {out}/result.json", flush=True)
-    return result
-
-
-def _mean(stats: list[dict]) -> dict:
-    return {k: float(np.mean([s[k] for s in stats])) for k in stats[0]}
-
-
-def _returns(trainer):
-    r = trainer.episode_returns()
-    return None if r is None else [float(x) for x in r]
+    plan = RunPlan("ippo", args.env_id, agents, options, args.seed, total, per_update, eval_every, args.eval_episodes,
+                   args.final_eval_episodes, frame_stack, out,
+                   settings_of(args, skip=("resume", "overwrite", "progress", "out_dir", "submitter", "notes",
+                                           "gs_processes")),
+                   training, args.resume, args.overwrite, args.progress, args.submitter, args.notes)
+    learner = GSCopiesLearner(args.env_id, agents, options, args.n_envs, processes, ppo, frame_stack, args.seed,
+                              total // per_update, int(np.prod(domain.observation_space.shape)), domain.n_actions)
+    copies = f"{args.n_envs} GS cop{'ies' if args.n_envs > 1 else 'y'}"
+    return run(plan, learner, f"ippo: {len(agents)} agents of {args.env_id} learn at once on the GS ({copies}, "
+               f"{processes} worker process{'es' if processes != 1 else ''})", domain)
 
 
 if __name__ == "__main__":
