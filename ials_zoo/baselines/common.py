@@ -347,6 +347,26 @@ def format_seconds(seconds: float) -> str:
     return f"{seconds / 3600:.1f} h"
 
 
+def scale_rewards(venv, gamma: float):
+    """``venv`` with its rewards divided by the running std of the discounted return (SB3's
+    ``VecNormalize``, observations untouched): what the multi-agent learners do
+    (:class:`~ials_zoo.learners.batched_ppo.RewardScale`)."""
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    return VecNormalize(venv, norm_obs=False, norm_reward=True, gamma=gamma)
+
+
+def reward_scale_of(venv):
+    """The ``VecNormalize`` inside a chain of SB3 vec-env wrappers, or None."""
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    while venv is not None:
+        if isinstance(venv, VecNormalize):
+            return venv
+        venv = getattr(venv, "venv", None)
+    return None
+
+
 class TrainingRun:
     """The bookkeeping of one SB3 training run in a :class:`~ials_zoo.baselines.runs.RunFolder`.
 
@@ -383,6 +403,11 @@ class TrainingRun:
         state, info = load_training_state(self.out)
         self.model.policy.load_state_dict(state["policy"])
         self.model.policy.optimizer.load_state_dict(state["optimizer"])
+        scale = reward_scale_of(self.model.get_env())
+        if scale is not None and "reward_rms" in state:
+            rms = state["reward_rms"]
+            scale.ret_rms.mean, scale.ret_rms.var = rms["mean"].numpy(), rms["var"].numpy()
+            scale.ret_rms.count = float(rms["count"])
         self.model.num_timesteps = int(info["num_timesteps"])
         self.curve[:] = info["learning_curve"]
         self.clock = Clock(offset=float(info["clock_seconds"]))
@@ -391,11 +416,18 @@ class TrainingRun:
         return policy_of(self.model, self.policy_agents, self.frame_stack, self.meta)
 
     def checkpoint(self):
+        import torch
+
         from ials_zoo.baselines.runs import save_training_state
 
         with self.clock.pause():
             state = {"policy": self.model.policy.state_dict(),
                      "optimizer": self.model.policy.optimizer.state_dict()}
+            scale = reward_scale_of(self.model.get_env())
+            if scale is not None:
+                state["reward_rms"] = {"mean": torch.as_tensor(scale.ret_rms.mean),
+                                       "var": torch.as_tensor(scale.ret_rms.var),
+                                       "count": torch.as_tensor(float(scale.ret_rms.count))}
             info = {"num_timesteps": int(self.model.num_timesteps), "clock_seconds": self.clock.seconds,
                     "learning_curve": self.curve}
             save_training_state(self.out, state, info)

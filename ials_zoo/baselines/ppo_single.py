@@ -64,6 +64,7 @@ from ials_zoo.baselines.common import (
     predictor_for,
     predictor_record,
     run_cli,
+    scale_rewards,
     simulator_label,
 )
 
@@ -82,6 +83,7 @@ class Args(PPOSettings):
     batch_size: int = arg(256, "minibatch size")
     net_arch: str = arg("256,128", "hidden layer sizes, comma-separated (policy and value nets)")
     frame_stack: int | None = arg(None, "observations the policy reads (default: the domain's)")
+    normalize_reward: bool = arg(False, "divide rewards by the running std of the discounted return (VecNormalize)")
     env_options: str = arg("", "GS/LS options as a JSON object, e.g. '{\"item_lifetime\": 8}' (memory variant)")
     dset_kind: str | None = arg(None, "d-set kind of the AIP (dset | full; default: the predictor's)")
     eval_every: int = arg(100_000, "GS evaluation every this many steps (0: only at the end)")
@@ -213,6 +215,8 @@ def main(args: Args | None = None) -> dict:
         # in training.aip, not charged
         aip_seconds = (aip["collection_seconds"] + aip["training_seconds"]) if aip and aip["charged"] else 0.0
         venv = VecMonitor(as_float_box(venv))
+        if args.normalize_reward:
+            venv = scale_rewards(venv, args.gamma)
         if frame_stack > 1:
             venv = VecFrameStack(venv, frame_stack)
         model = make_ppo(venv, args, _hidden(args.net_arch))
