@@ -104,6 +104,9 @@ class Args(MultiPPOSettings):
     collect_steps: int | None = arg(None, lambda: "GS steps per data collection (default: the domain's: "
                                     f"{_per_domain(lambda d: f'{d.dials.collect_steps:,}')})")
     aip_epochs: int | None = arg(None, "epochs per AIP (re)training (default: the domain's)")
+    aip_autoregressive: bool | None = arg(None, lambda: "AIPs that also read the influence they sampled at the "
+                                          "previous step, P(u_t | d_<=t, u_<t) (default: the domain's: " + _per_domain(
+                                              lambda d: "yes" if d.dials.aip_autoregressive else "no") + ")")
     n_envs: int | None = arg(None, lambda: f"IALS copies per agent (default: the domain's: "
                              f"{_per_domain(lambda d: str(d.dials.copies))})")
     learner: str = arg("batched", "batched (one torch program) | sb3 (one SB3 PPO per agent)")
@@ -181,6 +184,11 @@ def check_args(args: Args):
     return domain, agents, options, refresh, copies
 
 
+def autoregressive_of(args, domain) -> bool:
+    """Whether the AIPs DIALS trains read ``u_{t-1}``: ``--aip-autoregressive``, else the domain's."""
+    return bool(domain.dials.aip_autoregressive if args.aip_autoregressive is None else args.aip_autoregressive)
+
+
 def default_workers(n_agents: int) -> int:
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     return max(1, min(cores, n_agents))
@@ -201,9 +209,11 @@ def initial_aips(args, env_id, agents, options, seed) -> tuple[dict, float]:
     return dict(zip(agents, preds)), 0.0
 
 
-def refresh_aips(env_id, agents, options, net, seed, steps, domain, epochs, old, progress, collect_workers=1):
+def refresh_aips(env_id, agents, options, net, seed, steps, domain, epochs, old, progress, collect_workers=1,
+                 autoregressive=False):
     """Collect every region's data with the joint policy ``net`` (None: uniform random) and
-    retrain every AIP (warm start from ``old`` when it holds networks of the same shape)."""
+    retrain every AIP (warm start from ``old`` when it holds networks of the same shape);
+    ``autoregressive``: AIPs that also read ``u_{t-1}``."""
 
     d = domain.dials
     policy = None if net is None else JointActor(net, seed)
@@ -212,10 +222,11 @@ def refresh_aips(env_id, agents, options, net, seed, steps, domain, epochs, old,
                        workers=collect_workers)
     collect_seconds = time.perf_counter() - t0
     warm = {a: p for a, p in old.items() if isinstance(p, ARCHS[d.aip_arch]) and p.hidden == d.aip_hidden
-            and p.metadata.get("variant") == "trained"}
+            and p.autoregressive == autoregressive and p.metadata.get("variant") == "trained"}
     t0 = time.perf_counter()
     preds, report = train_predictors(data, d.aip_arch, hidden=d.aip_hidden, lr=d.aip_lr, epochs=epochs,
-                                     batch_size=d.aip_batch, seed=seed, init=warm or None, progress=progress)
+                                     batch_size=d.aip_batch, seed=seed, init=warm or None, progress=progress,
+                                     autoregressive=autoregressive)
     train_seconds = time.perf_counter() - t0
     return preds, {"collect_seconds": collect_seconds, "train_seconds": train_seconds,
                    "mean_test_cross_entropy": report["mean_test_cross_entropy"], "warm_start": bool(warm)}
@@ -236,6 +247,7 @@ class ShardsLearner:
         self.training, self.simulator = training, training["simulator"]
         self.collect_steps = int(args.collect_steps or domain.dials.collect_steps)
         self.epochs = int(args.aip_epochs or domain.dials.aip_epochs)
+        self.autoregressive = autoregressive_of(args, domain)
         self.chunks = split_agents(agents, workers)
         self.charged_seconds, self.refreshes, self.aip_split = 0.0, 0, {"collect": 0.0, "train": 0.0}
         self.aips, self.state, self.backend = None, None, None
@@ -290,9 +302,11 @@ class ShardsLearner:
         note(f"AIP round {n}: GS collection + training")
         print(f"dials: AIP round {n} at {steps:,} steps per agent: {self.collect_steps:,} GS steps of "
               f"{'the joint policy' if net else 'uniformly random agents'}, then {len(self.agents)} "
-              f"{d.aip_arch.upper()} AIPs x {self.epochs} epochs ...", flush=True)
+              f"{'autoregressive ' if self.autoregressive else ''}{d.aip_arch.upper()} AIPs x {self.epochs} epochs ...",
+              flush=True)
         self.aips, rep = refresh_aips(args.env_id, self.agents, self.options, net, args.seed + n, self.collect_steps,
-                                      self.domain, self.epochs, self.aips, progress=False)
+                                      self.domain, self.epochs, self.aips, progress=False,
+                                      autoregressive=self.autoregressive)
         print(f"dials: AIP round {n} done: collection {rep['collect_seconds']:.0f} s, training "
               f"{rep['train_seconds']:.0f} s, mean test cross-entropy {rep['mean_test_cross_entropy']:.3f}", flush=True)
         self.charged_seconds += rep["collect_seconds"] + rep["train_seconds"]
@@ -338,7 +352,8 @@ def main(args: Args | None = None) -> dict:
                 "hyperparameters": dict(settings_of(args), agents=agents, refresh_steps=refresh,
                                         total_timesteps=total, eval_every=eval_every,
                                         collect_steps=int(args.collect_steps or domain.dials.collect_steps),
-                                        aip_epochs=int(args.aip_epochs or domain.dials.aip_epochs), ppo=ppo,
+                                        aip_epochs=int(args.aip_epochs or domain.dials.aip_epochs),
+                                        aip_autoregressive=autoregressive_of(args, domain), ppo=ppo,
                                         learner=args.learner)}
     plan = RunPlan("dials", args.env_id, agents, options, args.seed, total, per_update, eval_every, args.eval_episodes,
                    args.final_eval_episodes, frame_stack, out, settings_of(args), training, args.resume,

@@ -5,6 +5,7 @@ Examples::
     ials-zoo train-aip --data wh.npz --arch gru --out robot_20.pt
     ials-zoo train-aip --env traffic_grid_v0 --agent tls_12 --steps 50000 --arch mlp --out t12.pt
     ials-zoo train-aip --env warehouse_v0 --agent all --steps 50000 --out robots.pt
+    ials-zoo train-aip --env warehouse_v0 --agent all --steps 50000 --autoregressive --out robots_ar.pt
 
 Without ``--data`` it first collects ``--steps`` steps (Algorithm 1). Several agents (a
 comma-separated list, or ``all``): one GS run records every listed region (all of them acting
@@ -37,6 +38,8 @@ def configure(parser):
     parser.add_argument("--hidden", type=int, default=None, help="hidden units of the AIP network")
     parser.add_argument("--batch-size", type=int, default=None,
                         help="episodes per batch (gru) or steps per batch (mlp)")
+    parser.add_argument("--autoregressive", action="store_true",
+                        help="an AIP that also reads the influence of the previous step, P(u_t | d_<=t, u_<t)")
     parser.add_argument("--save-data", default=None, help="also save the collected data here")
     parser.add_argument("--report", default=None, help="write the training report as JSON here")
     parser.add_argument("--out", required=True, help="output predictor file (.pt)")
@@ -85,7 +88,7 @@ def run(args) -> int:
     arch = args.arch or get_domain(data.region.domain).default_predictor
     pred, report = train_predictor(data, arch=arch, dset_kind=args.dset_kind, epochs=args.epochs,
                                    seed=args.seed, progress=progress, lr=args.lr, hidden=args.hidden,
-                                   batch_size=args.batch_size)
+                                   batch_size=args.batch_size, autoregressive=args.autoregressive)
     save_predictor(pred, args.out)
     if args.report:
         atomic_write_text(args.report, json.dumps(report, indent=2) + "\n")
@@ -119,7 +122,7 @@ def _train_set(args, progress: bool) -> int:
         lr=args.lr or (d.aip_lr if arch == d.aip_arch else None),
         epochs=args.epochs or (d.aip_epochs if arch == d.aip_arch else None),
         batch_size=args.batch_size or (d.aip_batch if arch == d.aip_arch else None),
-        seed=args.seed, dset_kind=args.dset_kind, progress=progress)
+        seed=args.seed, dset_kind=args.dset_kind, progress=progress, autoregressive=args.autoregressive)
     collect_seconds = next(iter(data.values())).metadata["collect_seconds"]
     save_predictor_set(preds.values(), args.out, metadata={
         "steps": next(iter(data.values())).n_steps, "policy": "uniform_random (every listed agent)",
@@ -128,7 +131,8 @@ def _train_set(args, progress: bool) -> int:
     if args.report:
         atomic_write_text(args.report, json.dumps(report, indent=2) + "\n")
     ce = report["test_cross_entropy"]
-    print(f"{len(agents)} {arch} AIPs of {args.env}: test cross-entropy mean {report['mean_test_cross_entropy']:.4f} "
+    kind = f"autoregressive {arch}" if args.autoregressive else arch
+    print(f"{len(agents)} {kind} AIPs of {args.env}: test cross-entropy mean {report['mean_test_cross_entropy']:.4f} "
           f"(min {min(ce.values()):.4f}, max {max(ce.values()):.4f}); collection {collect_seconds:.1f} s, training "
           f"{report['train_seconds']:.1f} s")
     print(f"wrote {args.out}")

@@ -70,6 +70,8 @@ class DIALSSettings:
         refresh: default steps per agent between AIP refreshes (0 = train once, at the start).
         frame_stack: observations a multi-agent (IPPO, DIALS) policy reads by default (None:
             the domain's ``frame_stack``); chosen from the PPO ablation.
+        aip_autoregressive: DIALS's AIPs also read their previous influence ``u_{t-1}``
+            (:mod:`ials_zoo.influence.base`) by default.
     """
 
     aip_arch: str = "mlp"
@@ -81,6 +83,7 @@ class DIALSSettings:
     collect_steps: int = 10_000
     refresh: int = 0
     frame_stack: int | None = None
+    aip_autoregressive: bool = False
 
 
 @dataclass(frozen=True)

@@ -153,6 +153,8 @@ class AgentShard:
                 if getattr(old, "h", None) is not None and getattr(new, "h", None) is not None \
                         and old.h.shape == new.h.shape:
                     new.h = old.h.copy()
+                if new.autoregressive and old.autoregressive:
+                    new._previous = old._previous.copy()
                 venv.predictor = new
 
     def where(self) -> tuple[int, str]:

@@ -1,4 +1,5 @@
-"""The influence-predictor interface (paper §4.2): ``P(u_t | d_0 .. d_t)``.
+"""The influence-predictor interface (paper §4.2): ``P(u_t | d_0 .. d_t)``, or, for an
+*autoregressive* predictor, ``P(u_t | d_0 .. d_t, u_0 .. u_{t-1})``.
 
 Every predictor implements :class:`InfluencePredictor`, the interface the IALS uses:
 
@@ -8,6 +9,16 @@ Every predictor implements :class:`InfluencePredictor`, the interface the IALS u
 * ``sample(dsets, rng)`` -- the same, then draw ``u_t`` (int64, ``[n, M]``).
 
 The sources are independent given the history (one softmax head per source, paper §4.2).
+
+An autoregressive predictor (``autoregressive=True``, :mod:`ials_zoo.influence.networks`) also
+reads the influence of the previous step, one-hot per source, beside ``d_t``: what it sampled
+itself (``sample`` remembers its draw) or, under teacher forcing, the recorded ``u_{t-1}``
+(:meth:`InfluencePredictor.observe`, what the cross-entropy on data does). A predictor that
+forgets its own samples turns one neighbour that lingers into a string of fresh arrivals (the
+warehouse, ``ials-zoo fidelity``); conditioning on ``u_{<t}`` is how it remembers. The sources
+of a region are still factored into independent heads given that input: each head sees every
+source's previous class, so a neighbour moving from one shared cell to the next is visible to
+both cells' heads.
 Sampling from logits is shared here (:meth:`InfluencePredictor._sample_logits`, and a
 single-history path, :meth:`InfluencePredictor._sample_logits1`, bitwise the same draws).
 """
@@ -44,6 +55,7 @@ class InfluencePredictor:
     """
 
     name = "base"
+    autoregressive = False
 
     def __init__(self, region: RegionSpec, dset_kind: str = "dset", metadata: dict | None = None):
         if not isinstance(region, RegionSpec):
@@ -71,6 +83,8 @@ class InfluencePredictor:
         self._same_k = bool((classes == classes[0]).all())
         self._sample_bufs = None
         self.n = 0
+        self.input_size = self.dset_size + (int(self._offsets[-1]) if self.autoregressive else 0)
+        self._previous = np.zeros((0, int(self._offsets[-1])), np.float32)
 
     # Scratch state of the n=1 fast paths: buffers holding views of each other, which a copy
     # or pickle would turn into unrelated arrays, and memo tables. Rebuilt on demand.
@@ -90,6 +104,19 @@ class InfluencePredictor:
         if n < 1:
             raise ValueError(f"n must be >= 1, got {n}")
         self.n = n
+        if self.autoregressive:
+            self._previous = np.zeros((n, int(self._offsets[-1])), np.float32)
+
+    def observe(self, influences: np.ndarray) -> None:
+        """Tell an autoregressive predictor the influence ``u_t`` (int ``[n, M]``) that the next
+        step conditions on (teacher forcing); ``sample`` does this with its own draw. A
+        predictor without that input ignores it."""
+        if not self.autoregressive:
+            return
+        u = np.asarray(influences)
+        if u.shape != (self.n, self.n_sources):
+            raise ValueError(f"expected influences of shape {(self.n, self.n_sources)}, got {u.shape}")
+        self._previous = one_hot_influences(u, self._offsets)
 
     def probs_padded(self, dsets: np.ndarray) -> np.ndarray:
         """Class probabilities ``[n, M, Kmax]`` (0 beyond a source's own classes)."""
@@ -107,7 +134,9 @@ class InfluencePredictor:
         r = rng.random((p.shape[0], self.n_sources, 1))
         u = (cum < r).sum(axis=-1)
         # cum[-1] may round to just below r; clamp to the last real class.
-        return np.minimum(u, self._kmax_minus1).astype(np.int64, copy=False)
+        u = np.minimum(u, self._kmax_minus1).astype(np.int64, copy=False)
+        self.observe(u)
+        return u
 
     # -- helpers ---------------------------------------------------------------------------
     def _check_dsets(self, dsets) -> np.ndarray:
@@ -122,6 +151,13 @@ class InfluencePredictor:
         if d.shape[0] != self.n:
             raise ValueError(f"reset({self.n}) was called but got {d.shape[0]} d-sets")
         return d
+
+    def _input(self, d: np.ndarray) -> np.ndarray:
+        """The network's input: ``d_t``, and for an autoregressive predictor the one-hot
+        ``u_{t-1}`` beside it (float32)."""
+        if not self.autoregressive:
+            return d
+        return np.concatenate([d.astype(np.float32, copy=False), self._previous], axis=1)
 
     def _sample_logits(self, logits: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Draw ``u`` from the per-source softmax of ``logits`` ``[n, sum K]``.
@@ -188,6 +224,25 @@ class InfluencePredictor:
 
     def __repr__(self):
         return f"<{type(self).__name__} {self.describe()}>"
+
+
+def one_hot_influences(u: np.ndarray, offsets) -> np.ndarray:
+    """``u`` (int ``[..., M]``) as the concatenated one-hot ``[..., sum K_m]`` (float32):
+    source ``m``'s class ``k`` at column ``offsets[m] + k``."""
+    u = np.asarray(u)
+    out = np.zeros(u.shape[:-1] + (int(offsets[-1]),), np.float32)
+    cols = u + np.asarray(offsets[:-1], np.int64)
+    np.put_along_axis(out, cols, 1.0, axis=-1)
+    return out
+
+
+def previous_influences(u: np.ndarray, offsets) -> np.ndarray:
+    """The autoregressive input of recorded episodes ``u`` (``[E, T, M]``): at step ``t`` the
+    one-hot ``u_{t-1}``, zeros at ``t = 0`` (teacher forcing), ``[E, T, sum K]``."""
+    onehot = one_hot_influences(u, offsets)
+    out = np.zeros_like(onehot)
+    out[:, 1:] = onehot[:, :-1]
+    return out
 
 
 def _check_shapes(arrays, shapes, who):

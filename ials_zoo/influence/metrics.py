@@ -10,7 +10,8 @@ from ials_zoo.influence.base import InfluencePredictor
 def evaluate_cross_entropy(predictor: InfluencePredictor, dataset, episodes=None) -> float:
     """Mean cross-entropy (nats) of ``predictor`` on ``dataset``.
 
-    ``CE = (1/M) sum_m mean_{episode, t} [-ln p_m(u_{t,m} | d_0..d_t)]``: the per-step
+    ``CE = (1/M) sum_m mean_{episode, t} [-ln p_m(u_{t,m} | d_0..d_t)]`` (and ``u_0..u_{t-1}``
+    for an autoregressive predictor, given the recorded ones: teacher forcing): the per-step
     negative log-likelihood of each source, averaged over steps and episodes, then over the
     ``M`` sources (so a uniform guess over 4 classes scores ln 4 = 1.386 whatever ``M``).
     The recurrent state is reset at the start of every episode. ``episodes`` selects a
@@ -39,6 +40,7 @@ def cross_entropy_per_source(predictor, dataset, episodes=None) -> np.ndarray:
     predictor.reset(E)
     for t in range(T):
         p = predictor.probs_padded(d[:, t])
+        predictor.observe(u[:, t])  # teacher forcing: an autoregressive AIP reads the recorded u_t next
         pu = p[rows, cols, u[:, t]]
         nll -= np.log(np.maximum(pu, 1e-12)).sum(axis=0)
     return nll / (E * T)

@@ -1,5 +1,8 @@
 """Neural influence predictors with numpy inference: :class:`MLPPredictor` (no memory, the
-traffic AIP) and :class:`GRUPredictor` (memory, the warehouse AIP).
+traffic AIP) and :class:`GRUPredictor` (memory, the warehouse AIP). Either can be
+*autoregressive* (``autoregressive=True``): its input is ``d_t`` and the one-hot ``u_{t-1}``
+(:mod:`ials_zoo.influence.base`), so an MLP then models ``P(u_t | d_t, u_{t-1})`` and a GRU
+``P(u_t | d_<=t, u_<t)``.
 
 Inference is plain numpy (weights copied out of torch after training): a torch call at batch
 1 costs more than a whole local-simulator step. A single history (``reset(1)``, the
@@ -31,17 +34,19 @@ class MLPPredictor(InfluencePredictor):
     name = "mlp"
     arch = "mlp"
 
-    def __init__(self, region, dset_kind="dset", hidden=64, arrays=None, seed=0, metadata=None):
+    def __init__(self, region, dset_kind="dset", hidden=64, arrays=None, seed=0, metadata=None,
+                 autoregressive=False):
+        self.autoregressive = bool(autoregressive)
         super().__init__(region, dset_kind, metadata)
         self.hidden = int(hidden)
         if arrays is None:
-            arrays = init_arrays("mlp", self.dset_size, self.hidden, int(self._offsets[-1]), seed)
+            arrays = init_arrays("mlp", self.input_size, self.hidden, int(self._offsets[-1]), seed)
         self.set_arrays(arrays)
 
     def set_arrays(self, arrays):
         a = {k: np.asarray(v, dtype=np.float32) for k, v in arrays.items()}
         shapes = {
-            "w1": (self.dset_size, self.hidden),
+            "w1": (self.input_size, self.hidden),
             "b1": (self.hidden,),
             "w_out": (self.hidden, int(self._offsets[-1])),
             "b_out": (int(self._offsets[-1]),),
@@ -50,7 +55,7 @@ class MLPPredictor(InfluencePredictor):
         self.w1, self.b1, self.w_out, self.b_out = (np.ascontiguousarray(a[k]) for k in shapes)
 
     def _logits(self, dsets):
-        d = self._check_dsets(dsets)
+        d = self._input(self._check_dsets(dsets))
         h = d.astype(np.float32) @ self.w1
         h += self.b1
         np.maximum(h, 0.0, out=h)
@@ -64,14 +69,17 @@ class MLPPredictor(InfluencePredictor):
     def sample(self, dsets, rng):
         logits = self._logits(dsets)
         if self.n == 1 and self._same_k:
-            return self._sample_logits1(logits, rng)
-        return self._sample_logits(logits, rng)
+            u = self._sample_logits1(logits, rng)
+        else:
+            u = self._sample_logits(logits, rng)
+        self.observe(u)
+        return u
 
     def _arrays(self):
         return {"w1": self.w1, "b1": self.b1, "w_out": self.w_out, "b_out": self.b_out}
 
     def _config(self):
-        return {"hidden": self.hidden}
+        return {"hidden": self.hidden, **({"autoregressive": True} if self.autoregressive else {})}
 
 
 class GRUPredictor(InfluencePredictor):
@@ -86,11 +94,13 @@ class GRUPredictor(InfluencePredictor):
     name = "gru"
     arch = "gru"
 
-    def __init__(self, region, dset_kind="dset", hidden=64, arrays=None, seed=0, metadata=None):
+    def __init__(self, region, dset_kind="dset", hidden=64, arrays=None, seed=0, metadata=None,
+                 autoregressive=False):
+        self.autoregressive = bool(autoregressive)
         super().__init__(region, dset_kind, metadata)
         self.hidden = int(hidden)
         if arrays is None:
-            arrays = init_arrays("gru", self.dset_size, self.hidden, int(self._offsets[-1]), seed)
+            arrays = init_arrays("gru", self.input_size, self.hidden, int(self._offsets[-1]), seed)
         self.set_arrays(arrays)
         self.h = np.zeros((0, self.hidden), dtype=np.float32)
 
@@ -98,7 +108,7 @@ class GRUPredictor(InfluencePredictor):
         a = {k: np.asarray(v, dtype=np.float32) for k, v in arrays.items()}
         H, K = self.hidden, int(self._offsets[-1])
         shapes = {
-            "w_ih": (self.dset_size, 3 * H),
+            "w_ih": (self.input_size, 3 * H),
             "w_hh": (H, 3 * H),
             "b_ih": (3 * H,),
             "b_hh": (3 * H,),
@@ -121,11 +131,12 @@ class GRUPredictor(InfluencePredictor):
 
     def sample(self, dsets, rng):
         if self.n == 1:
-            logits = self._logits1(self._check_dsets(dsets))
-            if self._same_k:
-                return self._sample_logits1(logits, rng)
-            return self._sample_logits(logits, rng)
-        return self._sample_logits(self._logits(dsets), rng)
+            logits = self._logits1(self._input(self._check_dsets(dsets)))
+            u = self._sample_logits1(logits, rng) if self._same_k else self._sample_logits(logits, rng)
+        else:
+            u = self._sample_logits(self._logits(dsets), rng)
+        self.observe(u)
+        return u
 
     # The d-set projection d @ w_ih + b_ih of at most this many distinct d-sets is memoised
     # for single-history sampling (binary d-sets repeat a lot; 8192 x 3H floats = 6 MB).
@@ -185,7 +196,7 @@ class GRUPredictor(InfluencePredictor):
         self._h_spare = np.empty((1, H), np.float32)  # swapped with h every step
 
     def _logits(self, dsets):
-        d = self._check_dsets(dsets)
+        d = self._input(self._check_dsets(dsets))
         H = self.hidden
         gi = d.astype(np.float32) @ self.w_ih
         gi += self.b_ih
@@ -218,7 +229,7 @@ class GRUPredictor(InfluencePredictor):
         }
 
     def _config(self):
-        return {"hidden": self.hidden}
+        return {"hidden": self.hidden, **({"autoregressive": True} if self.autoregressive else {})}
 
 
 ARCHS = {"mlp": MLPPredictor, "gru": GRUPredictor}
@@ -256,10 +267,10 @@ def init_arrays(arch: str, d: int, hidden: int, n_logits: int, seed: int = 0) ->
     raise ValueError(f"unknown AIP architecture {arch!r}; expected one of {sorted(ARCHS)}")
 
 
-def untrained_predictor(region, arch="gru", dset_kind="dset", hidden=64, seed=0):
+def untrained_predictor(region, arch="gru", dset_kind="dset", hidden=64, seed=0, autoregressive=False):
     """A randomly initialised network AIP: the paper's untrained-IALS (SPEC §3)."""
     if arch not in ARCHS:
         raise ValueError(f"unknown AIP architecture {arch!r}; expected one of {sorted(ARCHS)}")
-    pred = ARCHS[arch](region, dset_kind=dset_kind, hidden=hidden, seed=seed)
+    pred = ARCHS[arch](region, dset_kind=dset_kind, hidden=hidden, seed=seed, autoregressive=autoregressive)
     pred.metadata.update({"variant": "untrained", "seed": int(seed)})
     return pred

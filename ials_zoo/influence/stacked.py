@@ -12,7 +12,8 @@ simply has several groups.
 Sampling draws, per row, one uniform number per source from that row's own stream
 (:class:`ials_zoo.core.streams.CopyStreams`), so an agent's influence sources never depend on
 which other agents share the batch. Replacing predictors (:meth:`StackedPredictor.replace`,
-what DIALS does after retraining) restacks only the groups concerned.
+what DIALS does after retraining) restacks only the groups concerned. An autoregressive group
+(:mod:`ials_zoo.influence.base`) keeps each row's last draw and reads it at the next step.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from ials_zoo.core.streams import CopyStreams
-from ials_zoo.influence.base import InfluencePredictor, _sigmoid
+from ials_zoo.influence.base import InfluencePredictor, _sigmoid, one_hot_influences
 from ials_zoo.influence.constant import _ConstantPredictor
 from ials_zoo.influence.networks import GRUPredictor, MLPPredictor
 
@@ -29,9 +30,9 @@ STREAM_SALT = 1  # separates the AIP's streams from the local simulator's (same 
 
 def _group_key(p: InfluencePredictor) -> tuple:
     if isinstance(p, MLPPredictor):
-        return ("mlp", p.hidden)
+        return ("mlp", p.hidden, p.autoregressive)
     if isinstance(p, GRUPredictor):
-        return ("gru", p.hidden)
+        return ("gru", p.hidden, p.autoregressive)
     if isinstance(p, _ConstantPredictor):
         return ("table",)
     raise TypeError(f"cannot stack a {type(p).__name__}")
@@ -41,6 +42,9 @@ class _Group:
     def __init__(self, kind, members: list[int], predictors: list[InfluencePredictor]):
         self.kind, self.members = kind, np.array(members)
         ps = [predictors[i] for i in members]
+        self.autoregressive = bool(ps[0].autoregressive)
+        self.offsets = ps[0]._offsets
+        self.previous = None  # [G, n, sum K]: the one-hot u_{t-1} of an autoregressive group
         if kind == "mlp":
             self.w = [np.stack([getattr(p, k) for p in ps]) for k in ("w1", "b1", "w_out", "b_out")]
         elif kind == "gru":
@@ -65,8 +69,16 @@ class _Group:
     def reset(self, n: int):
         if self.kind == "gru":
             self.h = np.zeros((len(self.members), n, self.hidden), np.float32)
+        if self.autoregressive:
+            self.previous = np.zeros((len(self.members), n, int(self.offsets[-1])), np.float32)
+
+    def remember(self, u):  # u: [G, n, M], what an autoregressive group reads at the next step
+        if self.autoregressive:
+            self.previous = one_hot_influences(u, self.offsets)
 
     def logits(self, d):  # d: [G, n, D] float32
+        if self.autoregressive:
+            d = np.concatenate([d, self.previous], axis=-1)
         if self.kind == "mlp":
             w1, b1, w_out, b_out = self.w
             h = np.matmul(d, w1)
@@ -156,13 +168,17 @@ class StackedPredictor:
             if p.region.agent != agent or p.region.influence_classes != self._layout.region.influence_classes:
                 raise ValueError(f"a predictor for {p.region.agent} cannot replace {agent}'s")
             self.predictors[i] = p
-        hidden = [(g.members, g.h) for g in self.groups]
+        running = [(g.members, g.h, g.previous) for g in self.groups]
         self._build()
         for g in self.groups:  # keep running histories where the group's shape allows
             g.reset(self.n_envs)
-            for members, h in hidden:
-                if h is not None and g.h is not None and np.array_equal(members, g.members) and h.shape == g.h.shape:
+            for members, h, previous in running:
+                if not np.array_equal(members, g.members):
+                    continue
+                if h is not None and g.h is not None and h.shape == g.h.shape:
                     g.h = h
+                if previous is not None and g.previous is not None:
+                    g.previous = previous
 
     def probs_padded(self, dsets: np.ndarray) -> np.ndarray:
         """Feed ``d_t`` of every row (``[rows, D]``), advance the recurrent states, return the
@@ -181,6 +197,16 @@ class StackedPredictor:
             probs = self._layout._logits_to_padded(logits.reshape(-1, logits.shape[-1]))
             view[g.members] = probs.reshape(len(g.members), self.n_envs, self.n_sources, self.max_classes)
         return out
+
+    def observe(self, influences: np.ndarray) -> None:
+        """The influence ``u_t`` of every row (int ``[rows, M]``) that autoregressive AIPs read
+        at the next step (teacher forcing; :meth:`sample` does this with its own draws)."""
+        u = np.asarray(influences)
+        if u.shape != (self.rows, self.n_sources):
+            raise ValueError(f"expected influences of shape {(self.rows, self.n_sources)}, got {u.shape}")
+        ug = u.reshape(len(self.agents), self.n_envs, self.n_sources)
+        for g in self.groups:
+            g.remember(ug[g.members])
 
     def sample(self, dsets: np.ndarray) -> np.ndarray:
         """Feed ``d_t`` of every row, advance, draw ``u_t`` (int64 ``[rows, M]``) from each row's
@@ -211,6 +237,7 @@ class StackedPredictor:
             np.cumsum(z, axis=-1, out=z)
             rr = r[g.members] * z[..., -1:]
             out[g.members] = (z < rr).sum(axis=-1)
+            g.remember(out[g.members])
         return out.reshape(self.rows, M)
 
 

@@ -22,6 +22,7 @@ import time
 
 import numpy as np
 
+from ials_zoo.influence.base import previous_influences
 from ials_zoo.influence.predictors import (
     ARCHS,
     MarginalPredictor,
@@ -121,8 +122,10 @@ def train_predictor(
     hidden: int | None = None,
     batch_size: int | None = None,
     test_fraction: float = 0.1,
+    autoregressive: bool = False,
 ):
-    """Train an AIP of architecture ``arch`` (``"gru"`` or ``"mlp"``) on ``dataset``.
+    """Train an AIP of architecture ``arch`` (``"gru"`` or ``"mlp"``) on ``dataset``;
+    ``autoregressive``: it also reads ``u_{t-1}`` (the recorded one: teacher forcing).
 
     Returns:
         ``(predictor, report)``. ``report`` (JSON-able) holds the hyper-parameters, the
@@ -145,12 +148,23 @@ def train_predictor(
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
-        return _train(dataset, arch, dset_kind, epochs, seed, progress, lr, hidden, batch_size, test_fraction)
+        return _train(dataset, arch, dset_kind, epochs, seed, progress, lr, hidden, batch_size, test_fraction,
+                      autoregressive)
     finally:
         torch.set_num_threads(threads)
 
 
-def _train(dataset, arch, dset_kind, epochs, seed, progress, lr, hidden, batch_size, test_fraction):
+def network_inputs(dataset, dset_kind: str, autoregressive: bool) -> np.ndarray:
+    """A data set's network inputs ``[E, T, D]`` (float32): the d-sets, and for an
+    autoregressive AIP the one-hot ``u_{t-1}`` beside them (zeros at an episode's start)."""
+    d = dataset.dsets[dset_kind].astype(np.float32)
+    if not autoregressive:
+        return d
+    offsets = np.concatenate([[0], np.cumsum(dataset.region.influence_classes)])
+    return np.concatenate([d, previous_influences(dataset.influences, offsets)], axis=2)
+
+
+def _train(dataset, arch, dset_kind, epochs, seed, progress, lr, hidden, batch_size, test_fraction, autoregressive):
     import torch
 
     from ials_zoo.core.region import check_dset_kind
@@ -171,7 +185,7 @@ def _train(dataset, arch, dset_kind, epochs, seed, progress, lr, hidden, batch_s
 
     region = dataset.region
     train_idx, test_idx = dataset.split(test_fraction, seed=seed)
-    d_all = dataset.dsets[dset_kind].astype(np.float32)
+    d_all = network_inputs(dataset, dset_kind, autoregressive)
     u_all = dataset.influences
     D = d_all.shape[2]
     offsets = [int(x) for x in np.concatenate([[0], np.cumsum(region.influence_classes)])]
@@ -224,8 +238,10 @@ def _train(dataset, arch, dset_kind, epochs, seed, progress, lr, hidden, batch_s
         bar.close()
     train_seconds = time.perf_counter() - t0
 
-    trained = ARCHS[arch](region, dset_kind=dset_kind, hidden=int(hp["hidden"]), arrays=net.to_numpy())
-    untrained = ARCHS[arch](region, dset_kind=dset_kind, hidden=int(hp["hidden"]), arrays=init)
+    trained = ARCHS[arch](region, dset_kind=dset_kind, hidden=int(hp["hidden"]), arrays=net.to_numpy(),
+                          autoregressive=autoregressive)
+    untrained = ARCHS[arch](region, dset_kind=dset_kind, hidden=int(hp["hidden"]), arrays=init,
+                            autoregressive=autoregressive)
     uniform = UniformPredictor(region, dset_kind=dset_kind, probs=untrained_probs(region))
     marginal = MarginalPredictor.fit(dataset, dset_kind=dset_kind, episodes=train_idx)
 
@@ -240,6 +256,7 @@ def _train(dataset, arch, dset_kind, epochs, seed, progress, lr, hidden, batch_s
         "env_id": region.domain,
         "agent": region.agent,
         "arch": arch,
+        "autoregressive": bool(autoregressive),
         "dset_kind": dset_kind,
         "hyperparameters": {**hp, "optimizer": "Adam", "seed": int(seed), "test_fraction": test_fraction},
         "dataset": {
@@ -352,7 +369,7 @@ def _stacked_modules():
 def train_predictors(datasets: dict, arch: str, hidden: int | None = None, lr: float | None = None,
                      epochs: int | None = None, batch_size: int | None = None, seed: int = 0,
                      init: dict | None = None, dset_kind: str = "dset", test_fraction: float = 0.1,
-                     progress: bool = False) -> tuple[dict, dict]:
+                     progress: bool = False, autoregressive: bool = False) -> tuple[dict, dict]:
     """Train one AIP per agent on its own data, all in one stacked torch program.
 
     Every agent's network is a slice of stacked weights; the loss is the sum of the agents'
@@ -360,8 +377,9 @@ def train_predictors(datasets: dict, arch: str, hidden: int | None = None, lr: f
     own data, in one batched computation per update (the agents' data sets come from one GS
     run: same episodes, same length). ``init`` (``{agent: predictor}``) warm-starts from those
     networks (DIALS retrains its AIPs), else each starts from ``init_arrays`` seeded from
-    ``seed`` and the agent's name. Returns ``({agent: predictor}, report)`` with each agent's
-    train/test cross-entropy and the training seconds.
+    ``seed`` and the agent's name. ``autoregressive``: every AIP also reads ``u_{t-1}`` (teacher
+    forcing). Returns ``({agent: predictor}, report)`` with each agent's train/test
+    cross-entropy and the training seconds.
     """
     import torch
 
@@ -388,14 +406,17 @@ def train_predictors(datasets: dict, arch: str, hidden: int | None = None, lr: f
     region = first.region
     offsets = [int(x) for x in np.concatenate([[0], np.cumsum(region.influence_classes)])]
     n_logits, H = offsets[-1], int(hp["hidden"])
-    D = first.dsets[dset_kind].shape[2]
+    inputs = {a: network_inputs(datasets[a], dset_kind, autoregressive) for a in agents}
+    D = inputs[agents[0]].shape[2]
     train_idx, test_idx = first.split(test_fraction, seed=seed)
     arrays = []
     for a in agents:
         if init and a in init:
             old = init[a]
-            if old.name != arch or old.hidden != H or old.dset_kind != dset_kind:
-                raise ValueError(f"cannot warm-start a {arch} AIP (hidden {H}) from {old!r}")
+            if (old.name != arch or old.hidden != H or old.dset_kind != dset_kind
+                    or old.autoregressive != bool(autoregressive)):
+                raise ValueError(f"cannot warm-start a {arch} AIP (hidden {H}, autoregressive {bool(autoregressive)}) "
+                                 f"from {old!r}")
             arrays.append({k: np.asarray(v, np.float32) for k, v in old._arrays().items()})
         else:
             arrays.append(init_arrays(arch, D, H, n_logits, seed=(seed * 1_000_003 + agent_key(a)) % 2**32))
@@ -406,7 +427,7 @@ def train_predictors(datasets: dict, arch: str, hidden: int | None = None, lr: f
         torch.manual_seed(seed)
         net = _stacked_modules()[arch](arrays)
         opt = torch.optim.Adam(net.parameters(), lr=float(hp["lr"]))
-        X = torch.from_numpy(np.stack([datasets[a].dsets[dset_kind][train_idx] for a in agents]).astype(np.float32))
+        X = torch.from_numpy(np.stack([inputs[a][train_idx] for a in agents]))
         U = torch.from_numpy(np.stack([datasets[a].influences[train_idx] for a in agents]))
         G = len(agents)
         if arch == "mlp":
@@ -449,16 +470,18 @@ def train_predictors(datasets: dict, arch: str, hidden: int | None = None, lr: f
         torch.set_num_threads(threads)
     out, ce = {}, {}
     for g, a in enumerate(agents):
-        pred = ARCHS[arch](datasets[a].region, dset_kind=dset_kind, hidden=H, arrays=net.arrays(g))
+        pred = ARCHS[arch](datasets[a].region, dset_kind=dset_kind, hidden=H, arrays=net.arrays(g),
+                           autoregressive=autoregressive)
         test = cross_entropy_per_source(pred, datasets[a], test_idx if len(test_idx) else train_idx)
-        pred.metadata.update({"variant": "trained", "arch": arch, "hyperparameters": {**hp, "seed": int(seed)},
+        pred.metadata.update({"variant": "trained", "arch": arch, "autoregressive": bool(autoregressive),
+                              "hyperparameters": {**hp, "seed": int(seed)},
                               "dataset": {"steps": datasets[a].n_steps,
                                           "collect_seconds": datasets[a].metadata.get("collect_seconds"),
                                           "policy": datasets[a].metadata.get("policy")},
                               "train_seconds": round(seconds, 3), "test_cross_entropy": float(np.mean(test))})
         out[a] = pred
         ce[a] = float(np.mean(test))
-    return out, {"arch": arch, "hyperparameters": hp, "agents": len(agents), "train_seconds": round(seconds, 3),
+    return out, {"arch": arch, "autoregressive": bool(autoregressive), "hyperparameters": hp, "agents": len(agents), "train_seconds": round(seconds, 3),
                  "test_cross_entropy": ce, "mean_test_cross_entropy": float(np.mean(list(ce.values()))),
                  "warm_start": bool(init)}
 

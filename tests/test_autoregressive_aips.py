@@ -1,0 +1,111 @@
+"""Autoregressive AIPs, P(u_t | d_<=t, u_<t), checked against what they must compute: on data
+whose influence persists (a neighbour that lingers) and whose d-sets say nothing, an
+autoregressive AIP samples the chain's own persistence and a memoryless one cannot; the
+stacked (multi-agent) AIPs compute what the single ones compute, and remember their draws;
+the variant survives a save and a load."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ials_zoo.core.domains import get_domain
+from ials_zoo.influence.dataset import DSET_KINDS, InfluenceDataset
+
+ENV, OPTIONS = "warehouse_v0", {"robots": (2, 2)}
+AGENTS = ["robot_0", "robot_1", "robot_2"]
+STAY = 0.9
+
+
+def _region(agent="robot_0"):
+    return get_domain(ENV).region_spec(agent, **OPTIONS)
+
+
+def _lingering_data(region, episodes=60, steps=40, seed=0) -> InfluenceDataset:
+    """Every source a Markov chain: it keeps its class with probability STAY, else redraws it
+    uniformly; the d-sets are all zero (they carry no information)."""
+    rng = np.random.default_rng(seed)
+    K = np.asarray(region.influence_classes)
+    u = np.zeros((episodes, steps, len(K)), np.int64)
+    u[:, 0] = rng.integers(K, size=(episodes, len(K)))
+    for t in range(1, steps):
+        fresh = rng.integers(K, size=(episodes, len(K)))
+        stay = rng.random((episodes, len(K))) < STAY
+        u[:, t] = np.where(stay, u[:, t - 1], fresh)
+    dsets = {k: np.zeros((episodes, steps, region.dset_size(k)), np.uint8) for k in DSET_KINDS}
+    return InfluenceDataset(region, dsets, u)
+
+
+def _sampled_persistence(predictor, region, episodes=200, steps=40, seed=1) -> float:
+    rng = np.random.default_rng(seed)
+    predictor.reset(episodes)
+    d = np.zeros((episodes, region.dset_size("dset")), np.uint8)
+    u = np.stack([predictor.sample(d, rng) for _ in range(steps)], axis=1)
+    return float((u[:, 1:] == u[:, :-1]).mean())
+
+
+@pytest.mark.parametrize("arch", ["mlp", "gru"])
+def test_an_autoregressive_aip_samples_the_persistence_a_memoryless_one_loses(arch):
+    from ials_zoo.influence.metrics import evaluate_cross_entropy
+    from ials_zoo.influence.train import train_predictor
+
+    region = _region()
+    data = _lingering_data(region)
+    K = np.asarray(region.influence_classes)
+    truth = float(np.mean(STAY + (1 - STAY) / K))  # P(u_t = u_{t-1}) of the chain
+    kw = {"mlp": dict(epochs=30, lr=1e-2), "gru": dict(epochs=40, lr=1e-2, batch_size=8)}[arch]
+    memoryless, _ = train_predictor(data, arch, hidden=16, progress=False, **kw)
+    remembering, report = train_predictor(data, arch, hidden=16, progress=False, autoregressive=True, **kw)
+    assert report["autoregressive"] and remembering.autoregressive
+    assert abs(_sampled_persistence(remembering, region) - truth) < 0.04
+    # without u_<t the draws are independent: P(stay) = sum_k p_k^2, about 1/K
+    assert _sampled_persistence(memoryless, region) < truth - 0.4
+    # teacher-forced cross-entropy: the chain's own entropy rate is far below ln K
+    assert evaluate_cross_entropy(remembering, data) < 0.6 * evaluate_cross_entropy(memoryless, data)
+
+
+@pytest.mark.parametrize("arch", ["mlp", "gru"])
+def test_stacked_autoregressive_aips_compute_what_each_one_computes(arch):
+    from ials_zoo.influence.networks import untrained_predictor
+    from ials_zoo.influence.stacked import StackedPredictor
+
+    preds = [untrained_predictor(_region(a), arch, hidden=8, seed=i, autoregressive=True)
+             for i, a in enumerate(AGENTS)]
+    singles = [untrained_predictor(_region(a), arch, hidden=8, seed=i, autoregressive=True)
+               for i, a in enumerate(AGENTS)]
+    n = 2
+    stacked = StackedPredictor(preds, n_envs=n)
+    rng = np.random.default_rng(0)
+    D, K = preds[0].dset_size, np.asarray(preds[0].n_classes)
+    for p in singles:
+        p.reset(n)
+    for _ in range(6):
+        d = rng.integers(0, 2, size=(len(AGENTS) * n, D)).astype(np.uint8)
+        u = rng.integers(K, size=(len(AGENTS) * n, len(K)))
+        together = stacked.probs_padded(d)
+        for i, p in enumerate(singles):
+            rows = slice(i * n, (i + 1) * n)
+            np.testing.assert_allclose(together[rows], p.probs_padded(d[rows]), atol=1e-5)
+            p.observe(u[rows])
+        stacked.observe(u)
+    # sample() remembers its own draws: the next step reads them as observe() would make it
+    twin = StackedPredictor([untrained_predictor(_region(a), arch, hidden=8, seed=i, autoregressive=True)
+                             for i, a in enumerate(AGENTS)], n_envs=n)
+    d0 = np.zeros((len(AGENTS) * n, D), np.uint8)
+    stacked.reset()
+    twin.reset()
+    u0 = stacked.sample(d0)
+    twin.probs_padded(d0)
+    twin.observe(u0)
+    np.testing.assert_allclose(stacked.probs_padded(d0), twin.probs_padded(d0), atol=1e-6)
+
+
+def test_the_variant_survives_a_save_and_a_load(tmp_path):
+    from ials_zoo.influence.files import load_predictor, save_predictor
+    from ials_zoo.influence.networks import untrained_predictor
+
+    pred = untrained_predictor(_region(), "gru", hidden=8, autoregressive=True)
+    back = load_predictor(save_predictor(pred, tmp_path / "aip.pt"))
+    assert back.autoregressive and back.input_size == pred.dset_size + int(np.sum(pred.n_classes))
+    plain = load_predictor(save_predictor(untrained_predictor(_region(), "gru", hidden=8), tmp_path / "p.pt"))
+    assert not plain.autoregressive and plain.input_size == plain.dset_size
