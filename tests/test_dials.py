@@ -226,6 +226,18 @@ def test_periodic_refresh_retrains_every_n_steps_and_sb3_learner_runs(tmp_path):
     assert list(load_predictor_set(folder / "aips.pt", env_id=ENV)) == AGENTS
 
 
+def test_dials_trains_refreshes_and_samples_autoregressive_aips_alike_on_any_workers(tmp_path):
+    from ials_zoo.influence.files import load_predictor_set
+
+    in_process = _dials(tmp_path, "ar0", refresh="128", aip_autoregressive=True, workers=0)
+    two = _dials(tmp_path, "ar2", refresh="128", aip_autoregressive=True, workers=2)
+    _assert_same_run(in_process, two)
+    result, folder = two
+    assert result["training"]["hyperparameters"]["aip_autoregressive"] is True
+    assert result["training"]["aip"]["refreshes"] == 2 and result["training"]["aip"]["last"]["warm_start"]
+    assert all(p.autoregressive for p in load_predictor_set(folder / "aips.pt", env_id=ENV).values())
+
+
 def test_a_dials_result_is_accepted_and_verified_by_the_leaderboard(tmp_path):
     from ials_zoo.leaderboard import submit, validate_result, verify
 
