@@ -6,7 +6,7 @@
 import sys
 
 from ials_zoo.baselines import ppo_shared
-from ials_zoo.baselines.common import run_cli
+from ials_zoo.baselines.arguments import run_cli
 
 if __name__ == "__main__":
     sys.exit(run_cli(ppo_shared))

@@ -206,3 +206,12 @@ def remove_stale_temporaries(folder, max_age_seconds: float = 3600.0) -> int:
                 p.unlink()
                 removed += 1
     return removed
+
+
+def format_seconds(seconds: float) -> str:
+    """``42 s``, ``3.5 min`` or ``2.1 h``."""
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.1f} min"
+    return f"{seconds / 3600:.1f} h"

@@ -8,7 +8,7 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import VecEnvWrapper
 
 from ials_zoo.baselines import ppo_shared, ppo_single
-from ials_zoo.baselines.common import predictor_for
+from ials_zoo.baselines.aip_record import predictor_for
 from ials_zoo.evaluation import eval_seeds, evaluate
 from ials_zoo.leaderboard import load_result
 

@@ -31,11 +31,11 @@ import numpy as np
 from tqdm.auto import tqdm
 
 import ials_zoo
-from ials_zoo.baselines.common import format_seconds
 from ials_zoo.baselines.multiagent import TrainingLog, final_results, joint_policy, policy_file, write_curve
 from ials_zoo.baselines.runs import Clock, RunFolder, load_training_state, save_training_state
 from ials_zoo.evaluation import evaluate_joint
 from ials_zoo.leaderboard import now_iso
+from ials_zoo.utils import format_seconds
 
 
 @dataclass

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ials_zoo.baselines.common import arg, parse_env_options, run_cli
+from ials_zoo.baselines.arguments import arg, parse_env_options, run_cli
 from ials_zoo.baselines.driver import RunPlan, check_run_args, run
 from ials_zoo.baselines.multiagent import (
     MultiPPOSettings,

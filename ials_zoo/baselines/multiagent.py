@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ials_zoo.baselines.common import PPOSettings, arg, check_ppo_settings
+from ials_zoo.baselines.arguments import PPOSettings, arg, check_ppo_settings
 from ials_zoo.utils import atomic_path, atomic_write_text
 
 

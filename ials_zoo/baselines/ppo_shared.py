@@ -37,17 +37,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ials_zoo.baselines.common import (
-    Evaluator,
-    PPOSettings,
-    TrainingRun,
-    arg,
-    as_float_box,
-    make_ppo,
-    parse_env_options,
-    run_cli,
-)
+from ials_zoo.baselines.arguments import PPOSettings, arg, parse_env_options, run_cli
 from ials_zoo.baselines.ppo_single import _hidden
+from ials_zoo.baselines.sb3_run import Evaluator, TrainingRun, as_float_box, make_ppo
 
 
 def _sb3_wrapper_base():
@@ -163,10 +155,11 @@ def main(args: Args | None = None) -> list[dict]:
     from ials_zoo.leaderboard import make_result, now_iso, write_result
 
     args = args or Args()
-    from ials_zoo.baselines.common import estimate_seconds, format_seconds
     from ials_zoo.baselines.ppo_single import check_ppo_args
     from ials_zoo.baselines.runs import RunFolder, training_logger
+    from ials_zoo.baselines.sb3_run import estimate_seconds
     from ials_zoo.core.domains import domain_ids
+    from ials_zoo.utils import format_seconds
 
     if args.env_id is None:
         raise ValueError(f"name the domain to train on: --env, one of {', '.join(domain_ids())}")

@@ -53,20 +53,9 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
-from ials_zoo.baselines.common import (
-    Evaluator,
-    PPOSettings,
-    TrainingRun,
-    arg,
-    as_float_box,
-    make_ppo,
-    parse_env_options,
-    predictor_for,
-    predictor_record,
-    run_cli,
-    scale_rewards,
-    simulator_label,
-)
+from ials_zoo.baselines.aip_record import predictor_for, predictor_record, simulator_label
+from ials_zoo.baselines.arguments import PPOSettings, arg, parse_env_options, run_cli
+from ials_zoo.baselines.sb3_run import Evaluator, TrainingRun, as_float_box, make_ppo, scale_rewards
 
 
 @dataclass
@@ -111,7 +100,7 @@ def _hidden(net_arch: str) -> list[int]:
 
 def check_ppo_args(args, positive=()) -> None:
     """Clear errors for the PPO settings before anything is built."""
-    from ials_zoo.baselines.common import check_ppo_settings
+    from ials_zoo.baselines.arguments import check_ppo_settings
     from ials_zoo.utils import check_seed
 
     for name in ("n_envs", "n_steps", "batch_size", "n_epochs", "eval_episodes", "final_eval_episodes",
@@ -184,11 +173,12 @@ def main(args: Args | None = None) -> dict:
     from stable_baselines3.common.vec_env import VecFrameStack, VecMonitor
 
     import ials_zoo
-    from ials_zoo.baselines.common import estimate_seconds, format_seconds
     from ials_zoo.baselines.runs import RunFolder, training_logger
+    from ials_zoo.baselines.sb3_run import estimate_seconds
     from ials_zoo.core.domains import get_domain
     from ials_zoo.leaderboard import make_result, now_iso, write_result
     from ials_zoo.single_agent import check_agent
+    from ials_zoo.utils import format_seconds
 
     args = args or Args()
     check_args(args)

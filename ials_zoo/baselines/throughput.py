@@ -75,8 +75,8 @@ def ppo_throughput(env_id: str, agent: str, simulator: str, steps: int = 30_000,
     import torch
     from stable_baselines3.common.vec_env import VecFrameStack, VecMonitor
 
-    from ials_zoo.baselines.common import as_float_box, make_ppo
     from ials_zoo.baselines.ppo_single import Args, _hidden, make_training_env
+    from ials_zoo.baselines.sb3_run import as_float_box, make_ppo
     from ials_zoo.core.domains import get_domain
     from ials_zoo.single_agent import check_agent
 

@@ -48,7 +48,7 @@ def configure(parser):
 
 
 def run(args) -> int:
-    from ials_zoo.baselines.common import parse_env_options
+    from ials_zoo.baselines.arguments import parse_env_options
     from ials_zoo.leaderboard import write_result
     from ials_zoo.utils import check_output_file
 

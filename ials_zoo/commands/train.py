@@ -14,7 +14,7 @@ import importlib
 
 def configure(parser):
     from ials_zoo.baselines import BASELINES
-    from ials_zoo.baselines.common import add_dataclass_args
+    from ials_zoo.baselines.arguments import add_dataclass_args
 
     sub = parser.add_subparsers(dest="baseline", metavar="BASELINE", required=True)
     for name, module_name in BASELINES.items():
@@ -26,7 +26,7 @@ def configure(parser):
 
 def run(args) -> int:
     from ials_zoo.baselines import BASELINES
-    from ials_zoo.baselines.common import dataclass_from_namespace
+    from ials_zoo.baselines.arguments import dataclass_from_namespace
 
     module = importlib.import_module(BASELINES[args.baseline])
     module.main(dataclass_from_namespace(module.Args, args))

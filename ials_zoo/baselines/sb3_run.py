@@ -1,221 +1,18 @@
-"""Pieces shared by the PPO baselines: dataclass <-> command line, training simulators, the
-periodic GS evaluation with its learning curve, checkpoints and the final policy file.
+"""One stable-baselines3 PPO training run (``ppo_single``, ``ppo_shared``): the SB3 model and
+its vec env, the periodic GS evaluation with its learning curve, checkpoints, the clock and
+the final policy file.
 """
 
 from __future__ import annotations
 
-import argparse
-import dataclasses
 import json
-import os
 import time
-import typing
-from pathlib import Path
 
 import numpy as np
 
+from ials_zoo.baselines.aip_record import GS
 from ials_zoo.baselines.runs import Clock
 from ials_zoo.utils import atomic_write_text
-
-# --------------------------------------------------------------------------------------------
-# dataclass <-> argparse
-
-
-def add_dataclass_args(parser: argparse.ArgumentParser, cls) -> argparse.ArgumentParser:
-    """Add one ``--field-name`` option per field of the dataclass ``cls``.
-
-    The help text of a field is its ``metadata["help"]`` (or what that callable returns, for
-    defaults read from the domains when the parser is built); booleans get ``--x/--no-x``."""
-    hints = typing.get_type_hints(cls)
-    for f in dataclasses.fields(cls):
-        name = "--" + f.name.replace("_", "-")
-        aliases = list(f.metadata.get("aliases", ()))
-        default = f.default if f.default is not dataclasses.MISSING else None
-        help_text = f.metadata.get("help", "")
-        help_text = f"{help_text() if callable(help_text) else help_text} (default: {default!r})"
-        typ = hints[f.name]
-        origin = typing.get_origin(typ)
-        if origin is typing.Union or str(origin) == "<class 'types.UnionType'>":
-            inner = [a for a in typing.get_args(typ) if a is not type(None)]
-            typ = inner[0] if inner else str
-        if typ is bool:
-            parser.add_argument(*aliases, name, dest=f.name, default=default,
-                                action=argparse.BooleanOptionalAction, help=help_text)
-        else:
-            parser.add_argument(*aliases, name, dest=f.name, type=typ, default=default,
-                                metavar=f.name.upper(), help=help_text)
-    return parser
-
-
-def dataclass_from_namespace(cls, ns: argparse.Namespace):
-    """Build ``cls`` from the parsed options (fields absent from ``ns`` keep their default)."""
-    values = {f.name: getattr(ns, f.name) for f in dataclasses.fields(cls) if hasattr(ns, f.name)}
-    return cls(**values)
-
-
-def parse_args(cls, argv=None, description: str | None = None):
-    """Parse a baseline's command line into its dataclass."""
-    parser = argparse.ArgumentParser(description=description, allow_abbrev=False)
-    add_dataclass_args(parser, cls)
-    return dataclass_from_namespace(cls, parser.parse_args(argv))
-
-
-def run_cli(module) -> int:
-    """``python -m`` entry point of a baseline module: parse its ``Args``, run its ``main``;
-    bad arguments print one clear line instead of a traceback (``ials-zoo train``'s style)."""
-    import sys
-
-    args = parse_args(module.Args, description=module.__doc__.splitlines()[0])
-    name = module.__name__.rsplit(".", 1)[-1]
-    try:
-        module.main(args)
-    except KeyboardInterrupt:
-        print(f"{name}: interrupted", file=sys.stderr)
-        return 130
-    except (ValueError, TypeError, FileNotFoundError) as exc:
-        print(f"{name}: {exc}", file=sys.stderr)
-        return 2
-    except RuntimeError as exc:  # a worker died or stopped: named by the error, no traceback
-        from ials_zoo.processes import WorkerError
-
-        if not isinstance(exc, WorkerError):
-            raise
-        print(f"{name}: {exc}", file=sys.stderr)
-        return 1
-    return 0
-
-
-def arg(default, help, **kw):
-    """A dataclass field with a help text (a string, or a callable returning one) and optional
-    ``aliases``."""
-    return dataclasses.field(default=default, metadata={"help": help, **kw})
-
-
-@dataclasses.dataclass
-class PPOSettings:
-    """The PPO update settings every baseline shares (SPEC §3: the authors' values)."""
-
-    n_epochs: int = arg(3, "epochs per update")
-    learning_rate: float = arg(2.5e-4, "initial learning rate")
-    anneal_lr: bool = arg(True, "decay the learning rate linearly to 0")
-    clip_range: float = arg(0.1, "PPO clip range")
-    ent_coef: float = arg(0.01, "entropy coefficient")
-    vf_coef: float = arg(1.0, "value loss coefficient")
-    gamma: float = arg(0.99, "discount")
-    gae_lambda: float = arg(0.95, "GAE lambda")
-    max_grad_norm: float = arg(0.5, "gradient clipping")
-
-
-def check_ppo_settings(args) -> None:
-    """Clear errors for the :class:`PPOSettings` fields of ``args``."""
-    import math
-
-    if args.n_epochs < 1:
-        raise ValueError(f"n_epochs must be >= 1, got {args.n_epochs}")
-    for name in ("learning_rate", "clip_range", "max_grad_norm"):
-        value = getattr(args, name)
-        if not (math.isfinite(value) and value > 0):
-            raise ValueError(f"{name} must be a finite number > 0, got {value}")
-    for name in ("ent_coef", "vf_coef"):
-        if not (math.isfinite(getattr(args, name)) and getattr(args, name) >= 0):
-            raise ValueError(f"{name} must be a finite number >= 0, got {getattr(args, name)}")
-    for name in ("gamma", "gae_lambda"):
-        if not 0.0 <= getattr(args, name) <= 1.0:
-            raise ValueError(f"{name} must be in [0, 1], got {getattr(args, name)}")
-
-
-def parse_env_options(text: str | None) -> dict:
-    """``--env-options`` (a JSON object of GS/LS options, e.g. ``{"item_lifetime": 8}``)."""
-    from ials_zoo.utils import parse_json_object
-
-    return parse_json_object(text, "env_options")
-
-
-# --------------------------------------------------------------------------------------------
-# Training simulators
-
-GS = "gs"
-
-
-def predictor_for(simulator: str) -> str | None:
-    """The ``predictor`` argument of the IALS factory for a ``--simulator`` value, or None for
-    the GS (the vocabulary of :mod:`ials_zoo.influence.specs`; a ValueError naming it for
-    anything else)."""
-    from ials_zoo.influence.specs import parse_simulator
-
-    spec = parse_simulator(simulator)
-    return None if spec is None else str(spec)
-
-
-def simulator_label(simulator: str, aip: dict | None) -> str:
-    """The training-simulator name a result carries for a ``--simulator`` value (a predictor
-    file is named by what it holds: ``ials`` for a trained AIP; the file itself, with its
-    sha256, is recorded in ``training.aip``)."""
-    from ials_zoo.influence.specs import simulator_label as label
-
-    return label(simulator, (aip or {}).get("variant"))
-
-
-def predictor_record(venv, simulator: str, env_id: str, agent: str, made_now: bool = True) -> dict | None:
-    """What the training record says about the AIP behind an IALS vec env (None on the GS).
-
-    The IALS vec env exposes its predictor as ``venv.predictor``; a trained AIP's
-    ``metadata`` holds its training report, with ``dataset.collect_seconds`` (Algorithm 1)
-    and ``train_seconds``: their sum is added to the training wall-clock (as in the paper's
-    plots) when this run made the AIP (``made_now``; ``charged`` in the record), and only
-    recorded when it was shipped or cached. Predictors that need neither (untrained, fixed)
-    count 0; so does ``marginal``, whose metadata does not carry the data collection time
-    (documented limitation). A shipped file is named relative to the package, not by an
-    absolute path of this machine."""
-    if simulator == GS:
-        return None
-    pred = getattr(venv, "predictor", None)
-    meta = dict(getattr(pred, "metadata", None) or {})
-    collect = (meta.get("dataset") or {}).get("collect_seconds") or meta.get("collect_seconds")
-    train = meta.get("train_seconds")
-    file = None
-    if os.path.exists(simulator):
-        file = simulator
-    elif predictor_for(simulator).startswith(("trained", "marginal")):
-        from ials_zoo.influence.ials import pretrained_path
-
-        shipped = pretrained_path(env_id, agent)
-        file = shipped if shipped.is_file() and not made_now else None
-    sha = None
-    if file:
-        from ials_zoo.evaluation import sha256_file
-
-        sha = sha256_file(file)
-    meta.pop("marginal", None)
-    return {
-        "variant": str(meta.get("variant") or predictor_for(simulator)),
-        "class": type(pred).__name__ if pred is not None else None,
-        "file": _portable(file) if file else None,
-        "charged": bool(made_now),
-        "sha256": sha,
-        "collection_seconds": float(collect or 0.0),
-        "training_seconds": float(train or 0.0),
-        "metadata": _jsonable(meta),
-    }
-
-
-def _portable(path) -> str:
-    """A file inside the installed package as ``ials_zoo/<path in the package>``; any other
-    file as given."""
-    import ials_zoo
-
-    package = Path(ials_zoo.__file__).resolve().parent
-    try:
-        return "ials_zoo/" + Path(path).resolve().relative_to(package).as_posix()
-    except ValueError:
-        return str(path)
-
-
-def _jsonable(obj):
-    try:
-        return json.loads(json.dumps(obj, default=str))
-    except (TypeError, ValueError):
-        return str(obj)
 
 
 def as_float_box(venv):
@@ -337,14 +134,6 @@ def estimate_seconds(env_id: str, simulator: str, steps: int) -> float:
     rates = get_domain(env_id).study.ppo_steps_per_second
     rate = rates.get("gs" if simulator == GS else "ials", 1000.0)
     return steps / max(rate, 1.0)
-
-
-def format_seconds(seconds: float) -> str:
-    if seconds < 120:
-        return f"{seconds:.0f} s"
-    if seconds < 7200:
-        return f"{seconds / 60:.1f} min"
-    return f"{seconds / 3600:.1f} h"
 
 
 def scale_rewards(venv, gamma: float):

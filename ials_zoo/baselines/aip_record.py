@@ -1,0 +1,92 @@
+"""What a single-agent training run says about its simulator: the ``--simulator`` vocabulary
+(GS or an IALS with which AIP) and the AIP record of the result (its file, sha256 and cost).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+GS = "gs"
+
+
+def predictor_for(simulator: str) -> str | None:
+    """The ``predictor`` argument of the IALS factory for a ``--simulator`` value, or None for
+    the GS (the vocabulary of :mod:`ials_zoo.influence.specs`; a ValueError naming it for
+    anything else)."""
+    from ials_zoo.influence.specs import parse_simulator
+
+    spec = parse_simulator(simulator)
+    return None if spec is None else str(spec)
+
+
+def simulator_label(simulator: str, aip: dict | None) -> str:
+    """The training-simulator name a result carries for a ``--simulator`` value (a predictor
+    file is named by what it holds: ``ials`` for a trained AIP; the file itself, with its
+    sha256, is recorded in ``training.aip``)."""
+    from ials_zoo.influence.specs import simulator_label as label
+
+    return label(simulator, (aip or {}).get("variant"))
+
+
+def predictor_record(venv, simulator: str, env_id: str, agent: str, made_now: bool = True) -> dict | None:
+    """What the training record says about the AIP behind an IALS vec env (None on the GS).
+
+    The IALS vec env exposes its predictor as ``venv.predictor``; a trained AIP's
+    ``metadata`` holds its training report, with ``dataset.collect_seconds`` (Algorithm 1)
+    and ``train_seconds``: their sum is added to the training wall-clock (as in the paper's
+    plots) when this run made the AIP (``made_now``; ``charged`` in the record), and only
+    recorded when it was shipped or cached. Predictors that need neither (untrained, fixed)
+    count 0; so does ``marginal``, whose metadata does not carry the data collection time
+    (documented limitation). A shipped file is named relative to the package, not by an
+    absolute path of this machine."""
+    if simulator == GS:
+        return None
+    pred = getattr(venv, "predictor", None)
+    meta = dict(getattr(pred, "metadata", None) or {})
+    collect = (meta.get("dataset") or {}).get("collect_seconds") or meta.get("collect_seconds")
+    train = meta.get("train_seconds")
+    file = None
+    if os.path.exists(simulator):
+        file = simulator
+    elif predictor_for(simulator).startswith(("trained", "marginal")):
+        from ials_zoo.influence.ials import pretrained_path
+
+        shipped = pretrained_path(env_id, agent)
+        file = shipped if shipped.is_file() and not made_now else None
+    sha = None
+    if file:
+        from ials_zoo.evaluation import sha256_file
+
+        sha = sha256_file(file)
+    meta.pop("marginal", None)
+    return {
+        "variant": str(meta.get("variant") or predictor_for(simulator)),
+        "class": type(pred).__name__ if pred is not None else None,
+        "file": _portable(file) if file else None,
+        "charged": bool(made_now),
+        "sha256": sha,
+        "collection_seconds": float(collect or 0.0),
+        "training_seconds": float(train or 0.0),
+        "metadata": _jsonable(meta),
+    }
+
+
+def _portable(path) -> str:
+    """A file inside the installed package as ``ials_zoo/<path in the package>``; any other
+    file as given."""
+    import ials_zoo
+
+    package = Path(ials_zoo.__file__).resolve().parent
+    try:
+        return "ials_zoo/" + Path(path).resolve().relative_to(package).as_posix()
+    except ValueError:
+        return str(path)
+
+
+def _jsonable(obj):
+    try:
+        return json.loads(json.dumps(obj, default=str))
+    except (TypeError, ValueError):
+        return str(obj)

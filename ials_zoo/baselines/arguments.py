@@ -1,0 +1,122 @@
+"""The baselines' command lines: a dataclass of arguments becomes ``--options`` (help texts
+from the fields), the PPO settings every baseline shares and their checks, ``--env-options``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import typing
+
+# --------------------------------------------------------------------------------------------
+# dataclass <-> argparse
+
+
+def add_dataclass_args(parser: argparse.ArgumentParser, cls) -> argparse.ArgumentParser:
+    """Add one ``--field-name`` option per field of the dataclass ``cls``.
+
+    The help text of a field is its ``metadata["help"]`` (or what that callable returns, for
+    defaults read from the domains when the parser is built); booleans get ``--x/--no-x``."""
+    hints = typing.get_type_hints(cls)
+    for f in dataclasses.fields(cls):
+        name = "--" + f.name.replace("_", "-")
+        aliases = list(f.metadata.get("aliases", ()))
+        default = f.default if f.default is not dataclasses.MISSING else None
+        help_text = f.metadata.get("help", "")
+        help_text = f"{help_text() if callable(help_text) else help_text} (default: {default!r})"
+        typ = hints[f.name]
+        origin = typing.get_origin(typ)
+        if origin is typing.Union or str(origin) == "<class 'types.UnionType'>":
+            inner = [a for a in typing.get_args(typ) if a is not type(None)]
+            typ = inner[0] if inner else str
+        if typ is bool:
+            parser.add_argument(*aliases, name, dest=f.name, default=default,
+                                action=argparse.BooleanOptionalAction, help=help_text)
+        else:
+            parser.add_argument(*aliases, name, dest=f.name, type=typ, default=default,
+                                metavar=f.name.upper(), help=help_text)
+    return parser
+
+
+def dataclass_from_namespace(cls, ns: argparse.Namespace):
+    """Build ``cls`` from the parsed options (fields absent from ``ns`` keep their default)."""
+    values = {f.name: getattr(ns, f.name) for f in dataclasses.fields(cls) if hasattr(ns, f.name)}
+    return cls(**values)
+
+
+def parse_args(cls, argv=None, description: str | None = None):
+    """Parse a baseline's command line into its dataclass."""
+    parser = argparse.ArgumentParser(description=description, allow_abbrev=False)
+    add_dataclass_args(parser, cls)
+    return dataclass_from_namespace(cls, parser.parse_args(argv))
+
+
+def run_cli(module) -> int:
+    """``python -m`` entry point of a baseline module: parse its ``Args``, run its ``main``;
+    bad arguments print one clear line instead of a traceback (``ials-zoo train``'s style)."""
+    import sys
+
+    args = parse_args(module.Args, description=module.__doc__.splitlines()[0])
+    name = module.__name__.rsplit(".", 1)[-1]
+    try:
+        module.main(args)
+    except KeyboardInterrupt:
+        print(f"{name}: interrupted", file=sys.stderr)
+        return 130
+    except (ValueError, TypeError, FileNotFoundError) as exc:
+        print(f"{name}: {exc}", file=sys.stderr)
+        return 2
+    except RuntimeError as exc:  # a worker died or stopped: named by the error, no traceback
+        from ials_zoo.processes import WorkerError
+
+        if not isinstance(exc, WorkerError):
+            raise
+        print(f"{name}: {exc}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def arg(default, help, **kw):
+    """A dataclass field with a help text (a string, or a callable returning one) and optional
+    ``aliases``."""
+    return dataclasses.field(default=default, metadata={"help": help, **kw})
+
+
+@dataclasses.dataclass
+class PPOSettings:
+    """The PPO update settings every baseline shares (SPEC §3: the authors' values)."""
+
+    n_epochs: int = arg(3, "epochs per update")
+    learning_rate: float = arg(2.5e-4, "initial learning rate")
+    anneal_lr: bool = arg(True, "decay the learning rate linearly to 0")
+    clip_range: float = arg(0.1, "PPO clip range")
+    ent_coef: float = arg(0.01, "entropy coefficient")
+    vf_coef: float = arg(1.0, "value loss coefficient")
+    gamma: float = arg(0.99, "discount")
+    gae_lambda: float = arg(0.95, "GAE lambda")
+    max_grad_norm: float = arg(0.5, "gradient clipping")
+
+
+def check_ppo_settings(args) -> None:
+    """Clear errors for the :class:`PPOSettings` fields of ``args``."""
+    import math
+
+    if args.n_epochs < 1:
+        raise ValueError(f"n_epochs must be >= 1, got {args.n_epochs}")
+    for name in ("learning_rate", "clip_range", "max_grad_norm"):
+        value = getattr(args, name)
+        if not (math.isfinite(value) and value > 0):
+            raise ValueError(f"{name} must be a finite number > 0, got {value}")
+    for name in ("ent_coef", "vf_coef"):
+        if not (math.isfinite(getattr(args, name)) and getattr(args, name) >= 0):
+            raise ValueError(f"{name} must be a finite number >= 0, got {getattr(args, name)}")
+    for name in ("gamma", "gae_lambda"):
+        if not 0.0 <= getattr(args, name) <= 1.0:
+            raise ValueError(f"{name} must be in [0, 1], got {getattr(args, name)}")
+
+
+def parse_env_options(text: str | None) -> dict:
+    """``--env-options`` (a JSON object of GS/LS options, e.g. ``{"item_lifetime": 8}``)."""
+    from ials_zoo.utils import parse_json_object
+
+    return parse_json_object(text, "env_options")
