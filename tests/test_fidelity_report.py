@@ -46,3 +46,19 @@ def test_the_report_runs_and_the_gs_lingers_under_a_constant_policy(tmp_path, ca
     assert "| robot_20 | persistence | 1.000 |" in text and "| robot_20 | arrivals | 1.000 |" in text
     assert "scripted controllers have no IALS form" in text
     assert main(["fidelity", "--env", "warehouse_v0", "--episodes", "1"]) == 2
+
+
+def test_on_policy_autoregressive_aips_keep_a_random_neighbour_lingering():
+    """Under uniformly random robots a neighbour on a shared cell stays there at the next step
+    with probability about 0.75 on the GS. AIPs trained on that policy's GS data that read their
+    own last draw keep most of it (0.5-0.6 here: sampling their own draws, they drift from the
+    teacher-forced data); memoryless ones (the paper's) redraw every step, about 0.05."""
+    from ials_zoo.influence.fidelity import fidelity_report
+
+    kw = dict(episodes=6, watched=["robot_0"], progress=False, collect_steps=5000, aip_lr=1e-2, robots=(2, 2))
+    ar = fidelity_report("warehouse_v0", ["random"], predictor="on-policy-autoregressive", **kw)
+    memoryless = fidelity_report("warehouse_v0", ["random"], predictor="on-policy", **kw)
+    ar_p, ml_p = ar["policies"]["random"]["robot_0"]["persistence"], memoryless["policies"]["random"]["robot_0"]["persistence"]
+    assert 0.65 < ar_p["gs"] < 0.85 and ar_p["ials"] > 0.4, ar_p
+    assert ml_p["ials"] < 0.2, ml_p
+    assert ar["predictor"] == "on-policy-autoregressive" and ar["aip_lr"] == 1e-2

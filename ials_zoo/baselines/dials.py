@@ -44,6 +44,7 @@ killed run), ``policy.safetensors`` (the joint policy) and ``result.json`` (mult
 
 from __future__ import annotations
 
+import math
 import os
 import time
 from dataclasses import dataclass
@@ -104,6 +105,7 @@ class Args(MultiPPOSettings):
     collect_steps: int | None = arg(None, lambda: "GS steps per data collection (default: the domain's: "
                                     f"{_per_domain(lambda d: f'{d.dials.collect_steps:,}')})")
     aip_epochs: int | None = arg(None, "epochs per AIP (re)training (default: the domain's)")
+    aip_lr: float | None = arg(None, "learning rate of the AIP (re)training (default: the domain's)")
     aip_autoregressive: bool | None = arg(None, lambda: "AIPs that also read the influence they sampled at the "
                                           "previous step, P(u_t | d_<=t, u_<t) (default: the domain's: " + _per_domain(
                                               lambda d: "yes" if d.dials.aip_autoregressive else "no") + ")")
@@ -165,6 +167,8 @@ def check_args(args: Args):
         if spec.kind not in ("trained", "file") and refresh is not None:
             raise ValueError(f"--aip {args.aip} is a fixed AIP: use --refresh never (retraining would replace it)")
     check_run_args(args)
+    if args.aip_lr is not None and not (math.isfinite(args.aip_lr) and args.aip_lr > 0):
+        raise ValueError(f"aip_lr must be a finite number > 0, got {args.aip_lr}")
     for name in ("collect_steps", "aip_epochs"):
         v = getattr(args, name)
         if v is not None and v < 1:
@@ -210,7 +214,7 @@ def initial_aips(args, env_id, agents, options, seed) -> tuple[dict, float]:
 
 
 def refresh_aips(env_id, agents, options, net, seed, steps, domain, epochs, old, progress, collect_workers=1,
-                 autoregressive=False):
+                 autoregressive=False, lr=None):
     """Collect every region's data with the joint policy ``net`` (None: uniform random) and
     retrain every AIP (warm start from ``old`` when it holds networks of the same shape);
     ``autoregressive``: AIPs that also read ``u_{t-1}``."""
@@ -224,7 +228,7 @@ def refresh_aips(env_id, agents, options, net, seed, steps, domain, epochs, old,
     warm = {a: p for a, p in old.items() if isinstance(p, ARCHS[d.aip_arch]) and p.hidden == d.aip_hidden
             and p.autoregressive == autoregressive and p.metadata.get("variant") == "trained"}
     t0 = time.perf_counter()
-    preds, report = train_predictors(data, d.aip_arch, hidden=d.aip_hidden, lr=d.aip_lr, epochs=epochs,
+    preds, report = train_predictors(data, d.aip_arch, hidden=d.aip_hidden, lr=lr or d.aip_lr, epochs=epochs,
                                      batch_size=d.aip_batch, seed=seed, init=warm or None, progress=progress,
                                      autoregressive=autoregressive)
     train_seconds = time.perf_counter() - t0
@@ -306,7 +310,7 @@ class ShardsLearner:
               flush=True)
         self.aips, rep = refresh_aips(args.env_id, self.agents, self.options, net, args.seed + n, self.collect_steps,
                                       self.domain, self.epochs, self.aips, progress=False,
-                                      autoregressive=self.autoregressive)
+                                      autoregressive=self.autoregressive, lr=args.aip_lr)
         print(f"dials: AIP round {n} done: collection {rep['collect_seconds']:.0f} s, training "
               f"{rep['train_seconds']:.0f} s, mean test cross-entropy {rep['mean_test_cross_entropy']:.3f}", flush=True)
         self.charged_seconds += rep["collect_seconds"] + rep["train_seconds"]
@@ -353,7 +357,8 @@ def main(args: Args | None = None) -> dict:
                                         total_timesteps=total, eval_every=eval_every,
                                         collect_steps=int(args.collect_steps or domain.dials.collect_steps),
                                         aip_epochs=int(args.aip_epochs or domain.dials.aip_epochs),
-                                        aip_autoregressive=autoregressive_of(args, domain), ppo=ppo,
+                                        aip_autoregressive=autoregressive_of(args, domain),
+                                        aip_lr=float(args.aip_lr or domain.dials.aip_lr), ppo=ppo,
                                         learner=args.learner)}
     plan = RunPlan("dials", args.env_id, agents, options, args.seed, total, per_update, eval_every, args.eval_episodes,
                    args.final_eval_episodes, frame_stack, out, settings_of(args), training, args.resume,

@@ -4,9 +4,12 @@ trajectories, under several joint policies? (:mod:`ials_zoo.influence.fidelity`)
     ials-zoo fidelity --env warehouse_v0
     ials-zoo fidelity --env traffic_grid_v0 --episodes 20 --policies random,constant,scripted
     ials-zoo fidelity --env warehouse_v0 --policies random,leaderboard/policies/<sha>.safetensors --out f.md
+    ials-zoo fidelity --env warehouse_v0 --predictor on-policy-autoregressive
 """
 
 from __future__ import annotations
+
+import math
 
 
 def configure(parser):
@@ -16,7 +19,16 @@ def configure(parser):
     parser.add_argument("--episodes", type=int, default=20, help="episodes per policy and simulator")
     parser.add_argument("--agents", default=None, help="agents to report, comma-separated (default: a corner, an "
                         "edge and the domain's default agent)")
-    parser.add_argument("--predictor", default="trained", help="the IALS's AIPs (a predictor spec or an AIP set file)")
+    parser.add_argument("--predictor", default="trained",
+                        help="the IALS's AIPs: a predictor spec or an AIP set file (one set for every policy), or "
+                             "on-policy / on-policy-autoregressive (AIPs trained on GS data of each policy)")
+    parser.add_argument("--collect-steps", type=int, default=None,
+                        help="GS steps of each policy's AIP data with --predictor on-policy* (default: the domain's "
+                             "DIALS collection)")
+    parser.add_argument("--aip-lr", type=float, default=None,
+                        help="learning rate of the on-policy AIPs (default: the domain's DIALS AIP setting)")
+    parser.add_argument("--aip-epochs", type=int, default=None,
+                        help="epochs of the on-policy AIPs (default: the domain's DIALS AIP setting)")
     parser.add_argument("--tolerance", type=float, default=0.1, help="relative difference that holds anyway")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", default=None, help="also write the Markdown report here (atomic)")
@@ -40,10 +52,16 @@ def run(args) -> int:
         if p not in ("random", "constant", "scripted") and not os.path.isfile(p):
             raise ValueError(f"--policies: {p!r} is neither random, constant, scripted nor a policy file")
     watched = None if args.agents is None else domain.check_agents(args.agents)
+    for name in ("collect_steps", "aip_epochs"):
+        if getattr(args, name) is not None and getattr(args, name) < 1:
+            raise ValueError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
+    if args.aip_lr is not None and not (math.isfinite(args.aip_lr) and args.aip_lr > 0):
+        raise ValueError(f"--aip-lr must be a finite number > 0, got {args.aip_lr}")
     if args.out:
         check_output_file(args.out)
     report = fidelity_report(args.env, policies, episodes=args.episodes, seed=args.seed, watched=watched,
-                             predictor=args.predictor, tolerance=args.tolerance)
+                             predictor=args.predictor, tolerance=args.tolerance, collect_steps=args.collect_steps,
+                             aip_lr=args.aip_lr, aip_epochs=args.aip_epochs)
     text = markdown(report)
     print(text)
     if args.out:

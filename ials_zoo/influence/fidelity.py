@@ -24,6 +24,13 @@ as a mean with a 95% interval over episodes, in the GS and in the IALS:
   ``persistence`` are how the temporal structure shows);
 * ``return``: the agent's own episodic return.
 
+Which AIPs: ``--predictor`` a fixed set for every joint policy (the shipped set was trained on
+uniformly random agents, so it can only be right for them: a neighbour's behaviour depends on
+its policy, which no d-set shows), or ``on-policy`` / ``on-policy-autoregressive``: for each
+joint policy, AIPs trained on GS data of that very policy (``--collect-steps`` steps, the
+domain's DIALS AIP settings, data seeds apart from the evaluation's), what DIALS retrains its
+AIPs on; the latter with autoregressive AIPs (:mod:`ials_zoo.influence.base`).
+
 A row "holds" when the 95% interval of the GS - IALS difference (Welch, over episodes)
 contains 0, or when the difference is within ``--tolerance`` (relative, default 10%) of the
 GS value: the tolerance comes from the sampling error, stated in the report. Joint policies:
@@ -155,6 +162,51 @@ def compare(gs: list[float], ials: list[float], tolerance: float) -> dict:
     return {"gs": float(a.mean()), "ials": float(b.mean()), "low": float(low), "high": float(high), "holds": holds}
 
 
+ON_POLICY = ("on-policy", "on-policy-autoregressive")
+DATA_SEED_OFFSET = 100_000  # the AIPs' data episodes never repeat the evaluation's
+
+
+class _PolicyActor:
+    """A joint policy as :func:`~ials_zoo.influence.dataset.collect_all` drives it."""
+
+    def __init__(self, policy, agents, seed: int):
+        from ials_zoo.evaluation import FrameStack
+
+        self.policy, self.agents, self.seed, self.episode = policy, list(agents), int(seed), 0
+        self.frames = FrameStack(getattr(policy, "frame_stack", 1))
+        self.name, self.x = "joint policy", None
+
+    def reset(self):
+        self.policy.reset(self.seed + self.episode)
+        self.episode += 1
+        self.x = None
+
+    def joint_act(self, observations: dict) -> dict:
+        obs = np.stack([observations[a] for a in self.agents])
+        self.x = self.frames.reset(obs) if self.x is None else self.frames.step(obs)
+        return {a: int(u) for a, u in zip(self.agents, self.policy.act_all(self.x))}
+
+
+def on_policy_aips(env_id: str, agents, policy, steps: int, seed: int, autoregressive: bool, options: dict,
+                   lr: float | None = None, epochs: int | None = None) -> dict:
+    """``{agent: AIP}`` trained on ``steps`` GS steps of the joint ``policy`` (every agent
+    acting), with the domain's DIALS AIP settings (``lr``, ``epochs``: others)."""
+    from ials_zoo.influence.dataset import collect_all
+    from ials_zoo.influence.train import train_predictors
+
+    d = get_domain(env_id).dials
+    if policy == "random":
+        actor = None
+    elif policy == "constant":
+        actor = {a: (lambda obs: 0) for a in agents}
+    else:
+        actor = _PolicyActor(policy, agents, seed)
+    data = collect_all(env_id, agents, steps=steps, policy=actor, seed=seed, gs_options=options, progress=False)
+    preds, _ = train_predictors(data, d.aip_arch, hidden=d.aip_hidden, lr=lr or d.aip_lr, epochs=epochs or d.aip_epochs,
+                                batch_size=d.aip_batch, seed=seed, autoregressive=autoregressive)
+    return preds
+
+
 def default_watched(domain, agents: Sequence[str]) -> list[str]:
     """The first and second agents and the domain's default one (see the module docstring)."""
     picks = [agents[0], agents[1], domain.default_agents[0]]
@@ -162,9 +214,13 @@ def default_watched(domain, agents: Sequence[str]) -> list[str]:
 
 
 def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: int = 0, watched=None,
-                    predictor="trained", tolerance: float = 0.1, progress: bool = True, **options) -> dict:
+                    predictor="trained", tolerance: float = 0.1, progress: bool = True,
+                    collect_steps: int | None = None, aip_lr: float | None = None, aip_epochs: int | None = None,
+                    **options) -> dict:
     """Run every joint policy on the GS and on the multi-agent IALS; returns
-    ``{policy name: {agent: {metric: compare(...)}}}`` and the raw per-episode values."""
+    ``{policy name: {agent: {metric: compare(...)}}}``. ``predictor``: an AIP set for every
+    policy, or ``on-policy[-autoregressive]`` (module docstring) with ``collect_steps`` GS
+    steps per policy (default: the domain's DIALS collection)."""
     from ials_zoo.evaluation import load_model
     from ials_zoo.influence.multi import make_ials_parallel_env
 
@@ -172,7 +228,8 @@ def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: i
     agents = domain.agents(**options)
     watched = list(watched or default_watched(domain, agents))
     report: dict = {"env_id": env_id, "episodes": episodes, "tolerance": tolerance, "watched": watched,
-                    "policies": {}}
+                    "predictor": str(predictor), "aip_lr": aip_lr, "aip_epochs": aip_epochs, "policies": {}}
+    steps = int(collect_steps or domain.dials.collect_steps)
     for spec in policies:
         name = str(spec)
         policy = spec if spec in ("random", "constant", "scripted") else load_model(spec)
@@ -190,7 +247,13 @@ def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: i
             continue
         if progress:
             print(f"fidelity {env_id}: {name}: IALS ...", flush=True)
-        ials_env = make_ials_parallel_env(env_id, agents, predictor=predictor, seed=seed, **options)
+        aips = predictor
+        if predictor in ON_POLICY:
+            if progress:
+                print(f"fidelity {env_id}: {name}: AIPs from {steps:,} GS steps of this policy ...", flush=True)
+            aips = on_policy_aips(env_id, agents, policy, steps, seed + DATA_SEED_OFFSET,
+                                  predictor == "on-policy-autoregressive", options, aip_lr, aip_epochs)
+        ials_env = make_ials_parallel_env(env_id, agents, predictor=aips, seed=seed, **options)
         try:
             ials = run(ials_env, agents, watched, policy, episodes, seed, domain.n_actions)
         finally:
@@ -204,7 +267,7 @@ def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: i
 def markdown(report: dict) -> str:
     """The report as Markdown tables, one per joint policy."""
     lines = [f"Fidelity of the multi-agent IALS on `{report['env_id']}`: {report['episodes']} episodes per joint "
-             f"policy, GS vs IALS, mean over episodes; a row holds when the 95% Welch interval of GS - IALS "
+             f"policy, GS vs IALS (AIPs: {report.get('predictor', 'trained')}), mean over episodes; a row holds when the 95% Welch interval of GS - IALS "
              f"contains 0 or |GS - IALS| <= {report['tolerance']:.0%} of the GS value.", ""]
     for name, rows in report["policies"].items():
         lines += [f"**{name}**", ""]
@@ -225,5 +288,5 @@ def markdown(report: dict) -> str:
     return "\n".join(lines)
 
 
-__all__ = ["METRICS", "compare", "default_watched", "episode_metrics", "fidelity_report", "markdown", "run",
+__all__ = ["METRICS", "ON_POLICY", "compare", "on_policy_aips", "default_watched", "episode_metrics", "fidelity_report", "markdown", "run",
            "summarise"]
