@@ -351,7 +351,8 @@ def main(args: Args | None = None) -> dict:
     frame_stack = frame_stack_of(args, domain)
     out = Path(args.out_dir or f"runs/{args.env_id}__dials__s{args.seed}")
     ppo = ppo_config(args, copies)
-    training = {"simulator": _label(args.aip, refresh), "aip": None, "seeds": [args.seed], "env_steps": 0,
+    label = _label(args.aip, refresh, autoregressive_of(args, domain))
+    training = {"simulator": label, "aip": None, "seeds": [args.seed], "env_steps": 0,
                 "wall_clock_seconds": 0.0, "aip_seconds": 0.0, "workers": max(workers, 1), "backend": args.backend,
                 "hyperparameters": dict(settings_of(args), agents=agents, refresh_steps=refresh,
                                         total_timesteps=total, eval_every=eval_every,
@@ -391,10 +392,10 @@ def _shard_state(by_agent: dict, chunk: list) -> dict:
     return {k: v for k, v in state.items() if k != "agents"}
 
 
-def _label(aip: str, refresh) -> str:
+def _label(aip: str, refresh, autoregressive: bool = False) -> str:
     """The simulator name a result carries."""
     if aip == "trained":
-        return "dials" if refresh else "dials-once"
+        return ("dials" if refresh else "dials-once") + ("-autoregressive" if autoregressive else "")
     if aip == "untrained":
         return "untrained-dials"
     return f"dials-{aip}" if not aip.endswith(".pt") else "dials-file"
