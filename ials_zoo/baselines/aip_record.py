@@ -8,6 +8,11 @@ import json
 import os
 from pathlib import Path
 
+from ials_zoo.evaluation import sha256_file
+from ials_zoo.influence.ials import pretrained_path
+from ials_zoo.influence.specs import parse_simulator
+from ials_zoo.influence.specs import simulator_label as label
+
 GS = "gs"
 
 
@@ -15,7 +20,6 @@ def predictor_for(simulator: str) -> str | None:
     """The ``predictor`` argument of the IALS factory for a ``--simulator`` value, or None for
     the GS (the vocabulary of :mod:`ials_zoo.influence.specs`; a ValueError naming it for
     anything else)."""
-    from ials_zoo.influence.specs import parse_simulator
 
     spec = parse_simulator(simulator)
     return None if spec is None else str(spec)
@@ -25,7 +29,6 @@ def simulator_label(simulator: str, aip: dict | None) -> str:
     """The training-simulator name a result carries for a ``--simulator`` value (a predictor
     file is named by what it holds: ``ials`` for a trained AIP; the file itself, with its
     sha256, is recorded in ``training.aip``)."""
-    from ials_zoo.influence.specs import simulator_label as label
 
     return label(simulator, (aip or {}).get("variant"))
 
@@ -51,13 +54,11 @@ def predictor_record(venv, simulator: str, env_id: str, agent: str, made_now: bo
     if os.path.exists(simulator):
         file = simulator
     elif predictor_for(simulator).startswith(("trained", "marginal")):
-        from ials_zoo.influence.ials import pretrained_path
 
         shipped = pretrained_path(env_id, agent)
         file = shipped if shipped.is_file() and not made_now else None
     sha = None
     if file:
-        from ials_zoo.evaluation import sha256_file
 
         sha = sha256_file(file)
     meta.pop("marginal", None)

@@ -8,6 +8,9 @@ import argparse
 import dataclasses
 import typing
 
+from ials_zoo.processes import WorkerError
+from ials_zoo.utils import parse_json_object
+
 # --------------------------------------------------------------------------------------------
 # dataclass <-> argparse
 
@@ -67,7 +70,6 @@ def run_cli(module) -> int:
         print(f"{name}: {exc}", file=sys.stderr)
         return 2
     except RuntimeError as exc:  # a worker died or stopped: named by the error, no traceback
-        from ials_zoo.processes import WorkerError
 
         if not isinstance(exc, WorkerError):
             raise
@@ -117,6 +119,5 @@ def check_ppo_settings(args) -> None:
 
 def parse_env_options(text: str | None) -> dict:
     """``--env-options`` (a JSON object of GS/LS options, e.g. ``{"item_lifetime": 8}``)."""
-    from ials_zoo.utils import parse_json_object
 
     return parse_json_object(text, "env_options")

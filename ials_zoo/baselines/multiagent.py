@@ -13,6 +13,11 @@ from pathlib import Path
 import numpy as np
 
 from ials_zoo.baselines.arguments import PPOSettings, arg, check_ppo_settings
+from ials_zoo.baselines.ppo_single import _hidden
+from ials_zoo.evaluation import evaluate_joint, load_model
+from ials_zoo.influence.files import save_predictor_set
+from ials_zoo.leaderboard import make_result, write_result
+from ials_zoo.policy import PolicyNetwork, save_policy
 from ials_zoo.utils import atomic_path, atomic_write_text
 
 
@@ -51,7 +56,6 @@ with the authors' buffer of 128): kept to measure against (``ials-zoo bench``, t
 
 def check_multi_ppo(args) -> list[int]:
     """Clear errors for the PPO settings; returns the hidden sizes."""
-    from ials_zoo.baselines.ppo_single import _hidden
 
     for name in ("samples_per_update", "batch_size"):
         if getattr(args, name) < 1:
@@ -96,7 +100,6 @@ def ppo_config(args, copies: int) -> dict:
 
 def joint_policy(agents, layers, obs_size: int, n_actions: int, frame_stack: int, metadata: dict):
     """The agents' actors as one :class:`~ials_zoo.policy.PolicyNetwork`."""
-    from ials_zoo.policy import PolicyNetwork
 
     return PolicyNetwork(agents, obs_size, n_actions, layers, "tanh", frame_stack, metadata)
 
@@ -164,7 +167,6 @@ def write_curve(out: Path, header: dict, points: list) -> None:
 
 
 def save_aips(path: Path, predictors: dict) -> None:
-    from ials_zoo.influence.files import save_predictor_set
 
     save_predictor_set(predictors.values(), path)
 
@@ -178,8 +180,6 @@ def final_results(out: Path, env_id: str, policy_path: Path, algorithm: str, tra
     """The final joint policy scored on the GS twice, with the protocol's seeds: sampling its
     actions (``result.json``, the score) and taking each agent's most likely action
     (``result_deterministic.json``); both results are written and returned."""
-    from ials_zoo.evaluation import evaluate_joint, load_model
-    from ials_zoo.leaderboard import make_result, write_result
 
     results = []
     for deterministic, name in ((False, "result.json"), (True, DETERMINISTIC_RESULT)):
@@ -195,7 +195,6 @@ def final_results(out: Path, env_id: str, policy_path: Path, algorithm: str, tra
 
 
 def policy_file(out: Path, net) -> Path:
-    from ials_zoo.policy import save_policy
 
     return save_policy(net, Path(out) / "policy.safetensors")
 

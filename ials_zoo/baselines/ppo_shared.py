@@ -38,8 +38,13 @@ from pathlib import Path
 import numpy as np
 
 from ials_zoo.baselines.arguments import PPOSettings, arg, parse_env_options, run_cli
-from ials_zoo.baselines.ppo_single import _hidden
-from ials_zoo.baselines.sb3_run import Evaluator, TrainingRun, as_float_box, make_ppo
+from ials_zoo.baselines.ppo_single import _hidden, check_ppo_args
+from ials_zoo.baselines.runs import RunFolder, training_logger
+from ials_zoo.baselines.sb3_run import Evaluator, TrainingRun, as_float_box, estimate_seconds, make_ppo
+from ials_zoo.core.domains import domain_ids, get_domain
+from ials_zoo.leaderboard import make_result, now_iso, write_result
+from ials_zoo.single_agent import needs_own_process
+from ials_zoo.utils import format_seconds
 
 
 def _sb3_wrapper_base():
@@ -93,8 +98,6 @@ def make_shared_vec_env(env_id: str, learners=None, n_copies: int = 1, seed: int
     """All learners of ``n_copies`` GS copies as one SB3 ``VecEnv`` (one entry per agent)."""
     import supersuit as ss
 
-    from ials_zoo.core.domains import get_domain
-    from ials_zoo.single_agent import needs_own_process
 
     if n_copies < 1:
         raise ValueError(f"n_copies must be >= 1, got {n_copies}")
@@ -138,7 +141,6 @@ class Args(PPOSettings):
 
 
 def _agent_list(text: str | None, env_id: str, default, **options) -> list[str]:
-    from ials_zoo.core.domains import get_domain
 
     if text is None or text == "":
         return list(default)
@@ -151,15 +153,8 @@ def main(args: Args | None = None) -> list[dict]:
     from stable_baselines3.common.vec_env import VecFrameStack, VecMonitor
 
     import ials_zoo
-    from ials_zoo.core.domains import get_domain
-    from ials_zoo.leaderboard import make_result, now_iso, write_result
 
     args = args or Args()
-    from ials_zoo.baselines.ppo_single import check_ppo_args
-    from ials_zoo.baselines.runs import RunFolder, training_logger
-    from ials_zoo.baselines.sb3_run import estimate_seconds
-    from ials_zoo.core.domains import domain_ids
-    from ials_zoo.utils import format_seconds
 
     if args.env_id is None:
         raise ValueError(f"name the domain to train on: --env, one of {', '.join(domain_ids())}")

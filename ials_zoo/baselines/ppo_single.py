@@ -54,8 +54,15 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ials_zoo.baselines.aip_record import predictor_for, predictor_record, simulator_label
-from ials_zoo.baselines.arguments import PPOSettings, arg, parse_env_options, run_cli
-from ials_zoo.baselines.sb3_run import Evaluator, TrainingRun, as_float_box, make_ppo, scale_rewards
+from ials_zoo.baselines.arguments import PPOSettings, arg, check_ppo_settings, parse_env_options, run_cli
+from ials_zoo.baselines.runs import RunFolder, training_logger
+from ials_zoo.baselines.sb3_run import Evaluator, TrainingRun, as_float_box, estimate_seconds, make_ppo, scale_rewards
+from ials_zoo.core.domains import domain_ids, get_domain
+from ials_zoo.influence.ials import make_ials_vec_env, trained_predictor
+from ials_zoo.influence.specs import parse_predictor
+from ials_zoo.leaderboard import make_result, now_iso, write_result
+from ials_zoo.single_agent import check_agent, make_gs_vec_env
+from ials_zoo.utils import check_seed, format_seconds
 
 
 @dataclass
@@ -100,8 +107,6 @@ def _hidden(net_arch: str) -> list[int]:
 
 def check_ppo_args(args, positive=()) -> None:
     """Clear errors for the PPO settings before anything is built."""
-    from ials_zoo.baselines.arguments import check_ppo_settings
-    from ials_zoo.utils import check_seed
 
     for name in ("n_envs", "n_steps", "batch_size", "n_epochs", "eval_episodes", "final_eval_episodes",
                  *positive):
@@ -120,7 +125,6 @@ def check_ppo_args(args, positive=()) -> None:
 
 def check_args(args: Args) -> None:
     """Clear errors for bad arguments before anything is built."""
-    from ials_zoo.core.domains import domain_ids
 
     if args.env_id is None:
         raise ValueError(f"name the domain to train on: --env, one of {', '.join(domain_ids())}")
@@ -130,7 +134,6 @@ def check_args(args: Args) -> None:
 
 def make_training_env(args: Args, agent: str):
     """The training vec env (GS or IALS) and the AIP record (None on the GS)."""
-    from ials_zoo.single_agent import make_gs_vec_env
 
     predictor = predictor_for(args.simulator)
     options = parse_env_options(args.env_options)
@@ -139,7 +142,6 @@ def make_training_env(args: Args, agent: str):
                                **options)
         venv.seed(args.seed)
         return venv, None
-    from ials_zoo.influence.ials import make_ials_vec_env
 
     kw = dict(options) if args.dset_kind is None else dict(options, dset_kind=args.dset_kind)
     # an AIP file is charged (the study trains one per run, and the paper's IALS cost includes
@@ -147,8 +149,6 @@ def make_training_env(args: Args, agent: str):
     made_now = True
     if predictor.startswith("trained"):
         made_now = False  # a training command may train its AIP (and says so)
-        from ials_zoo.influence.ials import trained_predictor
-        from ials_zoo.influence.specs import parse_predictor
 
         try:
             trained_predictor(args.env_id, agent, args.dset_kind or "dset", arch=parse_predictor(predictor).arch,
@@ -173,12 +173,6 @@ def main(args: Args | None = None) -> dict:
     from stable_baselines3.common.vec_env import VecFrameStack, VecMonitor
 
     import ials_zoo
-    from ials_zoo.baselines.runs import RunFolder, training_logger
-    from ials_zoo.baselines.sb3_run import estimate_seconds
-    from ials_zoo.core.domains import get_domain
-    from ials_zoo.leaderboard import make_result, now_iso, write_result
-    from ials_zoo.single_agent import check_agent
-    from ials_zoo.utils import format_seconds
 
     args = args or Args()
     check_args(args)

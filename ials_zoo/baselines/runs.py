@@ -29,7 +29,7 @@ import sys
 import time
 from pathlib import Path
 
-from ials_zoo.utils import atomic_write_text, remove_stale_temporaries
+from ials_zoo.utils import atomic_path, atomic_write_text, remove_stale_temporaries
 
 STATUS = "status.json"
 LOCK = ".lock"
@@ -204,7 +204,6 @@ def save_training_state(folder, state: dict, info: dict) -> None:
     """``checkpoint.pt`` (tensors and plain containers) and ``checkpoint.json`` (``info``)."""
     import torch
 
-    from ials_zoo.utils import atomic_path
 
     folder = Path(folder)
     with atomic_path(folder / "checkpoint.pt", suffix=".pt") as tmp:

@@ -11,7 +11,12 @@ import time
 import numpy as np
 
 from ials_zoo.baselines.aip_record import GS
-from ials_zoo.baselines.runs import Clock
+from ials_zoo.baselines.runs import Clock, load_training_state, save_training_state
+from ials_zoo.core.domains import get_domain
+from ials_zoo.evaluation import NetworkPolicy, _evaluate_worker, evaluate, load_model
+from ials_zoo.policy import PolicyNetwork, policy_from_sb3_model, save_policy
+from ials_zoo.processes import shutdown_pool, spawn_pool
+from ials_zoo.single_agent import box_space
 from ials_zoo.utils import atomic_write_text
 
 
@@ -21,7 +26,6 @@ def as_float_box(venv):
     from gymnasium import spaces
     from stable_baselines3.common.vec_env import VecEnvWrapper
 
-    from ials_zoo.single_agent import box_space
 
     space = venv.observation_space
     if isinstance(space, spaces.Box) and space.dtype == np.float32:
@@ -51,7 +55,6 @@ def as_float_box(venv):
 def policy_of(model, agents, frame_stack: int, metadata: dict):
     """The actor of a live SB3 model as a :class:`~ials_zoo.policy.PolicyNetwork` for
     ``agents`` (one set of weights shared by all of them)."""
-    from ials_zoo.policy import PolicyNetwork, policy_from_sb3_model
 
     agents = list(agents)
     net = policy_from_sb3_model(model, agents[0], frame_stack, metadata)
@@ -75,8 +78,6 @@ class Evaluator:
 
     def __call__(self, policy, episodes: int | None = None, progress: bool = False):
         """Score ``policy`` (a PolicyNetwork, a NetworkPolicy or a policy file)."""
-        from ials_zoo.evaluation import NetworkPolicy, _evaluate_worker, evaluate
-        from ials_zoo.policy import PolicyNetwork
 
         if isinstance(policy, PolicyNetwork):
             policy = NetworkPolicy(policy)
@@ -84,7 +85,6 @@ class Evaluator:
                   "progress": progress, **self.options}
         if not self.in_subprocess:
             return evaluate(self.env_id, self.agent, policy, **kwargs)
-        from ials_zoo.processes import shutdown_pool, spawn_pool
 
         if self._pool is None:
             self._pool = spawn_pool(1)
@@ -96,7 +96,6 @@ class Evaluator:
             raise
 
     def close(self, kill: bool = False):
-        from ials_zoo.processes import shutdown_pool
 
         shutdown_pool(self._pool, kill=kill)
         self._pool = None
@@ -129,7 +128,6 @@ def make_ppo(venv, args, hidden: list[int]):
 
 def estimate_seconds(env_id: str, simulator: str, steps: int) -> float:
     """Rough training time from the domain's measured PPO throughput (``Domain.study``)."""
-    from ials_zoo.core.domains import get_domain
 
     rates = get_domain(env_id).study.ppo_steps_per_second
     rate = rates.get("gs" if simulator == GS else "ials", 1000.0)
@@ -187,7 +185,6 @@ class TrainingRun:
         self._last_checkpoint = time.monotonic()
 
     def _resume(self):
-        from ials_zoo.baselines.runs import load_training_state
 
         state, info = load_training_state(self.out)
         self.model.policy.load_state_dict(state["policy"])
@@ -207,7 +204,6 @@ class TrainingRun:
     def checkpoint(self):
         import torch
 
-        from ials_zoo.baselines.runs import save_training_state
 
         with self.clock.pause():
             state = {"policy": self.model.policy.state_dict(),
@@ -245,7 +241,6 @@ class TrainingRun:
         """Train up to ``total_timesteps``; return ``{agent: EvaluationResult}`` of the final
         policy (``policy.safetensors``) over ``final_episodes`` GS episodes. Closes the
         training env and the evaluators (killing workers after an error or an interrupt)."""
-        from ials_zoo.policy import save_policy
 
         done = int(self.model.num_timesteps)
         callback = make_progress_callback(total_timesteps, self, eval_every, progress)
@@ -277,7 +272,6 @@ class TrainingRun:
 
 
 def _file_policy(path):
-    from ials_zoo.evaluation import load_model
 
     return load_model(path)
 

@@ -17,6 +17,11 @@ import time
 import numpy as np
 from stable_baselines3.common.vec_env import VecEnv
 
+from ials_zoo.baselines.ppo_single import Args, _hidden, make_training_env
+from ials_zoo.baselines.sb3_run import as_float_box, make_ppo
+from ials_zoo.core.domains import get_domain
+from ials_zoo.single_agent import check_agent
+
 NO_SIMULATOR = "none"
 
 
@@ -75,10 +80,6 @@ def ppo_throughput(env_id: str, agent: str, simulator: str, steps: int = 30_000,
     import torch
     from stable_baselines3.common.vec_env import VecFrameStack, VecMonitor
 
-    from ials_zoo.baselines.ppo_single import Args, _hidden, make_training_env
-    from ials_zoo.baselines.sb3_run import as_float_box, make_ppo
-    from ials_zoo.core.domains import get_domain
-    from ials_zoo.single_agent import check_agent
 
     if steps < 1 or n_envs < 1:
         raise ValueError(f"steps and n_envs must be >= 1, got {steps} and {n_envs}")

@@ -30,9 +30,15 @@ import time
 
 import numpy as np
 
-from ials_zoo.baselines.multiagent import PREVIOUS_PPO_SETTINGS
+from ials_zoo.baselines import dials
+from ials_zoo.baselines.multiagent import PREVIOUS_PPO_SETTINGS, frame_stack_of, ppo_config
+from ials_zoo.baselines.throughput import NO_SIMULATOR, ppo_bound, ppo_throughput
+from ials_zoo.commands import CommandError
 from ials_zoo.core.domains import domain_ids, get_domain
-from ials_zoo.utils import atomic_write_text
+from ials_zoo.influence.ials import make_ials, make_ials_vec_env
+from ials_zoo.influence.multi import make_ials_parallel_env, make_multi_agent_ials, resolve_predictor_set
+from ials_zoo.learners.batched_ppo import BatchedPPO, PPOConfig
+from ials_zoo.utils import atomic_path, atomic_write_text
 
 
 def configure(parser):
@@ -111,7 +117,6 @@ def _gs_seconds(env_id: str, learners, steps: int, seed: int, **options) -> floa
 
 def _ials_seconds(env_id: str, agent: str, steps: int, seed: int, predictor, **options) -> float:
     """Seconds per step of one agent's IALS (Gymnasium API)."""
-    from ials_zoo.influence.ials import make_ials
 
     env = make_ials(env_id, agent, predictor=predictor, seed=seed, **options)
     try:
@@ -131,7 +136,6 @@ def _ials_seconds(env_id: str, agent: str, steps: int, seed: int, predictor, **o
 def _ials_batched_seconds(env_id: str, agent: str, steps: int, seed: int, predictor, n_envs: int,
                           **options) -> float:
     """Seconds per agent-step of ``n_envs`` copies of one agent's IALS stepped together."""
-    from ials_zoo.influence.ials import make_ials_vec_env
 
     venv = make_ials_vec_env(env_id, agent, n_envs=n_envs, predictor=predictor, seed=seed, **options)
     try:
@@ -149,7 +153,6 @@ def _ials_batched_seconds(env_id: str, agent: str, steps: int, seed: int, predic
 
 def _parallel_env_seconds(env_id: str, steps: int, seed: int, predictors) -> float:
     """Seconds per agent-step of the multi-agent IALS as a PettingZoo ParallelEnv."""
-    from ials_zoo.influence.multi import make_ials_parallel_env
 
     env = make_ials_parallel_env(env_id, None, predictor=predictors, seed=seed)
     try:
@@ -170,7 +173,6 @@ def _parallel_env_seconds(env_id: str, steps: int, seed: int, predictors) -> flo
 
 def _multi_agent_seconds(env_id: str, steps: int, seed: int, predictors, copies: int) -> float:
     """Seconds per agent-step of every agent's IALS x ``copies``, stepped as DIALS does."""
-    from ials_zoo.influence.multi import make_multi_agent_ials
 
     core = make_multi_agent_ials(env_id, None, copies, predictors, seed=seed)
     try:
@@ -197,9 +199,6 @@ def _learner_seconds(env_id: str, copies: int, seed: int, updates: int = 5,
     ``settings`` (e.g. :data:`~ials_zoo.baselines.multiagent.PREVIOUS_PPO_SETTINGS`)."""
     import torch
 
-    from ials_zoo.baselines import dials
-    from ials_zoo.baselines.multiagent import frame_stack_of, ppo_config
-    from ials_zoo.learners.batched_ppo import BatchedPPO, PPOConfig
 
     domain = get_domain(env_id)
     agents = domain.agents()
@@ -234,7 +233,6 @@ def _learner_seconds(env_id: str, copies: int, seed: int, updates: int = 5,
 
 def bench_domain(env_id: str, steps: int | None, batch: int, predictor, seed: int, repeats: int) -> dict:
     """Every measurement of one domain, ``repeats`` times (module docstring)."""
-    from ials_zoo.influence.multi import resolve_predictor_set
 
     domain = get_domain(env_id)
     agent = domain.default_agents[0]
@@ -386,7 +384,6 @@ def _plot_scaling(rows: list[dict], path: str) -> None:
         ax.legend()
     fig.suptitle("Cost of one step of experience for one agent: GS vs IALS")
     fig.tight_layout()
-    from ials_zoo.utils import atomic_path
 
     with atomic_path(path, suffix=".png") as tmp:
         fig.savefig(tmp, dpi=110)
@@ -396,7 +393,6 @@ def _plot_scaling(rows: list[dict], path: str) -> None:
 def bench_ppo(env_id: str, steps: int, predictor: str, seed: int) -> list[dict]:
     """``ppo_single`` steps/s on the GS, the IALS and no simulator, with the time per step of
     each relative to the GS (the last one is the floor no simulator can beat)."""
-    from ials_zoo.baselines.throughput import NO_SIMULATOR, ppo_bound, ppo_throughput
 
     agent = get_domain(env_id).default_agents[0]
     simulator = "ials" if predictor == "trained" else predictor
@@ -408,7 +404,6 @@ def bench_ppo(env_id: str, steps: int, predictor: str, seed: int) -> list[dict]:
 
 
 def run(args) -> int:
-    from ials_zoo.commands import CommandError
 
     if args.steps is not None and args.steps < 1:
         raise CommandError(f"--steps must be >= 1, got {args.steps}")

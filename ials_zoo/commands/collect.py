@@ -15,17 +15,18 @@ records every listed region at once (all of them acting randomly) into
 from __future__ import annotations
 
 from ials_zoo.commands import CommandError
+from ials_zoo.core.domains import domain_ids, get_domain
+from ials_zoo.influence.dataset import collect_all
+from ials_zoo.utils import check_output_file, check_seed, parse_json_object, remove_stale_temporaries
 
 
 def _json_dict(text: str) -> dict:
-    from ials_zoo.utils import parse_json_object
 
     return parse_json_object(text, "--options")
 
 
 def add_collect_arguments(parser, required: bool = True) -> None:
     """Arguments shared by ``collect`` and ``train-aip``."""
-    from ials_zoo.core.domains import domain_ids
 
     parser.add_argument("--env", required=required, choices=domain_ids(), help="domain id")
     parser.add_argument("--agent", required=required, help="learning agent, e.g. robot_20")
@@ -41,8 +42,6 @@ def add_collect_arguments(parser, required: bool = True) -> None:
 
 def check_collect_arguments(args) -> dict:
     """Clear errors for the shared arguments before anything runs; returns the GS options."""
-    from ials_zoo.core.domains import get_domain
-    from ials_zoo.utils import check_seed
 
     if args.steps < 1:
         raise CommandError(f"--steps must be >= 1, got {args.steps}")
@@ -71,8 +70,6 @@ def configure(parser):
 def run(args) -> int:
     from pathlib import Path
 
-    from ials_zoo.influence.dataset import collect_all
-    from ials_zoo.utils import check_output_file, remove_stale_temporaries
 
     options = check_collect_arguments(args)
     agents = None if args.agent == "all" else [a.strip() for a in args.agent.split(",") if a.strip()]
@@ -86,7 +83,6 @@ def run(args) -> int:
             raise CommandError("--out takes one agent's data; use --out-dir for several agents")
         targets = {agents[0]: check_output_file(args.out, "--out")}
     else:
-        from ials_zoo.core.domains import get_domain
 
         names = get_domain(args.env).check_agents(agents, **options)
         targets = {a: check_output_file(Path(args.out_dir) / f"{a}.npz", "--out-dir") for a in names}

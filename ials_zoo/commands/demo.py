@@ -15,6 +15,8 @@ import numpy as np
 
 from ials_zoo.commands import CommandError
 from ials_zoo.core.domains import default_domain, domain_ids, get_domain
+from ials_zoo.utils import check_output_file
+from ials_zoo.viewer import annotate, save_gif
 
 
 def configure(parser):
@@ -30,7 +32,6 @@ def configure(parser):
 
 
 def run(args) -> int:
-    from ials_zoo.utils import check_output_file
 
     domain = get_domain(args.domain or default_domain())
     steps = domain.episode_length if args.steps is None else args.steps
@@ -59,7 +60,6 @@ def run(args) -> int:
         space.seed(int(rng.integers(2**31)))
         legend = domain.legend
         if args.gif:
-            from ials_zoo.viewer import annotate
 
             frames.append(annotate(env.render(), f"{domain.env_id}  step 0/{steps}", legend))
         t0 = time.perf_counter()
@@ -86,7 +86,6 @@ def run(args) -> int:
     for key, value in summary.items():
         print(f"  {key:<30} {value}")
     if args.gif:
-        from ials_zoo.viewer import save_gif
 
         fps = float(env.metadata.get("render_fps", 5))
         save_gif(frames, args.gif, fps=fps)

@@ -15,12 +15,15 @@ Protocol (20 episodes, seeds 10000 + i, 95% bootstrap interval): :mod:`ials_zoo.
 
 from __future__ import annotations
 
+from ials_zoo.baselines.arguments import parse_env_options
 from ials_zoo.commands import CommandError
+from ials_zoo.evaluation import PROTOCOL_EPISODES
+from ials_zoo.leaderboard import write_result
 from ials_zoo.leaderboard.build import result_for
+from ials_zoo.utils import check_output_file
 
 
 def configure(parser):
-    from ials_zoo.evaluation import PROTOCOL_EPISODES
 
     parser.add_argument("--env", dest="env_id", default=None,
                         help="domain id (default: from the policy file)")
@@ -48,9 +51,6 @@ def configure(parser):
 
 
 def run(args) -> int:
-    from ials_zoo.baselines.arguments import parse_env_options
-    from ials_zoo.leaderboard import write_result
-    from ials_zoo.utils import check_output_file
 
     if args.episodes < 1:
         raise CommandError(f"--episodes must be >= 1, got {args.episodes}")

@@ -11,6 +11,10 @@ from __future__ import annotations
 
 import math
 
+from ials_zoo.core.domains import get_domain
+from ials_zoo.influence.fidelity import fidelity_report, markdown
+from ials_zoo.utils import atomic_write_text, check_output_file, check_seed
+
 
 def configure(parser):
     parser.add_argument("--env", required=True, help="domain id")
@@ -37,9 +41,6 @@ def configure(parser):
 def run(args) -> int:
     import os
 
-    from ials_zoo.core.domains import get_domain
-    from ials_zoo.influence.fidelity import fidelity_report, markdown
-    from ials_zoo.utils import atomic_write_text, check_output_file, check_seed
 
     domain = get_domain(args.env)
     if args.episodes < 2:

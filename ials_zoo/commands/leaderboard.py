@@ -19,6 +19,11 @@ from __future__ import annotations
 
 import sys
 
+from ials_zoo import leaderboard as lb
+from ials_zoo.evaluation import load_model
+from ials_zoo.policy import save_policy
+from ials_zoo.utils import atomic_write_text, check_output_file
+
 
 def configure(parser):
     sub = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
@@ -59,7 +64,6 @@ def configure(parser):
 
 
 def run(args) -> int:
-    from ials_zoo import leaderboard as lb
 
     try:
         if args.action == "submit":
@@ -68,7 +72,6 @@ def run(args) -> int:
             lb.load_result(args.file)
             print(f"{args.file}: valid")
         elif args.action == "merge":
-            from ials_zoo.utils import check_output_file
 
             check_output_file(args.out, "--out")
             merged = lb.merge_results([lb.load_result(f) for f in args.files], notes=args.notes)
@@ -83,7 +86,6 @@ def run(args) -> int:
         elif args.action == "export":
             import json
 
-            from ials_zoo.utils import atomic_write_text, check_output_file
 
             if args.out:
                 check_output_file(args.out, "--out")
@@ -96,9 +98,6 @@ def run(args) -> int:
         elif args.action == "render":
             print(f"wrote {lb.render(args.dir)}")
         elif args.action == "convert":
-            from ials_zoo.evaluation import load_model
-            from ials_zoo.policy import save_policy
-            from ials_zoo.utils import check_output_file
 
             if not args.out.endswith(".safetensors"):
                 raise ValueError("--out must name a .safetensors file")

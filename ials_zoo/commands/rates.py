@@ -10,7 +10,9 @@ uniform random policy (:func:`ials_zoo.influence.rates.influence_rates`).
 from __future__ import annotations
 
 from ials_zoo.commands import CommandError
-from ials_zoo.core.domains import domain_ids
+from ials_zoo.core.domains import domain_ids, get_domain
+from ials_zoo.influence.rates import influence_rates
+from ials_zoo.influence.specs import parse_predictor
 
 
 def configure(parser):
@@ -23,9 +25,6 @@ def configure(parser):
 
 
 def run(args) -> int:
-    from ials_zoo.core.domains import get_domain
-    from ials_zoo.influence.rates import influence_rates
-    from ials_zoo.influence.specs import parse_predictor
 
     domain = get_domain(args.env)
     agent = domain.check_agent(args.agent or domain.default_agents[0])

@@ -27,6 +27,18 @@ curves are flat from ~100k steps) and 500,000 per memory-experiment run; see ``-
 from __future__ import annotations
 
 from ials_zoo.commands import CommandError
+from ials_zoo.core.domains import domain_ids, get_domain
+from ials_zoo.reproduce import build_plan, describe_plan, settings
+from ials_zoo.reproduce.plan import (
+    DEFAULT_MEMORY_BUDGET,
+    DEFAULT_SIMULATORS,
+    DIALS_VARIANTS,
+    EXPERIMENTS,
+    Config,
+    default_budgets,
+)
+from ials_zoo.reproduce.report import submit_results, write_report
+from ials_zoo.reproduce.runner import run_jobs
 
 
 def _csv(text: str) -> tuple:
@@ -34,15 +46,6 @@ def _csv(text: str) -> tuple:
 
 
 def configure(parser):
-    from ials_zoo.core.domains import domain_ids, get_domain
-    from ials_zoo.reproduce.plan import (
-        DEFAULT_MEMORY_BUDGET,
-        DEFAULT_SIMULATORS,
-        DIALS_VARIANTS,
-        EXPERIMENTS,
-        Config,
-        default_budgets,
-    )
 
     c = Config()
     parser.add_argument("--experiments", default=",".join(EXPERIMENTS),
@@ -116,7 +119,6 @@ def parse_budget(text, default: int, default_domains: dict) -> tuple[int, dict]:
 
 def config_from_args(args):
     """The :class:`~ials_zoo.reproduce.plan.Config` of parsed command-line ``args``."""
-    from ials_zoo.reproduce.plan import DEFAULT_MEMORY_BUDGET, Config, default_budgets
 
     budget, per = parse_budget(args.budget, Config.budget, default_budgets())
     dials_default, dials_per = parse_budget(args.dials_budget, 0, {})
@@ -139,9 +141,6 @@ def config_from_args(args):
 
 
 def run(args) -> int:
-    from ials_zoo.reproduce import build_plan, describe_plan, settings
-    from ials_zoo.reproduce.report import submit_results, write_report
-    from ials_zoo.reproduce.runner import run_jobs
 
     try:
         cfg = config_from_args(args)

@@ -11,10 +11,11 @@ from __future__ import annotations
 
 import importlib
 
+from ials_zoo.baselines import BASELINES
+from ials_zoo.baselines.arguments import add_dataclass_args, dataclass_from_namespace
+
 
 def configure(parser):
-    from ials_zoo.baselines import BASELINES
-    from ials_zoo.baselines.arguments import add_dataclass_args
 
     sub = parser.add_subparsers(dest="baseline", metavar="BASELINE", required=True)
     for name, module_name in BASELINES.items():
@@ -25,8 +26,6 @@ def configure(parser):
 
 
 def run(args) -> int:
-    from ials_zoo.baselines import BASELINES
-    from ials_zoo.baselines.arguments import dataclass_from_namespace
 
     module = importlib.import_module(BASELINES[args.baseline])
     module.main(dataclass_from_namespace(module.Args, args))

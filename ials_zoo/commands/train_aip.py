@@ -24,6 +24,12 @@ import math
 
 from ials_zoo.commands import CommandError
 from ials_zoo.commands.collect import add_collect_arguments, check_collect_arguments
+from ials_zoo.core.domains import get_domain
+from ials_zoo.influence.dataset import InfluenceDataset, collect, collect_all
+from ials_zoo.influence.files import save_predictor_set
+from ials_zoo.influence.predictors import save_predictor
+from ials_zoo.influence.train import format_report, train_predictor, train_predictors
+from ials_zoo.utils import atomic_write_text, check_output_file
 
 
 def configure(parser):
@@ -60,11 +66,6 @@ def check_training_arguments(args) -> None:
 def run(args) -> int:
     import torch
 
-    from ials_zoo.core.domains import get_domain
-    from ials_zoo.influence.dataset import InfluenceDataset, collect
-    from ials_zoo.influence.predictors import save_predictor
-    from ials_zoo.influence.train import format_report, train_predictor
-    from ials_zoo.utils import atomic_write_text, check_output_file
 
     check_training_arguments(args)
     check_output_file(args.out, "--out")
@@ -99,11 +100,6 @@ def run(args) -> int:
 
 def _train_set(args, progress: bool) -> int:
     """Every listed agent's AIP from one GS run, into one predictor-set file."""
-    from ials_zoo.core.domains import get_domain
-    from ials_zoo.influence.dataset import collect_all
-    from ials_zoo.influence.files import save_predictor_set
-    from ials_zoo.influence.train import train_predictors
-    from ials_zoo.utils import atomic_write_text
 
     if args.data:
         raise CommandError("--data holds one agent's data; several agents are collected in one GS run (leave "

@@ -11,14 +11,14 @@
 """
 
 from ials_zoo.reproduce.plan import Config, Job, build_plan, describe_plan
+from ials_zoo.reproduce.report import submit_results, write_report
+from ials_zoo.reproduce.runner import run_jobs
 
 
 def reproduce(cfg: Config, progress: bool = True, report: bool = True, submit: bool = True) -> dict:
     """Run the study ``cfg`` (skipping finished jobs), then aggregate and submit.
 
     Returns ``{"jobs": run_jobs' status lists, "report": path, "leaderboard": submissions}``."""
-    from ials_zoo.reproduce.report import submit_results, write_report
-    from ials_zoo.reproduce.runner import run_jobs
 
     jobs = build_plan(cfg)
     status = run_jobs(jobs, n_jobs=cfg.jobs, progress=progress, lock_dir=cfg.out)

@@ -28,7 +28,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ials_zoo.baselines.multiagent import PREVIOUS_PPO_SETTINGS
+from ials_zoo.baselines.ippo import Args
+from ials_zoo.baselines.multiagent import DETERMINISTIC_RESULT, PREVIOUS_PPO_SETTINGS
+from ials_zoo.core.domains import get_domain
+from ials_zoo.evaluation import evaluate_joint
 from ials_zoo.stats import t_interval
 from ials_zoo.utils import atomic_write_text
 
@@ -90,9 +93,7 @@ def _slug(cell: str) -> str:
 
 def run_cell(env_id: str, cell: str, seed: int, budget: int, episodes: int, out: Path) -> dict:
     """Train and score one (cell, seed); returns its record (also ``record.json``)."""
-    from ials_zoo.baselines.ippo import Args, main
-    from ials_zoo.baselines.multiagent import DETERMINISTIC_RESULT
-    from ials_zoo.evaluation import evaluate_joint
+    from ials_zoo.baselines.ippo import main
 
     folder = out / env_id / _slug(cell) / f"s{seed}"
     record_path = folder / "record.json"
@@ -119,7 +120,6 @@ def run_cell(env_id: str, cell: str, seed: int, budget: int, episodes: int, out:
 
 def scripted_score(env_id: str, episodes: int, out: Path) -> float:
     """The domain's scripted joint score on the same episodes (cached in ``out``)."""
-    from ials_zoo.evaluation import evaluate_joint
 
     path = out / env_id / "scripted.json"
     if path.is_file():
@@ -178,7 +178,6 @@ def main(argv=None) -> int:
     parser.add_argument("--table", default=None, help="also write the table here")
     parser.add_argument("--report", action="store_true", help="only write the table from finished runs")
     args = parser.parse_args(argv)
-    from ials_zoo.core.domains import get_domain
 
     domain = get_domain(args.env)
     cells = domain_cells(domain, args.round) if args.cells == "all" else args.cells.split(",")

@@ -21,6 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ials_zoo.leaderboard import load_entries
+from ials_zoo.reproduce.plan import DIALS_VARIANTS, KNOWN_SIMULATORS
 from ials_zoo.stats import t_interval as mean_ci
 
 # SPEC §4 (authors' plotting notebooks).
@@ -152,7 +154,6 @@ def summarize_training(runs: list[dict]) -> dict:
 
 
 def _sim_order(label: str):
-    from ials_zoo.reproduce.plan import KNOWN_SIMULATORS
 
     return (KNOWN_SIMULATORS.index(label) if label in KNOWN_SIMULATORS else len(KNOWN_SIMULATORS), label)
 
@@ -165,7 +166,6 @@ def paper_steps_per_second(env_id: str) -> dict:
 
 def reference_scores(leaderboard, env_id: str, agent: str) -> dict:
     """Scores of the reference policies (entries without training) on the board."""
-    from ials_zoo.leaderboard import load_entries
 
     refs = {}
     try:
@@ -338,7 +338,6 @@ def summarize_dials(runs: list[dict]) -> dict:
                 "curve": aggregate_curves([r["curve"]["points"] for r in vrs if r["curve"]]),
                 "per_seed": {r["job"]["params"]["seed"]: r["result"] for r in done},
             }
-        from ials_zoo.reproduce.plan import DIALS_VARIANTS
 
         order = {v: i for i, v in enumerate(DIALS_VARIANTS)}
         variants = dict(sorted(variants.items(), key=lambda kv: (order.get(kv[0], len(order)), kv[0])))

@@ -21,7 +21,19 @@ from pathlib import Path
 
 import numpy as np
 
-from ials_zoo.utils import atomic_write_text
+from ials_zoo.core.domains import get_domain
+from ials_zoo.influence.dataset import collect
+from ials_zoo.influence.ials import make_ials
+from ials_zoo.influence.predictors import (
+    MarginalPredictor,
+    UniformPredictor,
+    evaluate_cross_entropy,
+    save_predictor,
+    untrained_predictor,
+)
+from ials_zoo.influence.train import train_predictor, untrained_probs
+from ials_zoo.leaderboard.build import result_for
+from ials_zoo.utils import atomic_path, atomic_write_text
 
 
 def _write_json(path: Path, data) -> None:
@@ -38,10 +50,6 @@ def train_aip(env_id: str, agent: str, out_dir, steps: int = 50_000, epochs: int
     """Collect ``steps`` steps (uniform random learner, scripted neighbours) with ``workers``
     GS processes, train an AIP, save ``aip.pt``, ``marginal.pt`` and ``report.json`` (written
     last: the done marker)."""
-    from ials_zoo.core.domains import get_domain
-    from ials_zoo.influence.dataset import collect
-    from ials_zoo.influence.predictors import MarginalPredictor, save_predictor
-    from ials_zoo.influence.train import train_predictor
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -69,7 +77,6 @@ def joint_reference(params: dict, out_dir) -> dict:
     """Every agent of ``params["env_id"]`` acting with a reference policy (``scripted`` or
     ``random``) on the GS with the protocol's seeds: the multi-agent track's references.
     Writes ``result.json``."""
-    from ials_zoo.leaderboard.build import result_for
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -106,7 +113,6 @@ def record_item_ages(env_id: str, agent: str, simulator: str = "gs", episodes: i
     (``simulator="gs"``) or an IALS (``simulator`` = a predictor spec for ``make_ials``), for a
     domain with ``Domain.study.lifetime_probes`` (the warehouse). ``policy``: ``obs -> action``
     (default uniform random)."""
-    from ials_zoo.core.domains import get_domain
 
     domain = get_domain(env_id)
     if domain.study.lifetime_probes is None:
@@ -129,7 +135,6 @@ def record_item_ages(env_id: str, agent: str, simulator: str = "gs", episodes: i
         finally:
             env.close()
         return out
-    from ials_zoo.influence.ials import make_ials
 
     env = make_ials(env_id, agent, predictor=simulator, seed=seed, **options)
     try:
@@ -167,7 +172,6 @@ def plot_lifetimes(hist: dict, path, lifetime: int | None = None, title: str = "
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ials_zoo.utils import atomic_path
 
     names = list(hist)
     top = max([max(v) for v in hist.values() if v] + [lifetime or 1]) + 1
@@ -220,7 +224,6 @@ def off_policy_cross_entropy(predictors: dict, on_policy, on_policy_episodes, of
     off-policy data set, and the increase off-policy (``off - on``).
 
     Returns ``{name: {"on_policy": ce, "off_policy": {data: ce}, "increase": {data: ce - on}}}``."""
-    from ials_zoo.influence.predictors import evaluate_cross_entropy
 
     if not predictors:
         raise ValueError("predictors must not be empty")
@@ -235,7 +238,6 @@ def off_policy_cross_entropy(predictors: dict, on_policy, on_policy_episodes, of
 def biased_policy(env_id: str, seed: int = 0, p: float = 0.7):
     """A random policy that takes action 0 with probability ``p`` (traffic: keep the green,
     so the light switches rarely; warehouse: mostly up)."""
-    from ials_zoo.core.domains import get_domain
 
     n = get_domain(env_id).n_actions
     rng = np.random.default_rng(seed)
@@ -250,8 +252,6 @@ def biased_policy(env_id: str, seed: int = 0, p: float = 0.7):
 def _ablation_direction(train, test_sets: dict, arch: str, epochs, seed: int) -> dict:
     """AIPs on the d-set and the full observation (+ references) trained on ``train``, scored
     on its own test split and on each data set of ``test_sets``."""
-    from ials_zoo.influence.predictors import MarginalPredictor, UniformPredictor, untrained_predictor
-    from ials_zoo.influence.train import train_predictor, untrained_probs
 
     train_idx, test_idx = train.split(0.1, seed=seed)
     preds, reports = {}, {}
@@ -275,8 +275,6 @@ def dset_ablation(params: dict, out_dir) -> dict:
     a policy whose actions depend on the local state, so the full observation (e.g. the light
     state in traffic) can carry correlations with the influence sources that do not hold
     under another policy -- and tested on the random and biased data."""
-    from ials_zoo.core.domains import get_domain
-    from ials_zoo.influence.dataset import collect
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

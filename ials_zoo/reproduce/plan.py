@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ials_zoo.core.domains import domain_ids, domain_of_agent, get_domain
+from ials_zoo.utils import atomic_write_text
 
 EXPERIMENTS = ("training", "memory", "dset", "dials")
 # The multi-agent study (issue: every agent learning at once): GS-IPPO and the DIALS variants,
@@ -228,7 +229,6 @@ class Job:
 
     def write(self) -> Path:
         """Write ``job.json`` into the job's folder (what the worker reads)."""
-        from ials_zoo.utils import atomic_write_text
 
         Path(self.dir).mkdir(parents=True, exist_ok=True)
         path = Path(self.dir) / "job.json"

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ials_zoo.baselines.multiagent import DETERMINISTIC_RESULT
+from ials_zoo.leaderboard import ResultError, identity, load_entries, merge_results, submit
 from ials_zoo.reproduce.claims import (  # noqa: F401 - names of the former single module
     CE_ROWS,
     CLEAR_CE_GAP,
@@ -401,7 +402,6 @@ def submit_results(out, leaderboard, experiments=("training", "dials")) -> dict:
     board never holds a partial merge; results already on the board are skipped.
 
     Returns ``{"submitted": [...], "already": [...], "rejected": [...], "incomplete": [...]}``."""
-    from ials_zoo.leaderboard import ResultError, identity, load_entries, merge_results
 
     (Path(leaderboard) / "results").mkdir(parents=True, exist_ok=True)  # the study's own board
     have = {identity(d) for _, d in load_entries(leaderboard)[0]}
@@ -457,7 +457,6 @@ def submit_results(out, leaderboard, experiments=("training", "dials")) -> dict:
 
 def _submit_one(path: Path, leaderboard, have: set, done: dict, name: str) -> None:
     """Submit one finished result file unless the board already has it."""
-    from ials_zoo.leaderboard import ResultError, identity, submit
 
     result = _load(path)
     if result is None:

@@ -11,12 +11,17 @@ import sys
 import time
 from pathlib import Path
 
+from ials_zoo.baselines.ppo_single import Args
+from ials_zoo.baselines.runs import run_state
+from ials_zoo.processes import die_with_parent
+from ials_zoo.reproduce import experiments as X
+from ials_zoo.reproduce.plan import Job
+
 
 def run_job(job) -> None:
     """Run ``job`` (a :class:`~ials_zoo.reproduce.plan.Job`) in this process."""
     import torch
 
-    from ials_zoo.reproduce import experiments as X
 
     torch.set_num_threads(1)
     p = dict(job.params)
@@ -27,8 +32,7 @@ def run_job(job) -> None:
     elif job.kind == "ppo":
         from pathlib import Path
 
-        from ials_zoo.baselines.ppo_single import Args, main
-        from ials_zoo.baselines.runs import run_state
+        from ials_zoo.baselines.ppo_single import main
 
         # a job killed earlier continues from its last checkpoint; one killed before its first
         # checkpoint starts again
@@ -54,7 +58,6 @@ def _run_multiagent(params: dict) -> None:
     earlier continues from its last checkpoint, one killed before it starts again."""
     from importlib import import_module
 
-    from ials_zoo.baselines.runs import run_state
 
     p = dict(params)
     module = import_module(f"ials_zoo.baselines.{p.pop('algorithm')}")
@@ -66,8 +69,6 @@ def _run_multiagent(params: dict) -> None:
 
 
 def main(argv=None) -> int:
-    from ials_zoo.processes import die_with_parent
-    from ials_zoo.reproduce.plan import Job
 
     die_with_parent()  # the study's runner started this process: it ends with it
     argv = sys.argv[1:] if argv is None else argv
