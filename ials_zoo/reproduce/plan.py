@@ -76,7 +76,7 @@ class Config:
     jobs: int = 2
     out: str = "runs/reproduce"
     leaderboard: str = "leaderboard"
-    net_arch: str = "256,128"
+    net_arch: str = "64,64"  # ppo_single's default (the ablation's; SPEC §3 used 256-128)
     n_envs: int = 8
     eval_points: int = 10  # GS evaluations along each curve
     eval_episodes: int = 10
