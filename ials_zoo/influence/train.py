@@ -111,6 +111,36 @@ def _loss(logits, u, offsets):
     return total / M
 
 
+def _fit(net, opt, X, U, batch: int, epochs: int, rng, offsets, bar) -> list[float]:
+    """Adam on shuffled minibatches of ``X`` (episodes or steps) for ``epochs``; returns the
+    mean training loss of every epoch."""
+    import torch
+
+    history = []
+    net.train()
+    n_logits = offsets[-1]
+    for _ in range(epochs):
+        perm = torch.from_numpy(rng.permutation(X.shape[0]))
+        running, count = 0.0, 0
+        for start in range(0, X.shape[0], batch):
+            idx = perm[start : start + batch]
+            logits = net(X[idx])
+            u = U[idx]
+            loss = _loss(logits.reshape(-1, n_logits), u.reshape(-1, u.shape[-1]), offsets)
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            running += loss.item() * len(idx)
+            count += len(idx)
+        history.append(running / max(count, 1))
+        if bar is not None:
+            bar.update(1)
+            bar.set_postfix(loss=f"{history[-1]:.4f}")
+    if bar is not None:
+        bar.close()
+    return history
+
+
 def train_predictor(
     dataset,
     arch: str = "gru",
@@ -154,6 +184,20 @@ def train_predictor(
         torch.set_num_threads(threads)
 
 
+def hyperparameters(arch: str, epochs, lr, hidden, batch_size, min_epochs: int) -> dict:
+    """:data:`DEFAULTS` of ``arch`` with the given values in place of the defaults (the batch
+    size counts episodes for a GRU, steps for an MLP)."""
+    hp = dict(DEFAULTS[arch])
+    for k, v in (("epochs", epochs), ("lr", lr), ("hidden", hidden)):
+        if v is not None:
+            hp[k] = v
+    if batch_size is not None:
+        hp["batch_episodes" if arch == "gru" else "batch_size"] = int(batch_size)
+    if int(hp["epochs"]) < min_epochs:
+        raise ValueError(f"epochs must be >= {min_epochs}, got {hp['epochs']}")
+    return hp
+
+
 def network_inputs(dataset, dset_kind: str, autoregressive: bool) -> np.ndarray:
     """A data set's network inputs ``[E, T, D]`` (float32): the d-sets, and for an
     autoregressive AIP the one-hot ``u_{t-1}`` beside them (zeros at an episode's start)."""
@@ -172,14 +216,7 @@ def _train(dataset, arch, dset_kind, epochs, seed, progress, lr, hidden, batch_s
     if arch not in ARCHS:
         raise ValueError(f"unknown AIP architecture {arch!r}; expected one of {sorted(ARCHS)}")
     check_dset_kind(dset_kind)
-    hp = dict(DEFAULTS[arch])
-    for k, v in (("epochs", epochs), ("lr", lr), ("hidden", hidden)):
-        if v is not None:
-            hp[k] = v
-    if batch_size is not None:
-        hp["batch_episodes" if arch == "gru" else "batch_size"] = int(batch_size)
-    if int(hp["epochs"]) < 0:
-        raise ValueError(f"epochs must be >= 0, got {hp['epochs']}")
+    hp = hyperparameters(arch, epochs, lr, hidden, batch_size, min_epochs=0)
     if dataset.n_episodes < 2:
         raise ValueError(f"need at least 2 episodes to split train/test, got {dataset.n_episodes}")
 
@@ -202,12 +239,10 @@ def _train(dataset, arch, dset_kind, epochs, seed, progress, lr, hidden, batch_s
         X = torch.from_numpy(d_all[train_idx])  # [E, T, D]
         U = torch.from_numpy(u_all[train_idx])  # [E, T, M]
         batch = int(hp["batch_episodes"])
-        n_items = X.shape[0]
     else:
         X = torch.from_numpy(d_all[train_idx].reshape(-1, D))
         U = torch.from_numpy(u_all[train_idx].reshape(-1, region.n_sources))
         batch = int(hp["batch_size"])
-        n_items = X.shape[0]
 
     bar = None
     if progress:
@@ -215,27 +250,7 @@ def _train(dataset, arch, dset_kind, epochs, seed, progress, lr, hidden, batch_s
 
         bar = tqdm(total=int(hp["epochs"]), desc=f"train {arch} AIP", unit="epoch")
     t0 = time.perf_counter()
-    history = []
-    net.train()
-    for _ in range(int(hp["epochs"])):
-        perm = torch.from_numpy(rng.permutation(n_items))
-        running, count = 0.0, 0
-        for start in range(0, n_items, batch):
-            idx = perm[start : start + batch]
-            x, u = X[idx], U[idx]
-            logits = net(x)
-            loss = _loss(logits.reshape(-1, n_logits), u.reshape(-1, u.shape[-1]), offsets)
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            opt.step()
-            running += loss.item() * len(idx)
-            count += len(idx)
-        history.append(running / max(count, 1))
-        if bar is not None:
-            bar.update(1)
-            bar.set_postfix(loss=f"{history[-1]:.4f}")
-    if bar is not None:
-        bar.close()
+    history = _fit(net, opt, X, U, batch, int(hp["epochs"]), rng, offsets, bar)
     train_seconds = time.perf_counter() - t0
 
     trained = ARCHS[arch](region, dset_kind=dset_kind, hidden=int(hp["hidden"]), arrays=net.to_numpy(),
@@ -244,13 +259,8 @@ def _train(dataset, arch, dset_kind, epochs, seed, progress, lr, hidden, batch_s
                             autoregressive=autoregressive)
     uniform = UniformPredictor(region, dset_kind=dset_kind, probs=untrained_probs(region))
     marginal = MarginalPredictor.fit(dataset, dset_kind=dset_kind, episodes=train_idx)
-
-    ce = {}
-    for name, pred in (("trained", trained), ("untrained", untrained), ("uniform", uniform), ("marginal", marginal)):
-        ce[name] = {
-            "train": float(np.mean(cross_entropy_per_source(pred, dataset, train_idx))),
-            "test": float(np.mean(cross_entropy_per_source(pred, dataset, test_idx))) if len(test_idx) else None,
-        }
+    ce = _cross_entropies({"trained": trained, "untrained": untrained, "uniform": uniform, "marginal": marginal},
+                          dataset, train_idx, test_idx)
     per_source = cross_entropy_per_source(trained, dataset, test_idx if len(test_idx) else train_idx)
     report = {
         "env_id": region.domain,
@@ -277,6 +287,13 @@ def _train(dataset, arch, dset_kind, epochs, seed, progress, lr, hidden, batch_s
     trained.metadata.update({k: v for k, v in report.items() if k != "loss_history"})
     trained.metadata["variant"] = "trained"
     return trained, report
+
+
+def _cross_entropies(predictors: dict, dataset, train_idx, test_idx) -> dict:
+    """``{name: {"train": CE, "test": CE or None}}`` (mean over sources) of each predictor."""
+    return {name: {"train": float(np.mean(cross_entropy_per_source(pred, dataset, train_idx))),
+                   "test": float(np.mean(cross_entropy_per_source(pred, dataset, test_idx))) if len(test_idx) else None}
+            for name, pred in predictors.items()}
 
 
 def untrained_probs(region):
@@ -366,6 +383,50 @@ def _stacked_modules():
     return {"mlp": StackedMLP, "gru": StackedGRU}
 
 
+def _initial_arrays(agent: str, old, arch: str, D: int, H: int, n_logits: int, dset_kind: str, autoregressive: bool,
+                    seed: int) -> dict:
+    """The starting weights of ``agent``'s network: ``old``'s (a warm start, which must have the
+    same shape and kind), else ``init_arrays`` seeded from ``seed`` and the agent's name."""
+    from ials_zoo.core.streams import agent_key
+
+    if old is None:
+        return init_arrays(arch, D, H, n_logits, seed=(seed * 1_000_003 + agent_key(agent)) % 2**32)
+    if old.name != arch or old.hidden != H or old.dset_kind != dset_kind or old.autoregressive != bool(autoregressive):
+        raise ValueError(f"cannot warm-start a {arch} AIP (hidden {H}, autoregressive {bool(autoregressive)}) "
+                         f"from {old!r}")
+    return {k: np.asarray(v, np.float32) for k, v in old._arrays().items()}
+
+
+def _fit_stacked(net, opt, X, U, batch: int, epochs: int, rngs, offsets, bar) -> None:
+    """Adam on every agent's own shuffled minibatches (``X [G, items, ...]``, one generator per
+    agent): the loss is the sum of the agents' mean cross-entropies, so each network's
+    gradient is its own."""
+    import torch
+
+    G, n_items, n_logits = X.shape[0], X.shape[1], offsets[-1]
+    gi = torch.arange(G)[:, None]
+    for _ in range(epochs):
+        perm = torch.from_numpy(np.stack([r.permutation(n_items) for r in rngs]))
+        for start in range(0, n_items, batch):
+            idx = perm[:, start:start + batch]
+            flat = net(X[gi, idx]).reshape(G, -1, n_logits)
+            u = U[gi, idx].reshape(G, -1, U.shape[-1])
+            loss = 0.0
+            for m in range(len(offsets) - 1):
+                lm = flat[:, :, offsets[m]:offsets[m + 1]]
+                ce = torch.nn.functional.cross_entropy(lm.reshape(-1, lm.shape[-1]), u[:, :, m].reshape(-1),
+                                                       reduction="none").reshape(G, -1).mean(dim=1)
+                loss = loss + ce
+            loss = (loss / (len(offsets) - 1)).sum()  # the agents' losses are independent
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+        if bar is not None:
+            bar.update(1)
+    if bar is not None:
+        bar.close()
+
+
 def train_predictors(datasets: dict, arch: str, hidden: int | None = None, lr: float | None = None,
                      epochs: int | None = None, batch_size: int | None = None, seed: int = 0,
                      init: dict | None = None, dset_kind: str = "dset", test_fraction: float = 0.1,
@@ -395,31 +456,15 @@ def train_predictors(datasets: dict, arch: str, hidden: int | None = None, lr: f
         if datasets[a].influences.shape != first.influences.shape:
             raise ValueError(f"the data sets differ in shape ({a}: {datasets[a].influences.shape} vs "
                              f"{first.influences.shape}); collect them in one GS run")
-    hp = dict(DEFAULTS[arch])
-    for k, v in (("epochs", epochs), ("lr", lr), ("hidden", hidden)):
-        if v is not None:
-            hp[k] = v
-    if batch_size is not None:
-        hp["batch_episodes" if arch == "gru" else "batch_size"] = int(batch_size)
-    if int(hp["epochs"]) < 1:
-        raise ValueError(f"epochs must be >= 1, got {hp['epochs']}")
+    hp = hyperparameters(arch, epochs, lr, hidden, batch_size, min_epochs=1)
     region = first.region
     offsets = [int(x) for x in np.concatenate([[0], np.cumsum(region.influence_classes)])]
     n_logits, H = offsets[-1], int(hp["hidden"])
     inputs = {a: network_inputs(datasets[a], dset_kind, autoregressive) for a in agents}
     D = inputs[agents[0]].shape[2]
     train_idx, test_idx = first.split(test_fraction, seed=seed)
-    arrays = []
-    for a in agents:
-        if init and a in init:
-            old = init[a]
-            if (old.name != arch or old.hidden != H or old.dset_kind != dset_kind
-                    or old.autoregressive != bool(autoregressive)):
-                raise ValueError(f"cannot warm-start a {arch} AIP (hidden {H}, autoregressive {bool(autoregressive)}) "
-                                 f"from {old!r}")
-            arrays.append({k: np.asarray(v, np.float32) for k, v in old._arrays().items()})
-        else:
-            arrays.append(init_arrays(arch, D, H, n_logits, seed=(seed * 1_000_003 + agent_key(a)) % 2**32))
+    arrays = [_initial_arrays(a, (init or {}).get(a), arch, D, H, n_logits, dset_kind, autoregressive, seed)
+              for a in agents]
     keep_freed_memory()
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
@@ -435,7 +480,6 @@ def train_predictors(datasets: dict, arch: str, hidden: int | None = None, lr: f
             batch = int(hp["batch_size"])
         else:
             batch = int(hp["batch_episodes"])
-        n_items = X.shape[1]
         rngs = [np.random.default_rng([seed, agent_key(a)]) for a in agents]
         bar = None
         if progress:
@@ -443,28 +487,7 @@ def train_predictors(datasets: dict, arch: str, hidden: int | None = None, lr: f
 
             bar = tqdm(total=int(hp["epochs"]), desc=f"train {G} {arch} AIPs", unit="epoch")
         t0 = time.perf_counter()
-        gi = torch.arange(G)[:, None]
-        for _ in range(int(hp["epochs"])):
-            perm = torch.from_numpy(np.stack([r.permutation(n_items) for r in rngs]))
-            for start in range(0, n_items, batch):
-                idx = perm[:, start:start + batch]
-                logits = net(X[gi, idx])
-                flat = logits.reshape(G, -1, n_logits)
-                u = U[gi, idx].reshape(G, -1, U.shape[-1])
-                loss = 0.0
-                for m in range(len(offsets) - 1):
-                    lm = flat[:, :, offsets[m]:offsets[m + 1]]
-                    ce = torch.nn.functional.cross_entropy(lm.reshape(-1, lm.shape[-1]), u[:, :, m].reshape(-1),
-                                                           reduction="none").reshape(G, -1).mean(dim=1)
-                    loss = loss + ce
-                loss = (loss / (len(offsets) - 1)).sum()  # the agents' losses are independent
-                opt.zero_grad(set_to_none=True)
-                loss.backward()
-                opt.step()
-            if bar is not None:
-                bar.update(1)
-        if bar is not None:
-            bar.close()
+        _fit_stacked(net, opt, X, U, batch, int(hp["epochs"]), rngs, offsets, bar)
         seconds = time.perf_counter() - t0
     finally:
         torch.set_num_threads(threads)
