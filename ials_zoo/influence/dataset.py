@@ -299,25 +299,7 @@ def collect_all(
         total = 0
         ep = 0
         while total < steps:
-            obs, infos = env.reset(seed=seed if ep == 0 else None)
-            actor.reset()
-            ep_d = {a: {k: [np.asarray(infos[a][keys[k]], dtype=np.uint8)] for k in DSET_KINDS} for a in agents}
-            ep_u = {a: [] for a in agents}
-            length = 0
-            while True:
-                obs, _, terms, truncs, infos = env.step(actor(obs))
-                length += 1
-                for a in agents:
-                    ep_u[a].append(np.asarray(infos[a][INFLUENCE_KEY], dtype=np.int64))
-                if any(terms.values()):
-                    raise RuntimeError(f"{env_id}: an episode terminated; the zoo's episodes only truncate")
-                if all(truncs.values()) or not env.agents:
-                    break
-                for a in agents:
-                    for k in DSET_KINDS:
-                        ep_d[a][k].append(np.asarray(infos[a][keys[k]], dtype=np.uint8))
-                if T is not None and length > T:
-                    raise RuntimeError(f"{env_id}: episode {ep} is longer than the first ({T} steps)")
+            ep_d, ep_u, length = _record_episode(env, actor, agents, keys, seed if ep == 0 else None, T, env_id, ep)
             if T is None:
                 T = length
             elif length != T:
@@ -336,26 +318,41 @@ def collect_all(
     finally:
         env.close()
     seconds = time.perf_counter() - t0
+    meta = {"env_id": env_id, "agents": list(agents), "gs_options": gs_options, "steps": total,
+            "steps_requested": steps, "seed": int(seed), "policy": actor.name, "collect_seconds": round(seconds, 3)}
+    return {a: _dataset(regions[a], data_d[a], data_u[a], dict(meta, agent=a)) for a in agents}
+
+
+def _dataset(region, dsets: dict, influences: list, meta: dict) -> InfluenceDataset:
+    """One agent's episodes as a data set, with the provenance ``meta`` (plus version, time)."""
     from ials_zoo._version import __version__
 
-    out = {}
-    for a in agents:
-        meta = {
-            "env_id": env_id,
-            "agent": a,
-            "agents": list(agents),
-            "gs_options": gs_options,
-            "steps": total,
-            "steps_requested": steps,
-            "seed": int(seed),
-            "policy": actor.name,
-            "package_version": __version__,
-            "collect_seconds": round(seconds, 3),
-            "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-        }
-        out[a] = InfluenceDataset(regions[a], {k: np.stack(v) for k, v in data_d[a].items()},
-                                  np.stack(data_u[a]), meta)
-    return out
+    meta = dict(meta, package_version=__version__, created=time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()))
+    return InfluenceDataset(region, {k: np.stack(v) for k, v in dsets.items()}, np.stack(influences), meta)
+
+
+def _record_episode(env, actor, agents, keys, seed, longest, env_id, ep):
+    """One GS episode of ``actor``: every agent's d-sets (``d_0 .. d_{T-1}``) and influences
+    (``u_0 .. u_{T-1}``) and the length ``T`` (at most ``longest``, the first episode's)."""
+    obs, infos = env.reset(seed=seed)
+    actor.reset()
+    ep_d = {a: {k: [np.asarray(infos[a][keys[k]], dtype=np.uint8)] for k in DSET_KINDS} for a in agents}
+    ep_u = {a: [] for a in agents}
+    length = 0
+    while True:
+        obs, _, terms, truncs, infos = env.step(actor(obs))
+        length += 1
+        for a in agents:
+            ep_u[a].append(np.asarray(infos[a][INFLUENCE_KEY], dtype=np.int64))
+        if any(terms.values()):
+            raise RuntimeError(f"{env_id}: an episode terminated; the zoo's episodes only truncate")
+        if all(truncs.values()) or not env.agents:
+            return ep_d, ep_u, length
+        for a in agents:
+            for k in DSET_KINDS:
+                ep_d[a][k].append(np.asarray(infos[a][keys[k]], dtype=np.uint8))
+        if longest is not None and length > longest:
+            raise RuntimeError(f"{env_id}: episode {ep} is longer than the first ({longest} steps)")
 
 
 def worker_seeds(seed: int, workers: int) -> list[int]:
