@@ -22,6 +22,9 @@ def files(tmp_path):
 
 
 CASES = [
+    (["bench", "--domain", "warehouse_v0", "--versus", "{d}/nowhere.pt"], "no such AIP set file"),
+    (["fidelity", "--env", "warehouse_v0", "--predictor", "on-policy", "--aip-lr", "0"], "--aip-lr"),
+    (["fidelity", "--env", "warehouse_v0", "--predictor", "on-policy", "--collect-steps", "0"], "--collect-steps"),
     (["evaluate", "--env", "warehouse_v0", "--policy", "random", "--out", "{d}/adir"], "is a folder"),
     (["evaluate", "--env", "warehouse_v0", "--policy", "random", "--frame-stack", "-1"], "--frame-stack"),
     (["evaluate", "--env", "warehouse_v0", "--policy", "random", "--frame-stack", "0"], "--frame-stack"),

@@ -55,6 +55,9 @@ def configure(parser):
     parser.add_argument("--ppo", action="store_true",
                         help="instead: time PPO training on the GS, the IALS and no simulator (PPO's own cost)")
     parser.add_argument("--ppo-steps", type=int, default=30_000, help="PPO steps per --ppo measurement")
+    parser.add_argument("--versus", default=None, metavar="AIP_SET",
+                        help="instead: the multi-agent IALS (ParallelEnv and DIALS's batched core) with the "
+                             "--predictor AIPs against this AIP set file (e.g. autoregressive ones), beside the GS")
     parser.add_argument("--out", default=None, help="write the figures (and the machine) as JSON here")
     parser.add_argument("--plot", default="bench_scaling.png",
                         help="PNG for --scaling (default: bench_scaling.png)")
@@ -403,6 +406,33 @@ def bench_ppo(env_id: str, steps: int, predictor: str, seed: int) -> list[dict]:
     return rows
 
 
+def bench_versus(env_id: str, steps: int | None, predictor, other: str, seed: int, repeats: int) -> dict:
+    """Cost per agent-step of the multi-agent IALS with two AIP sets (``predictor`` and the file
+    ``other``), interleaved with the GS in one run: the ParallelEnv users call and DIALS's
+    batched core (16 copies). Prints and returns the medians and the ratios."""
+    domain = get_domain(env_id)
+    agents = domain.agents()
+    steps = int(steps or 10 * domain.episode_length)
+    sets = {"base": dict(zip(agents, resolve_predictor_set(predictor, env_id, agents, seed=seed))),
+            "versus": dict(zip(agents, resolve_predictor_set(other, env_id, agents, seed=seed)))}
+    times = {k: [] for k in ("gs", "env_base", "env_versus", "core_base", "core_versus")}
+    for r in range(repeats):
+        times["gs"].append(_gs_seconds(env_id, agents, steps, seed + r) / len(agents))
+        for name, aips in sets.items():
+            times[f"env_{name}"].append(_parallel_env_seconds(env_id, steps, seed + r, aips))
+            times[f"core_{name}"].append(_multi_agent_seconds(env_id, max(1, steps // 10), seed + r, aips, 16))
+    row = {"domain": env_id, "predictor": str(predictor), "versus": other, "repeats": repeats,
+           **{k: summary(1e6 * np.asarray(v)) for k, v in times.items()}}
+    print(f"\n[{env_id}] us per agent-step, median [min, max] of {repeats}: base = {predictor}, versus = {other}")
+    for k in times:
+        print(f"  {k:<12}{_fmt(row[k], ',.2f')}")
+    gs = row["gs"]["median"]
+    print(f"  ParallelEnv / GS: base {row['env_base']['median'] / gs:.2f}, versus {row['env_versus']['median'] / gs:.2f}; "
+          f"versus / base: ParallelEnv {row['env_versus']['median'] / row['env_base']['median']:.2f}, "
+          f"DIALS core {row['core_versus']['median'] / row['core_base']['median']:.2f}", flush=True)
+    return row
+
+
 def run(args) -> int:
 
     if args.steps is not None and args.steps < 1:
@@ -425,6 +455,11 @@ def run(args) -> int:
             print(f"{r['domain']:<16}{r['simulator']:<12}{r['steps_per_s']:>12,.0f}{r['time_per_step_vs_gs']:>17.2f}")
         print("'none' is PPO alone (a simulator that costs nothing): no IALS can train in less than that "
               "share of the GS's wall-clock.")
+    elif args.versus:
+        if not os.path.isfile(args.versus):
+            raise CommandError(f"--versus {args.versus!r}: no such AIP set file")
+        rows = [bench_versus(env_id, args.steps, args.predictor, args.versus, args.seed, args.repeats)
+                for env_id in env_ids]
     elif args.scaling:
         rows = [r for env_id in env_ids for r in bench_scaling(env_id, args.steps, args.seed)]
         print(f"\n{'domain':<16}{'size':>9}{'agents':>8}{'GS steps/s':>12}"
