@@ -119,8 +119,9 @@ def run(plan: RunPlan, learner: MultiAgentLearner, description: str, domain) -> 
         else:
             learner.load(None, None)
             clock = Clock(offset=learner.charged_seconds)
-        learner.start(steps)
         try:
+            learner.start(steps)  # inside: a start that fails half-way still closes what it started
+
             def policy_net():
                 return joint_policy(plan.agents, learner.actor_layers(), obs_size, domain.n_actions, plan.frame_stack,
                                     dict(meta, training=training, learning_curve=curve))
