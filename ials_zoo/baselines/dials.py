@@ -105,7 +105,8 @@ class Args(MultiPPOSettings):
     collect_steps: int | None = arg(None, lambda: "GS steps per data collection (default: the domain's: "
                                     f"{_per_domain(lambda d: f'{d.dials.collect_steps:,}')})")
     aip_epochs: int | None = arg(None, "epochs per AIP (re)training (default: the domain's)")
-    aip_lr: float | None = arg(None, "learning rate of the AIP (re)training (default: the domain's)")
+    aip_lr: float | None = arg(None, "learning rate of the AIP (re)training (default: the domain's for the kind "
+                               "of AIP, memoryless or autoregressive)")
     aip_autoregressive: bool | None = arg(None, lambda: "AIPs that also read the influence they sampled at the "
                                           "previous step, P(u_t | d_<=t, u_<t) (default: the domain's: " + _per_domain(
                                               lambda d: "yes" if d.dials.aip_autoregressive else "no") + ")")
@@ -228,7 +229,8 @@ def refresh_aips(env_id, agents, options, net, seed, steps, domain, epochs, old,
     warm = {a: p for a, p in old.items() if isinstance(p, ARCHS[d.aip_arch]) and p.hidden == d.aip_hidden
             and p.autoregressive == autoregressive and p.metadata.get("variant") == "trained"}
     t0 = time.perf_counter()
-    preds, report = train_predictors(data, d.aip_arch, hidden=d.aip_hidden, lr=lr or d.aip_lr, epochs=epochs,
+    preds, report = train_predictors(data, d.aip_arch, hidden=d.aip_hidden, lr=lr or d.lr_for(autoregressive),
+                                     epochs=epochs,
                                      batch_size=d.aip_batch, seed=seed, init=warm or None, progress=progress,
                                      autoregressive=autoregressive)
     train_seconds = time.perf_counter() - t0
@@ -359,7 +361,8 @@ def main(args: Args | None = None) -> dict:
                                         collect_steps=int(args.collect_steps or domain.dials.collect_steps),
                                         aip_epochs=int(args.aip_epochs or domain.dials.aip_epochs),
                                         aip_autoregressive=autoregressive_of(args, domain),
-                                        aip_lr=float(args.aip_lr or domain.dials.aip_lr), ppo=ppo,
+                                        aip_lr=float(args.aip_lr or domain.dials.lr_for(autoregressive_of(args, domain))),
+                                        ppo=ppo,
                                         learner=args.learner)}
     plan = RunPlan("dials", args.env_id, agents, options, args.seed, total, per_update, eval_every, args.eval_episodes,
                    args.final_eval_episodes, frame_stack, out, settings_of(args), training, args.resume,

@@ -72,6 +72,8 @@ class DIALSSettings:
             the domain's ``frame_stack``); chosen from the PPO ablation.
         aip_autoregressive: DIALS's AIPs also read their previous influence ``u_{t-1}``
             (:mod:`ials_zoo.influence.base`) by default.
+        aip_autoregressive_lr: the learning rate of autoregressive AIPs (at ``aip_lr`` for
+            ``aip_epochs`` the dependence on ``u_{t-1}`` is barely learned from one collection).
     """
 
     aip_arch: str = "mlp"
@@ -84,6 +86,11 @@ class DIALSSettings:
     refresh: int = 0
     frame_stack: int | None = None
     aip_autoregressive: bool = False
+    aip_autoregressive_lr: float = 1e-2
+
+    def lr_for(self, autoregressive: bool) -> float:
+        """The AIP learning rate of a memoryless or an autoregressive AIP."""
+        return self.aip_autoregressive_lr if autoregressive else self.aip_lr
 
 
 @dataclass(frozen=True)

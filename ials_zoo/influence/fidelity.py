@@ -202,7 +202,8 @@ def on_policy_aips(env_id: str, agents, policy, steps: int, seed: int, autoregre
     else:
         actor = _PolicyActor(policy, agents, seed)
     data = collect_all(env_id, agents, steps=steps, policy=actor, seed=seed, gs_options=options, progress=False)
-    preds, _ = train_predictors(data, d.aip_arch, hidden=d.aip_hidden, lr=lr or d.aip_lr, epochs=epochs or d.aip_epochs,
+    preds, _ = train_predictors(data, d.aip_arch, hidden=d.aip_hidden, lr=lr or d.lr_for(autoregressive),
+                                epochs=epochs or d.aip_epochs,
                                 batch_size=d.aip_batch, seed=seed, autoregressive=autoregressive)
     return preds
 

@@ -36,11 +36,10 @@ EXPERIMENTS = ("training", "memory", "dset", "dials")
 # The multi-agent study (issue: every agent learning at once): GS-IPPO and the DIALS variants,
 # each ``(algorithm, extra arguments)`` of :mod:`ials_zoo.baselines.ippo` / ``.dials``.
 # "dials" retrains the AIPs every half budget (rounds at 0 and budget/2); see plan_dials.
-# "dials-autoregressive" is "dials" with AIPs that read their own last draw (P(u_t | d_<=t, u_<t),
-# trained at AUTOREGRESSIVE_AIP_LR: at the domains' 1e-3 and 10 epochs they barely learn that
-# dependence from one collection; see ials_zoo.influence.base).
+# "dials" and "dials-once" use memoryless AIPs (the paper's), "dials-autoregressive" AIPs that
+# read their own last draw (P(u_t | d_<=t, u_<t), at the domain's DIALSSettings.lr_for): each
+# variant says which, whatever the domain's default (DIALSSettings.aip_autoregressive).
 DIALS_VARIANTS = ("ippo", "dials", "dials-once", "untrained-dials", "dials-autoregressive")
-AUTOREGRESSIVE_AIP_LR = 1e-2
 JOINT_REFERENCES = ("scripted", "random")
 RUN_SUBDIR = "run"  # a PPO job's run folder inside its job folder (which holds job.json, log.txt)
 DEFAULT_SIMULATORS = ("gs", "ials", "untrained-ials", "fixed:0.1")
@@ -356,8 +355,8 @@ def _multiagent_params(cfg: Config, env_id: str, variant: str, seed: int, out: P
                              "dials-autoregressive": str(max(1, budget // 2))}[variant]
         if variant == "untrained-dials":
             params["aip"] = "untrained"
-        if variant == "dials-autoregressive":
-            params.update(aip_autoregressive=True, aip_lr=AUTOREGRESSIVE_AIP_LR)
+        if variant in ("dials", "dials-once", "dials-autoregressive"):
+            params["aip_autoregressive"] = variant == "dials-autoregressive"
     return params
 
 
