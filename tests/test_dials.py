@@ -197,7 +197,7 @@ def test_dials_gives_the_same_result_with_any_number_of_workers(tmp_path):
     # it trained: the policies moved away from their initial weights, the AIPs were trained once
     assert result["track"] == "multi-agent" and result["trained_agents"] == AGENTS
     training = result["training"]
-    assert training["simulator"] == "dials-once" and training["aip"]["refreshes"] == 1
+    assert training["simulator"] == "dials-once-autoregressive" and training["aip"]["refreshes"] == 1
     assert training["env_steps"] == 256 and training["workers"] == 2 and training["aip_seconds"] > 0
     assert json.loads((folder / "status.json").read_text())["state"] == "finished"
     assert {"aips.pt", "checkpoint.pt", "curve.json", "progress.csv"} <= {p.name for p in folder.iterdir()}
@@ -219,7 +219,7 @@ def test_dials_on_ray_matches_the_process_backend(tmp_path):
 def test_periodic_refresh_retrains_every_n_steps_and_sb3_learner_runs(tmp_path):
     result, folder = _dials(tmp_path, "refresh", refresh="128", learner="sb3", workers=0)
     aip = result["training"]["aip"]
-    assert result["training"]["simulator"] == "dials"
+    assert result["training"]["simulator"] == "dials-autoregressive"  # the warehouse's default AIPs
     assert aip["refreshes"] == 2 and aip["last"]["at_steps_per_agent"] == 128 and aip["last"]["warm_start"]
     from ials_zoo.influence.files import load_predictor_set
 
