@@ -201,7 +201,8 @@ def dials_section(out, leaderboard) -> list[str]:
          "Score: the mean over agents of each agent's GS episodic return, every agent acting with its own "
          "policy (the multi-agent track), final evaluation on the protocol's seeds; mean [95% CI] over "
          "training seeds. Wall-clock: training plus AIP data collection and training (GS evaluations "
-         "excluded); every multi-agent run had the machine to itself. `dials` retrains every AIP every half "
+         "excluded), as measured: with `--jobs` above 1 or other work on the machine, runs shared its cores, "
+         "so compare wall-clocks with care. `dials` retrains every AIP every half "
          "budget, `dials-once` trains them once at the start, `untrained-dials` keeps randomly initialised "
          "AIPs.", ""]
     for env_id, summ in summarize_dials(runs).items():
