@@ -357,6 +357,8 @@ def _multiagent_params(cfg: Config, env_id: str, variant: str, seed: int, out: P
             params["aip"] = "untrained"
         if variant in ("dials", "dials-once", "dials-autoregressive"):
             params["aip_autoregressive"] = variant == "dials-autoregressive"
+        if variant == "dials-autoregressive":  # the job records the learning rate its AIPs train at
+            params["aip_lr"] = get_domain(env_id).dials.lr_for(True)
     return params
 
 
