@@ -208,10 +208,10 @@ def remove_stale_temporaries(folder, max_age_seconds: float = 3600.0) -> int:
     return removed
 
 
-def format_seconds(seconds: float) -> str:
-    """``42 s``, ``3.5 min`` or ``2.1 h``."""
+def format_seconds(seconds: float, hour_decimals: int = 1) -> str:
+    """``42 s``, ``3.5 min`` or ``2.1 h`` (hours with ``hour_decimals`` decimals)."""
     if seconds < 120:
         return f"{seconds:.0f} s"
     if seconds < 7200:
         return f"{seconds / 60:.1f} min"
-    return f"{seconds / 3600:.1f} h"
+    return f"{seconds / 3600:.{hour_decimals}f} h"

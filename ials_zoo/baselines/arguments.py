@@ -99,6 +99,17 @@ class PPOSettings:
     max_grad_norm: float = arg(0.5, "gradient clipping")
 
 
+@dataclasses.dataclass
+class AblatedPPOSettings(PPOSettings):
+    """:class:`PPOSettings` with the choices of the PPO ablation (``docs/ablation.md``) that
+    every learner of ours shares: lr 1e-3 held constant, 10 epochs per update, gamma 0.95."""
+
+    n_epochs: int = arg(10, "epochs per update")
+    learning_rate: float = arg(1e-3, "learning rate")
+    anneal_lr: bool = arg(False, "decay the learning rate linearly to 0")
+    gamma: float = arg(0.95, "discount")
+
+
 def check_ppo_settings(args) -> None:
     """Clear errors for the :class:`PPOSettings` fields of ``args``."""
     import math

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ials_zoo.baselines.arguments import PPOSettings, arg, check_ppo_settings
+from ials_zoo.baselines.arguments import AblatedPPOSettings, arg, check_ppo_settings
 from ials_zoo.baselines.ppo_single import _hidden
 from ials_zoo.evaluation import evaluate_joint, load_model
 from ials_zoo.influence.files import save_predictor_set
@@ -22,7 +22,7 @@ from ials_zoo.utils import atomic_path, atomic_write_text
 
 
 @dataclass
-class MultiPPOSettings(PPOSettings):
+class MultiPPOSettings(AblatedPPOSettings):
     """PPO settings of every agent, chosen by the ablation of
     :mod:`ials_zoo.reproduce.ablation` (IPPO on the GS, 3 seeds per cell, both domains; table
     in ``docs/ablation.md``), where SPEC §3/§6's settings (lr 2.5e-4 decayed linearly, 3
@@ -35,10 +35,6 @@ class MultiPPOSettings(PPOSettings):
     Policies are MLPs of ``hidden`` units (64-64: with 25-36 learners PPO's own computation
     dominates a 2-core machine; SPEC §6 used 256-128)."""
 
-    learning_rate: float = arg(1e-3, "learning rate")
-    anneal_lr: bool = arg(False, "decay the learning rate linearly to 0")
-    n_epochs: int = arg(10, "epochs per update")
-    gamma: float = arg(0.95, "discount")
     samples_per_update: int = arg(512, "samples of each agent per PPO update")
     batch_size: int = arg(128, "minibatch size (samples of one agent)")
     hidden: str = arg("64,64", "hidden layers of every actor and critic, comma-separated")

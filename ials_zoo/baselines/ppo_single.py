@@ -55,7 +55,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ials_zoo.baselines.aip_record import predictor_for, predictor_record, simulator_label
-from ials_zoo.baselines.arguments import PPOSettings, arg, check_ppo_settings, parse_env_options, run_cli
+from ials_zoo.baselines.arguments import AblatedPPOSettings, arg, check_ppo_settings, parse_env_options, run_cli
 from ials_zoo.baselines.runs import RunFolder, training_logger
 from ials_zoo.baselines.sb3_run import Evaluator, TrainingRun, as_float_box, estimate_seconds, make_ppo, scale_rewards
 from ials_zoo.core.domains import domain_ids, get_domain
@@ -67,16 +67,12 @@ from ials_zoo.utils import check_seed, format_seconds
 
 
 @dataclass
-class Args(PPOSettings):
+class Args(AblatedPPOSettings):
     """Arguments of :func:`main` (``python -m baselines.ppo_single --help``). The PPO settings
     are the multi-agent ablation's (:class:`~ials_zoo.baselines.multiagent.MultiPPOSettings`),
     which beat SPEC §3's here too (:data:`PREVIOUS_SETTINGS`; one seed each, tls_12 on the GS
     166 against 112, on the IALS 156 against 110; robot_20 8.7 against 7.7 and 9.8 against 7.4)."""
 
-    n_epochs: int = arg(10, "epochs per update")
-    learning_rate: float = arg(1e-3, "learning rate")
-    anneal_lr: bool = arg(False, "decay the learning rate linearly to 0")
-    gamma: float = arg(0.95, "discount")
     env_id: str | None = arg(None, "domain id (required)", aliases=("--env",))
     agent: str | None = arg(None, "learning agent (default: the domain's first default agent)")
     simulator: str = arg("gs", "gs | ials | untrained-ials | uniform | fixed:P | marginal | PATH.pt")

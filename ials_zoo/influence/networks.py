@@ -72,7 +72,8 @@ class MLPPredictor(InfluencePredictor):
             u = self._sample_logits1(logits, rng)
         else:
             u = self._sample_logits(logits, rng)
-        self.observe(u)
+        if self.autoregressive:
+            self.observe(u)
         return u
 
     def _arrays(self):
@@ -131,11 +132,13 @@ class GRUPredictor(InfluencePredictor):
 
     def sample(self, dsets, rng):
         if self.n == 1:
-            logits = self._logits1(self._input(self._check_dsets(dsets)))
+            d = self._check_dsets(dsets)
+            logits = self._logits1(self._input(d) if self.autoregressive else d)
             u = self._sample_logits1(logits, rng) if self._same_k else self._sample_logits(logits, rng)
         else:
             u = self._sample_logits(self._logits(dsets), rng)
-        self.observe(u)
+        if self.autoregressive:
+            self.observe(u)
         return u
 
     # The d-set projection d @ w_ih + b_ih of at most this many distinct d-sets is memoised

@@ -9,7 +9,7 @@ from pathlib import Path
 from ials_zoo.leaderboard.build import MULTI, OFFICIAL, SINGLE
 from ials_zoo.leaderboard.store import ARCHIVE_SUBDIR, board_path, load_entries
 from ials_zoo.stats import iqm_interval
-from ials_zoo.utils import atomic_path, atomic_write_text, read_regular_file
+from ials_zoo.utils import atomic_path, atomic_write_text, format_seconds, read_regular_file
 
 WRITEUP = "writeup.md"
 MAX_WRITEUP_BYTES = 1 << 20
@@ -27,11 +27,7 @@ def _total_seconds(data: dict) -> float | None:
 
 
 def format_duration(seconds: float) -> str:
-    if seconds < 120:
-        return f"{seconds:.0f} s"
-    if seconds < 7200:
-        return f"{seconds / 60:.1f} min"
-    return f"{seconds / 3600:.2f} h"
+    return format_seconds(seconds, hour_decimals=2)
 
 
 def _iqm(d: dict) -> str:
