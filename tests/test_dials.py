@@ -364,7 +364,7 @@ def test_a_stopped_ray_actor_is_named_within_seconds():
 
 def test_killing_a_dials_run_leaves_no_worker_and_resume_finishes_it(tmp_path):
     """kill -9 of the training process: its workers die with it; --resume continues from the
-    last checkpoint to the full budget."""
+    last checkpoint to the full budget and ends where the uninterrupted run ends."""
     out = tmp_path / "run"
     cmd = [sys.executable, "-m", "baselines.dials", "--env", ENV, "--agents", ",".join(AGENTS), "--env-options",
            json.dumps(OPTIONS), "--total-timesteps", "4096", "--eval-every", "256", "--n-envs", "2",
@@ -393,6 +393,13 @@ def test_killing_a_dials_run_leaves_no_worker_and_resume_finishes_it(tmp_path):
     result = json.loads((out / "result.json").read_text())
     assert result["training"]["env_steps"] == 4096
     assert json.loads((out / "status.json").read_text())["state"] == "finished"
+    # and it is the run that was never killed, bit for bit
+    whole = tmp_path / "whole"
+    assert subprocess.run([c if c != str(out) else str(whole) for c in cmd], cwd=root, capture_output=True,
+                          timeout=300).returncode == 0
+    for key, value in _weights(whole).items():
+        np.testing.assert_array_equal(_weights(out)[key], value, err_msg=key)
+    assert json.loads((whole / "result.json").read_text())["score"] == result["score"]
 
 
 def test_kill_9_of_a_ray_run_leaves_no_ray_process():

@@ -267,6 +267,9 @@ class ShardsLearner:
             return
         self.aips = load_predictor_set(self.out / "aips.pt", env_id=args.env_id)
         self.state = state
+        if args.learner == "sb3":
+            print("  resuming with the SB3 learner: it continues from its last checkpoint (not bitwise the run that "
+                  "was never stopped; the batched learner is)", flush=True)
         self.charged_seconds, self.refreshes = float(info["aip_seconds"]), int(info["refreshes"])
         self.aip_split = info.get("aip_split", self.aip_split)
         self.training["aip"] = info.get("aip")

@@ -97,16 +97,18 @@ class GSCopiesLearner:
         self.env_id, self.agents, self.options, self.copies, self.processes = env_id, agents, options, copies, processes
         self.frame_stack, self.seed, self.per_update = frame_stack, seed, ppo["n_steps"] * ppo["n_envs"]
         self.learner = BatchedPPO(agents, obs_size * frame_stack, n_actions, PPOConfig(**ppo), seed, updates)
-        self.env = self.trainer = None
+        self.env = self.trainer = self.episode_state = None
 
     def load(self, state, info):
         if state is not None:
             self.learner.load_state_dict(state["learner"])
+            self.episode_state = state.get("trainer")
 
     def start(self, steps):
-        self.env = GSVecEnv(self.env_id, self.agents, self.copies, self.processes,
-                            seed=self.seed + 1000 * (steps // self.per_update), **self.options)
-        self.trainer = RolloutTrainer(self.learner, self.env, self.frame_stack)
+        self.env = GSVecEnv(self.env_id, self.agents, self.copies, self.processes, seed=self.seed, **self.options)
+        self.trainer = RolloutTrainer(self.learner, self.env, self.frame_stack, seed=self.seed)
+        if self.episode_state is not None:  # the checkpoint's episodes, replayed to where they were
+            self.trainer.restore(self.episode_state)
 
     def actor_layers(self):
         return self.learner.actor_layers()
@@ -129,7 +131,7 @@ class GSCopiesLearner:
         return merge_shard_stats([dict(mean, episode_returns=returns)], [len(self.agents)])
 
     def checkpoint(self, out):
-        return {"learner": self.learner.state_dict()}, {}
+        return {"learner": self.learner.state_dict(), "trainer": self.trainer.state()}, {}
 
     def close(self):
         if self.env is not None:

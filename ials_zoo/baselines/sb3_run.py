@@ -185,7 +185,10 @@ class TrainingRun:
         self._last_checkpoint = time.monotonic()
 
     def _resume(self):
-
+        # SB3 keeps its environments' episodes and torch's global generator out of our reach:
+        # the run continues from its checkpoint but is not bitwise the uninterrupted one
+        print("  resuming an SB3 run: it continues from its last checkpoint (not bitwise the run that was never "
+              "stopped; the batched learners of ippo and dials are)", flush=True)
         state, info = load_training_state(self.out)
         self.model.policy.load_state_dict(state["policy"])
         self.model.policy.optimizer.load_state_dict(state["optimizer"])

@@ -61,4 +61,13 @@ class CopyStreams:
         return self._gens[row]
 
 
-__all__ = ["BLOCK", "CopyStreams", "agent_key", "row_seed_sequences"]
+def derived_seed(seed: int, use: str, *counters: int) -> int:
+    """A 32-bit seed for one ``use`` of a run's ``seed`` (``"episode"``, ``"update"``) at
+    ``counters`` (the episode's index, the update's): counter-based, so a resumed run
+    recomputes it from the counters it saved instead of saving a generator's state. In
+    ``[0, 2**31 - 2]``, which SUMO accepts too."""
+    state = np.random.SeedSequence([int(seed), agent_key(use), *(int(k) for k in counters)]).generate_state(1)[0]
+    return int(state) % (2**31 - 1)
+
+
+__all__ = ["BLOCK", "CopyStreams", "agent_key", "derived_seed", "row_seed_sequences"]

@@ -142,6 +142,7 @@ class AgentShard:
         mine = {a: p for a, p in predictors.items() if a in self.agents}
         if self.spec.learner == "batched":
             self.env.set_predictors(mine)
+            self.trainer.new_episodes()  # an episode runs on one AIP throughout (and replays on it)
         else:
             import copy
 
@@ -185,7 +186,7 @@ class AgentShard:
     def state(self) -> dict:
         """The learners' state (tensors and plain containers) and the step count."""
         if self.spec.learner == "batched":
-            return {"steps": self.steps, "learner": self.learner.state_dict()}
+            return {"steps": self.steps, "learner": self.learner.state_dict(), "trainer": self.trainer.state()}
         return {"steps": self.steps, "models": {a: {"policy": m.policy.state_dict(),
                                                     "optimizer": m.policy.optimizer.state_dict(),
                                                     "num_timesteps": int(m.num_timesteps)}
@@ -195,6 +196,8 @@ class AgentShard:
         self.steps = int(state["steps"])
         if self.spec.learner == "batched":
             self.learner.load_state_dict(state["learner"])
+            if "trainer" in state:  # the checkpoint's episodes, replayed to where they were
+                self.trainer.restore(state["trainer"])
             return
         for a, s in state["models"].items():
             m = self.models[a]

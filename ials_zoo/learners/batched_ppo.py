@@ -13,6 +13,11 @@ layer instead of one small model call per agent. Nothing is shared:
   (:class:`ials_zoo.core.streams.CopyStreams`); initial weights come from a generator seeded
   with the run seed and the agent's name.
 
+Random numbers are counter-based: the action streams and the minibatch permutations of
+update ``k`` are seeded from ``(seed, k)`` (:func:`~ials_zoo.core.streams.derived_seed`),
+so :meth:`BatchedPPO.state_dict` (weights, optimiser, update count, reward scale) is all
+a resumed run needs to draw what the uninterrupted run draws.
+
 So an agent's training does not depend on which other agents share the batch (or the process):
 DIALS gives the same run with any number of workers. Bitwise, too: every matrix dimension is
 zero-padded to a multiple of 8 (:func:`_padded`), with which torch's CPU batched products give
@@ -35,7 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ials_zoo.core.streams import CopyStreams, agent_key
+from ials_zoo.core.streams import CopyStreams, agent_key, derived_seed
 
 ACTION_STREAM_SALT = 2
 
@@ -120,12 +125,16 @@ class BatchedPPO:
         self.n_layers = len(cfg.hidden) + 1
         self.opt = torch.optim.Adam(self.params.values(), lr=cfg.learning_rate, eps=1e-5, fused=True)
         self.streams = CopyStreams(self.agents, cfg.n_envs, 1, salt=ACTION_STREAM_SALT)
-        self.streams.seed(self.seed)
-        self._perm_rngs = [self._rng(a, "minibatches") for a in self.agents]
+        self._seed_update()
         self.reward_scale = RewardScale(A, cfg.n_envs, cfg.gamma)
 
-    def _rng(self, agent: str, what: str) -> np.random.Generator:
-        return np.random.default_rng([self.seed, agent_key(agent), agent_key(what)])
+    def _rng(self, agent: str, what: str, *counters: int) -> np.random.Generator:
+        return np.random.default_rng([self.seed, agent_key(agent), agent_key(what), *counters])
+
+    def _seed_update(self) -> None:
+        """The random numbers of update ``self.updates``: its rollout's actions, its minibatches."""
+        self.streams.seed(derived_seed(self.seed, "update", self.updates))
+        self._perm_rngs = [self._rng(a, "minibatches", self.updates) for a in self.agents]
 
     # -- networks
     def _mlp(self, head: str, x):
@@ -222,6 +231,7 @@ class BatchedPPO:
                     stats["approx_kl"] += ((ratio - 1) - (logp - logp_t[rows, idx])).mean().item()
                 count += 1
         self.updates += 1
+        self._seed_update()
         out = {k: v / max(count, 1) for k, v in stats.items()}
         out["learning_rate"] = lr
         return out
@@ -241,6 +251,7 @@ class BatchedPPO:
                 self.params[k].copy_(v)
         self.opt.load_state_dict(state["optimizer"])
         self.updates = int(state["updates"])
+        self._seed_update()
         if "reward_scale" in state:
             self.reward_scale.load_state_dict(state["reward_scale"])
 

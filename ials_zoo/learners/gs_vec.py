@@ -4,14 +4,16 @@ Copies run in this process (``processes=0``) or spread over ``processes`` worker
 (fresh interpreters that die with this one), which step their copies while the others do
 theirs. A domain whose GS holds a process-wide resource (SUMO) puts at most one copy in this
 process and the others in workers of its own lease, which step one after the other; use
-``processes`` to step them at once. Copy ``j`` is first reset with seed ``seed + j``; later
-resets continue each copy's own random stream.
+``processes`` to step them at once. ``reset(seed)`` resets copy ``j`` with
+``derived_seed(seed, "copy", j)``; ``reset()`` with the constructor's ``seed + j`` the first
+time, and later continues each copy's own random stream.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from ials_zoo.core.streams import derived_seed
 from ials_zoo.processes import WorkerError, die_with_parent, recv_from, sigint_ignored_at_birth
 
 
@@ -24,7 +26,9 @@ class _Copies:
         self.envs = [get_domain(env_id).parallel_env(learners=agents, **options) for _ in seeds]
         self.agents, self.seeds = list(agents), list(seeds)
 
-    def reset(self):
+    def reset(self, seeds=None):
+        if seeds is not None:
+            self.seeds = list(seeds)
         obs = []
         for env, seed in zip(self.envs, self.seeds):
             o, _ = env.reset(seed=seed)
@@ -60,7 +64,7 @@ def _worker(conn, env_id, agents, options, seeds):
             break
         try:
             if cmd == "reset":
-                conn.send(("ok", copies.reset()))
+                conn.send(("ok", copies.reset(arg)))
             elif cmd == "step":
                 conn.send(("ok", copies.step(arg)))
             elif cmd == "close":
@@ -118,9 +122,12 @@ class GSVecEnv:
         return out
 
     def reset(self, seed=None):
+        seeds = None if seed is None else [derived_seed(seed, "copy", j) for j in range(self.n_envs)]
         if self._local is not None:
-            return self._local.reset()
-        return np.concatenate(self._gather("reset", [None] * len(self._workers)), axis=1)
+            return self._local.reset(seeds)
+        bounds = np.cumsum([0] + [k for _, _, k in self._workers])
+        shares = [None if seeds is None else seeds[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
+        return np.concatenate(self._gather("reset", shares), axis=1)
 
     def step(self, actions):
         actions = np.asarray(actions)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ials_zoo.core.streams import derived_seed
 from ials_zoo.learners.batched_ppo import BatchedPPO, gae
 
 
@@ -71,18 +72,60 @@ class RolloutTrainer:
     """Trains ``learner`` on ``env``: ``n_steps`` steps of every copy, then one update.
 
     Episode returns (the sum of rewards per agent and copy) are kept for the training log.
-    The env is reset by the trainer (its first reset uses ``seed``)."""
+    The env is reset by the trainer: episode ``e`` starts from ``reset(seed=derived_seed(seed,
+    "episode", e))`` (``seed=None``: unseeded), so an episode is a function of the run seed,
+    its index and the actions taken in it. That makes the trainer's state small
+    (:meth:`state`: the episode's index, its actions so far, the running returns) and a
+    resume exact: :meth:`restore` resets to the same seed and replays the actions."""
 
     def __init__(self, learner: BatchedPPO, env, frame_stack: int = 1, seed: int | None = None):
         if list(env.agents) != list(learner.agents) or env.n_envs != learner.cfg.n_envs:
             raise ValueError("the learner and the env must hold the same agents and copies")
-        self.learner, self.env = learner, env
+        self.learner, self.env, self.seed = learner, env, seed
         self.stack = FrameStack(frame_stack)
-        self.x = self.stack.reset(env.reset(seed))
         A, n = len(env.agents), env.n_envs
         self.running = np.zeros((A, n))
         self.finished: list[np.ndarray] = []  # per finished episode: returns [A] (mean over copies)
         self.steps = 0  # steps per agent and copy
+        self.episode = 0
+        self._start_episode()
+
+    def _start_episode(self) -> None:
+        seed = None if self.seed is None else derived_seed(self.seed, "episode", self.episode)
+        self.x = self.stack.reset(self.env.reset(seed))
+        self.actions: list[np.ndarray] = []  # this episode's, one [A, n] array per step
+        self.running[:] = 0.0
+
+    def new_episodes(self) -> None:
+        """End the running episodes here and start the next ones (after the simulators
+        changed, e.g. new AIPs: an episode then runs on one simulator throughout). The last
+        rollout bootstrapped from this state's value, as at a time limit; the cut episodes'
+        returns are not logged."""
+        self.episode += 1
+        self.learner.reward_scale.returns[:] = 0.0
+        self._start_episode()
+
+    def state(self) -> dict:
+        """What :meth:`restore` needs, as plain containers (a ``weights_only`` checkpoint)."""
+        return {"episode": self.episode, "actions": [a.tolist() for a in self.actions],
+                "running": self.running.tolist(), "steps": self.steps}
+
+    def restore(self, state: dict) -> None:
+        """Continue where :meth:`state` was taken: the same episode, replayed to the same step.
+        Only a seeded trainer can (an unseeded episode cannot be replayed)."""
+        if self.seed is None:
+            raise ValueError("an unseeded RolloutTrainer cannot restore an episode")
+        self.episode, self.steps = int(state["episode"]), int(state["steps"])
+        self._start_episode()
+        for a in state["actions"]:
+            a = np.asarray(a, np.int64).reshape(self.running.shape)
+            obs, _, done = self.env.step(a)
+            if done:
+                raise ValueError("the saved episode ended while it was replayed: not the run that saved it")
+            self.x = self.stack.push(obs)
+            self.actions.append(a)
+        self.running = np.asarray(state["running"], float).reshape(self.running.shape)
+        self.finished = []
 
     def collect_and_update(self) -> dict:
         """One rollout of ``n_steps`` and one PPO update; returns the update's statistics."""
@@ -92,6 +135,7 @@ class RolloutTrainer:
         for _ in range(T):
             a, v, lp = learner.act(self.x)
             obs, r, done = self.env.step(a)
+            self.actions.append(np.asarray(a, np.int64))
             r = np.asarray(r, np.float64)
             self.running += r
             if cfg.normalize_reward:
@@ -105,8 +149,8 @@ class RolloutTrainer:
                 terminal = self.stack.push(obs)
                 r = r + cfg.gamma * learner.values(terminal)
                 self.finished.append(self.running.mean(axis=1))
-                self.running[:] = 0.0
-                self.x = self.stack.reset(self.env.reset())
+                self.episode += 1
+                self._start_episode()
             else:
                 self.x = self.stack.push(obs)
             rews.append(r)

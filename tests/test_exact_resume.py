@@ -1,0 +1,157 @@
+"""A run stopped after a checkpoint and resumed ends bitwise equal to the run that was never
+stopped: the same weights, learning curve and score, for IPPO and for DIALS on every backend.
+
+The stop is a crash right after a checkpoint was written, in the middle of the GS and IALS
+episodes (the budgets are not multiples of an episode); the kill -9 variant is in
+``test_dials.py``. Runs use the 2x2 warehouse, tiny networks and budgets."""
+
+import json
+
+import numpy as np
+import pytest
+
+ENV = "warehouse_v0"
+OPTIONS = {"robots": [2, 2]}
+AGENTS = ["robot_0", "robot_1", "robot_2", "robot_3"]
+COMMON = dict(env_id=ENV, agents=",".join(AGENTS), env_options=json.dumps(OPTIONS), n_envs=2,
+              samples_per_update=128, batch_size=64, n_epochs=2, hidden="16", eval_episodes=1,
+              final_eval_episodes=2, progress=False)
+# DIALS: AIPs retrained at 0 and 384 steps per agent, checkpoints every 256: the stop at 256
+# replays an IALS episode 28 steps in and then meets a refresh; 1024 = 10.24 GS episodes.
+DIALS = dict(COMMON, total_timesteps=1024, eval_every=256, refresh="384", collect_steps=200, aip_epochs=1)
+IPPO = dict(COMMON, total_timesteps=768, eval_every=256)
+
+
+class Crash(RuntimeError):
+    pass
+
+
+def _crash_after_checkpoints(monkeypatch, n: int):
+    """The next run crashes right after its ``n``-th checkpoint (a curve point)."""
+    from ials_zoo.baselines import driver
+
+    real, seen = driver._curve_point, []
+
+    def point(*args, **kwargs):
+        out = real(*args, **kwargs)
+        seen.append(out)
+        if len(seen) == n:
+            raise Crash(f"stopped after checkpoint {n}")
+        return out
+
+    monkeypatch.setattr(driver, "_curve_point", point)
+
+
+def _weights(folder):
+    from safetensors.numpy import load_file
+
+    return load_file(folder / "policy.safetensors")
+
+
+def _assert_same_run(a, b):
+    (ra, fa), (rb, fb) = a, b
+    wa, wb = _weights(fa), _weights(fb)
+    assert wa.keys() == wb.keys()
+    for k in wa:
+        np.testing.assert_array_equal(wa[k], wb[k], err_msg=k)
+    assert [p["mean"] for p in ra["learning_curves"][0]["points"]] == \
+        [p["mean"] for p in rb["learning_curves"][0]["points"]]
+    for key in ("returns", "per_agent_returns"):  # (the policy files differ in their wall-clocks)
+        assert [s[key] for s in ra["scores"]] == [s[key] for s in rb["scores"]]
+    assert ra["score"] == rb["score"]
+
+
+def _stopped_and_resumed(monkeypatch, module, out, kwargs, checkpoints=2):
+    _crash_after_checkpoints(monkeypatch, checkpoints)
+    with pytest.raises(Crash):
+        module.main(module.Args(**kwargs, out_dir=str(out)))
+    monkeypatch.undo()
+    assert json.loads((out / "status.json").read_text())["state"] == "failed"
+    assert not (out / "result.json").exists()
+    return module.main(module.Args(**kwargs, out_dir=str(out), resume=True)), out
+
+
+@pytest.mark.parametrize("workers,backend", [(0, "process"), (2, "process"), (2, "ray")])
+def test_a_resumed_dials_run_ends_bitwise_as_the_uninterrupted_one(tmp_path, monkeypatch, workers, backend):
+    if backend == "ray":
+        pytest.importorskip("ray")
+    from ials_zoo.baselines import dials
+
+    kwargs = dict(DIALS, workers=workers, backend=backend)
+    whole = dials.main(dials.Args(**kwargs, out_dir=str(tmp_path / "whole"))), tmp_path / "whole"
+    resumed = _stopped_and_resumed(monkeypatch, dials, tmp_path / "resumed", kwargs)
+    _assert_same_run(whole, resumed)
+    assert resumed[0]["training"]["aip"]["refreshes"] == whole[0]["training"]["aip"]["refreshes"] == 3
+
+
+def test_a_resumed_ippo_run_ends_bitwise_as_the_uninterrupted_one(tmp_path, monkeypatch):
+    from ials_zoo.baselines import ippo
+
+    whole = ippo.main(ippo.Args(**IPPO, out_dir=str(tmp_path / "whole"))), tmp_path / "whole"
+    resumed = _stopped_and_resumed(monkeypatch, ippo, tmp_path / "resumed", IPPO)
+    _assert_same_run(whole, resumed)
+
+
+@pytest.mark.parametrize("module_name", ["ippo", "dials"])
+def test_a_resumed_traffic_run_ends_bitwise_as_the_uninterrupted_one(tmp_path, monkeypatch, module_name):
+    """SUMO in the GS copies (IPPO) and in the local simulators (DIALS), two lights."""
+    import importlib
+
+    module = importlib.import_module(f"ials_zoo.baselines.{module_name}")
+    kwargs = dict(env_id="traffic_grid_v0", agents="tls_12,tls_13", n_envs=2, samples_per_update=128, batch_size=64,
+                  n_epochs=2, hidden="16", eval_episodes=1, final_eval_episodes=1, progress=False,
+                  total_timesteps=1024, eval_every=256)
+    if module_name == "dials":
+        kwargs.update(refresh="384", collect_steps=300, aip_epochs=1, workers=2)
+    whole = module.main(module.Args(**kwargs, out_dir=str(tmp_path / "whole"))), tmp_path / "whole"
+    _assert_same_run(whole, _stopped_and_resumed(monkeypatch, module, tmp_path / "resumed", kwargs))
+
+
+def test_a_resume_that_started_from_the_initial_weights_would_be_caught(tmp_path, monkeypatch):
+    """The check above is not blind: a resume that loads no weights (the mutant of
+    ``BatchedPPO.load_state_dict`` that copies nothing) ends elsewhere."""
+    from ials_zoo.baselines import ippo
+    from ials_zoo.learners.batched_ppo import BatchedPPO
+
+    whole = ippo.main(ippo.Args(**IPPO, out_dir=str(tmp_path / "whole"))), tmp_path / "whole"
+    real = BatchedPPO.load_state_dict
+
+    def forgetful(self, state):
+        real(self, dict(state, params={k: v.detach().clone() for k, v in self.params.items()}))
+
+    _crash_after_checkpoints(monkeypatch, 2)
+    with pytest.raises(Crash):
+        ippo.main(ippo.Args(**IPPO, out_dir=str(tmp_path / "resumed")))
+    monkeypatch.undo()
+    monkeypatch.setattr(BatchedPPO, "load_state_dict", forgetful)
+    resumed = ippo.main(ippo.Args(**IPPO, out_dir=str(tmp_path / "resumed"), resume=True)), tmp_path / "resumed"
+    with pytest.raises(AssertionError):
+        _assert_same_run(whole, resumed)
+
+
+def test_the_trainer_replays_a_saved_episode_to_the_same_state():
+    """``RolloutTrainer.state``/``restore`` on the GS copies: the restored trainer's stacked
+    observations and its next rollout are those of the trainer that saved."""
+    from ials_zoo.learners.batched_ppo import BatchedPPO, PPOConfig
+    from ials_zoo.learners.gs_vec import GSVecEnv
+    from ials_zoo.learners.rollout import RolloutTrainer
+
+    cfg = PPOConfig(n_steps=30, n_envs=2, hidden=(16,), batch_size=60, n_epochs=1)
+
+    def trainer():
+        learner = BatchedPPO(AGENTS, 37 * 2, 4, cfg, seed=3)
+        return RolloutTrainer(learner, GSVecEnv(ENV, AGENTS, 2, seed=0, **OPTIONS), frame_stack=2, seed=3), learner
+
+    first, learner = trainer()
+    first.collect_and_update()  # 30 steps into a 100-step episode
+    saved, weights = first.state(), learner.state_dict()
+    assert saved["episode"] == 0 and len(saved["actions"]) == 30
+    second, other = trainer()
+    other.load_state_dict(weights)
+    second.restore(saved)
+    np.testing.assert_array_equal(second.x, first.x)
+    a, b = first.collect_and_update(), second.collect_and_update()
+    assert a == b
+    np.testing.assert_array_equal(second.x, first.x)
+    with pytest.raises(ValueError, match="unseeded"):
+        RolloutTrainer(BatchedPPO(AGENTS, 37, 4, cfg), GSVecEnv(ENV, AGENTS, 2, **OPTIONS)).restore(saved)
