@@ -1,7 +1,7 @@
 """Child processes that never outlive their parent, and pools that never hang on shutdown.
 
-Every process the zoo starts (SUMO workers, evaluation and collection pools, the SB3
-``SubprocVecEnv`` workers of a traffic run, the jobs of a study, DIALS learners) calls
+Every process the zoo starts (SUMO workers, evaluation and collection pools, the env workers
+of a single-agent traffic run, the jobs of a study, DIALS learners) calls
 :func:`die_with_parent` first thing: on Linux the kernel then sends it ``SIGKILL`` when the
 parent dies, however the parent dies (Ctrl-C, ``SIGTERM``, ``kill -9``). Elsewhere a child
 notices its parent's death at its next pipe read (EOF).
@@ -11,6 +11,13 @@ live libsumo simulation is inherited) whose workers die with this process and ig
 ``SIGINT`` (a Ctrl-C is the parent's to handle: it stops the pool, the workers do not each
 raise ``KeyboardInterrupt`` half-way through a task). :func:`shutdown_pool` stops one without
 waiting on a worker that no longer answers.
+
+:class:`Worker` is the one protocol for a long-lived worker of ours: an object built in a
+fresh interpreter and called by method name, ``call(method, *args)``, with a heartbeat, a
+death and stop signal and a timeout: DIALS's shards (:mod:`ials_zoo.dials.backends`), IPPO's
+GS copies (:mod:`ials_zoo.learners.gs_vec`), SUMO simulations (:mod:`ials_zoo.traffic.lease`)
+and the env workers of SB3's vector envs (:mod:`ials_zoo.single_agent`). Pools of short tasks
+(collection, evaluation) stay ``concurrent.futures`` pools (:func:`spawn_pool`).
 """
 
 from __future__ import annotations
@@ -20,8 +27,12 @@ import contextlib
 import ctypes
 import multiprocessing
 import os
+import pickle
 import signal
 import sys
+import threading
+import time
+import traceback
 
 _PR_SET_PDEATHSIG = 1
 _M_TRIM_THRESHOLD, _M_MMAP_MAX = -1, -4  # glibc <malloc.h>
@@ -107,38 +118,243 @@ def shutdown_pool(pool: concurrent.futures.ProcessPoolExecutor | None, kill: boo
 
 
 class WorkerError(RuntimeError):
-    """A worker process died, stopped answering, or took too long."""
+    """A worker process died, stopped answering, took too long, or (``kind="failed"``) raised:
+    ``kind`` says which, ``remote`` holds what it raised (type name, message, traceback)."""
+
+    def __init__(self, message: str, kind: str = "died", remote: tuple | None = None):
+        super().__init__(message)
+        self.kind, self.remote = kind, remote
 
 
-def recv_from(conn, process, what: str = "worker", timeout: float = 300.0,
-              stopped_after: float = 5.0):
-    """``conn.recv()`` that never waits forever: a :class:`WorkerError` naming ``what`` when
-    ``process`` (a ``multiprocessing.Process`` or ``subprocess.Popen``) dies, has been stopped
-    (``SIGSTOP``) for ``stopped_after`` seconds, or ``timeout`` seconds pass."""
-    import time
+HEARTBEAT_SECONDS = 0.5
 
-    start = time.monotonic()
-    stopped_since = None
-    while not conn.poll(0.1):
-        now = time.monotonic()
-        alive = process.is_alive() if hasattr(process, "is_alive") else process.poll() is None
-        if not alive:
-            if conn.poll(0):  # it answered, then exited
-                break
-            raise WorkerError(f"the {what} (pid {process.pid}) died")
-        if process_state(process.pid) in ("T", "t"):
-            stopped_since = stopped_since or now
-            if now - stopped_since > stopped_after:
-                raise WorkerError(f"the {what} (pid {process.pid}) has been stopped for "
-                                  f"{now - stopped_since:.0f} s")
-        else:
-            stopped_since = None
-        if now - start > timeout:
-            raise WorkerError(f"the {what} (pid {process.pid}) did not answer within {timeout:.0f} s")
+
+def _dumps(obj) -> bytes:
+    # plain pickle, by value: multiprocessing's own pickler would pass torch tensors as shared
+    # file descriptors, which a worker that is not a multiprocessing child cannot open. These
+    # bytes only ever travel between this process and its own worker (never a file).
+    return pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
+
+
+_loads = pickle.loads
+WORKER_MODULE = "ials_zoo._worker"
+
+
+def _heartbeat(fd: int) -> None:
+    while True:
+        try:
+            os.write(fd, b".")
+        except OSError:
+            return
+        time.sleep(HEARTBEAT_SECONDS)
+
+
+def serve(read_fd: int, write_fd: int, beat_fd: int) -> None:
+    """A :class:`Worker`'s process (``python -m ials_zoo._worker R W B``): build the object
+    the first message names, then answer calls until told to exit (or the pipe closes). An
+    exception goes back as ``(type name, message, traceback)`` and the loop goes on."""
+    from multiprocessing.connection import Connection
+
+    die_with_parent(ignore_sigint=True)
+    threading.Thread(target=_heartbeat, args=(beat_fd,), daemon=True).start()
+    conn_r, conn_w = Connection(read_fd, writable=False), Connection(write_fd, readable=False)
+    obj = None
     try:
-        return conn.recv()
-    except (EOFError, OSError) as exc:
-        raise WorkerError(f"the {what} (pid {process.pid}) closed its pipe: {exc}") from None
+        while True:
+            try:
+                kind, method, args = _loads(conn_r.recv_bytes())
+            except (EOFError, OSError):
+                break
+            if kind == "exit":
+                break
+            try:
+                if kind == "init":
+                    obj = method(*args)
+                    result = None
+                else:
+                    result = getattr(obj, method)(*args)
+                conn_w.send_bytes(_dumps(("ok", result)))
+            except Exception as exc:
+                conn_w.send_bytes(_dumps(("err", (type(exc).__name__, str(exc), traceback.format_exc()))))
+    finally:
+        close = getattr(obj, "close", None)
+        if callable(close):
+            with contextlib.suppress(Exception):
+                close()
+
+
+class Worker:
+    """``factory(*args)`` built in a fresh interpreter (``python -m ials_zoo._worker``: nothing
+    of this process is inherited, no ``__main__`` guard needed, its console output dropped)
+    that dies with this process, and called by method name over two dedicated pipes.
+
+    Nothing waits forever on it. A :class:`WorkerError` naming the worker comes when it dies
+    (``kind="died"``), is stopped by ``SIGSTOP`` or a debugger (``"stopped"``), sends no
+    heartbeat for ``unresponsive_after`` seconds (``"unresponsive"``), takes longer than a
+    call's ``timeout`` (``"timeout"``) -- after which the worker is killed -- or raises
+    (``"failed"``; ``remote`` holds the exception's type name, message and traceback; the
+    worker lives on).
+
+    ``call(method, *args)`` is one round trip; :meth:`send` then :meth:`receive` let several
+    workers work at once (:func:`call_all`). ``name`` and ``detail`` make the messages,
+    ``"<name> (pid <pid>, <detail>) died"``. The factory and the arguments travel pickled over
+    our own pipe to our own child (never read from a file)."""
+
+    def __init__(self, factory, args=(), name: str = "worker", detail: str = "",
+                 unresponsive_after: float = 20.0):
+        import subprocess
+        from multiprocessing.connection import Connection
+
+        self.name, self.detail = name, detail
+        self.unresponsive_after = float(unresponsive_after)
+        self._closed = False
+        r_child, w_parent = os.pipe()  # parent -> child
+        r_parent, w_child = os.pipe()  # child -> parent
+        beat_r, beat_w = os.pipe()  # child -> parent heartbeats
+        env = dict(os.environ)
+        env.setdefault("OMP_NUM_THREADS", "1")
+        try:
+            with sigint_ignored_at_birth():
+                self.process = subprocess.Popen(
+                    [sys.executable, "-m", WORKER_MODULE, str(r_child), str(w_child), str(beat_w)],
+                    pass_fds=(r_child, w_child, beat_w), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                    env=env, close_fds=True)
+        except BaseException:
+            for fd in (w_parent, r_parent, beat_r):
+                os.close(fd)
+            raise
+        finally:
+            for fd in (r_child, w_child, beat_w):
+                os.close(fd)
+        os.set_blocking(beat_r, False)
+        self._beat_fd = beat_r
+        self._conn_w, self._conn_r = Connection(w_parent, readable=False), Connection(r_parent, writable=False)
+        self._send(("init", factory, tuple(args)))
+
+    def started(self, timeout: float | None = 300.0) -> None:
+        """Wait until the object is built (its constructor's error, if any, comes here)."""
+        self.receive(timeout)
+
+    @property
+    def pid(self) -> int:
+        return self.process.pid
+
+    def _what(self) -> str:
+        return f"{self.name} (pid {self.pid}{', ' + self.detail if self.detail else ''})"
+
+    def _send(self, message) -> None:
+        if self._closed:
+            raise WorkerError(f"{self._what()} is closed", kind="died")
+        try:
+            self._conn_w.send_bytes(_dumps(message))
+        except (OSError, BrokenPipeError) as exc:
+            self._fail("died", f"{self._what()} closed its pipe ({exc})")
+
+    def send(self, method: str, *args) -> None:
+        self._send(("call", method, args))
+
+    def _heard(self) -> bool:
+        """Drain the heartbeat pipe; True when the worker beat since the last look."""
+        heard = False
+        while True:
+            try:
+                chunk = os.read(self._beat_fd, 4096)
+            except OSError:  # BlockingIOError: nothing more
+                return heard
+            if not chunk:
+                return heard
+            heard = True
+
+    def receive(self, timeout: float | None = None):
+        """The answer to the last :meth:`send` (see the class docstring for the errors)."""
+        start = last = time.monotonic()
+        try:
+            while not self._conn_r.poll(0.1):
+                now = time.monotonic()
+                if self._heard():
+                    last = now
+                if self.process.poll() is not None:
+                    if self._conn_r.poll(0):  # it answered, then exited
+                        break
+                    self._fail("died", f"{self._what()} died (exit code {self.process.returncode})")
+                if process_state(self.pid) in ("T", "t"):
+                    self._fail("stopped", f"{self._what()} is stopped (SIGSTOP or a debugger: process state T)")
+                if now - last > self.unresponsive_after:
+                    self._fail("unresponsive", f"{self._what()} stopped answering (no heartbeat for "
+                                               f"{now - last:.0f} s)")
+                if timeout is not None and now - start > timeout:
+                    self._fail("timeout", f"{self._what()} did not answer within {timeout:.0f} s")
+            status, payload = _loads(self._conn_r.recv_bytes())
+        except (EOFError, OSError) as exc:
+            self._fail("died", f"{self._what()} died (exit code {self.process.poll()}; {exc})")
+        except WorkerError:
+            raise
+        except BaseException:
+            # e.g. Ctrl-C while waiting: the answer would come out of turn later
+            self.close(kill=True)
+            raise
+        if status == "err":
+            type_name, message, trace = payload
+            raise WorkerError(f"{self._what()} failed: {type_name}: {message}\n{trace}", kind="failed",
+                              remote=(type_name, message, trace))
+        return payload
+
+    def call(self, method: str, *args, timeout: float | None = None):
+        self.send(method, *args)
+        return self.receive(timeout)
+
+    def _fail(self, kind: str, message: str):
+        self.close(kill=True)
+        raise WorkerError(message, kind=kind)
+
+    def close(self, kill: bool = False) -> None:
+        """Ask the worker to close its object and exit (``kill``: at once); idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        if not kill and self.process.poll() is None:
+            with contextlib.suppress(OSError, BrokenPipeError):
+                self._conn_w.send_bytes(_dumps(("exit", None, None)))
+            with contextlib.suppress(Exception):
+                self.process.wait(timeout=10)
+        if self.process.poll() is None:
+            self.process.kill()
+        with contextlib.suppress(Exception):
+            self.process.wait(timeout=5)
+        for conn in (self._conn_r, self._conn_w):
+            with contextlib.suppress(OSError):
+                conn.close()
+        with contextlib.suppress(OSError):
+            os.close(self._beat_fd)
+
+    def __del__(self):
+        with contextlib.suppress(Exception):
+            self.close(kill=True)
+
+
+def call_all(workers: list[Worker], method: str, args: list | None = None, timeout: float | None = None) -> list:
+    """``method`` on every worker at once (``args[i]``: worker i's argument tuple); the
+    answers in order. On any error every worker is killed and the error raised."""
+    args = args or [()] * len(workers)
+    try:
+        for w, a in zip(workers, args):
+            w.send(method, *a)
+        return [w.receive(timeout) for w in workers]
+    except BaseException:
+        for w in workers:
+            w.close(kill=True)
+        raise
+
+
+def start_all(workers: list[Worker], timeout: float | None = 300.0) -> None:
+    """Wait until every worker built its object; on any error every worker is killed."""
+    try:
+        for w in workers:
+            w.started(timeout)
+    except BaseException:
+        for w in workers:
+            w.close(kill=True)
+        raise
 
 
 def process_state(pid: int) -> str | None:
@@ -219,5 +435,5 @@ _REAPER = None
 _REAPER_PIPE: list[int] = []
 
 
-__all__ = ["WorkerError", "die_with_parent", "keep_freed_memory", "process_state", "reap_descendants_when_gone",
-           "recv_from", "shutdown_pool", "sigint_ignored_at_birth", "spawn_pool"]
+__all__ = ["Worker", "WorkerError", "call_all", "die_with_parent", "keep_freed_memory", "process_state", "reap_descendants_when_gone",
+           "shutdown_pool", "sigint_ignored_at_birth", "spawn_pool", "start_all"]

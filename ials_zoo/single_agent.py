@@ -28,6 +28,7 @@ import numpy as np
 from gymnasium import spaces
 
 from ials_zoo.core.domains import get_domain
+from ials_zoo.processes import Worker, call_all, start_all
 
 
 def needs_own_process(env_id: str) -> bool:
@@ -120,66 +121,137 @@ class SingleAgentGS(gymnasium.Env):
 
 
 def _make_single_agent_gs(env_id: str, agent: str, options: dict, in_worker: bool = False) -> SingleAgentGS:
-    # Module-level (picklable) factory. In a SubprocVecEnv worker, the worker dies with the
-    # training process and leaves Ctrl-C to it (never in the training process itself).
+    # Module-level (picklable) factory; a worker process of make_gs_vec_env runs one env on
+    # one thread
     import torch
 
     if in_worker:
-        from ials_zoo.processes import die_with_parent
-
-        die_with_parent(ignore_sigint=True)
         torch.set_num_threads(1)
     return SingleAgentGS(env_id, agent, **options)
 
 
-def _safe_subproc_vec_env_class():
-    from stable_baselines3.common.vec_env import SubprocVecEnv
+class _EnvServer:
+    """One gymnasium env in a :class:`~ials_zoo.processes.Worker`, answering what SB3's
+    ``SubprocVecEnv`` worker answers (auto-reset after an episode's end included)."""
+
+    def __init__(self, env_fn):
+        self.env = env_fn()
+
+    def spaces(self):
+        return self.env.observation_space, self.env.action_space
+
+    def step(self, action):
+        observation, reward, terminated, truncated, info = self.env.step(action)
+        done = terminated or truncated
+        info["TimeLimit.truncated"] = truncated and not terminated
+        reset_info = {}
+        if done:
+            info["terminal_observation"] = observation
+            observation, reset_info = self.env.reset()
+        return observation, reward, done, info, reset_info
+
+    def reset(self, seed, options):
+        return self.env.reset(seed=seed, **({"options": options} if options else {}))
+
+    def render(self):
+        return self.env.render()
+
+    def get_attr(self, name):
+        return self.env.get_wrapper_attr(name)
+
+    def has_attr(self, name):
+        try:
+            self.env.get_wrapper_attr(name)
+            return True
+        except AttributeError:
+            return False
+
+    def set_attr(self, name, value):
+        setattr(self.env, name, value)
+
+    def env_method(self, name, args, kwargs):
+        return self.env.get_wrapper_attr(name)(*args, **kwargs)
+
+    def is_wrapped(self, wrapper_class):
+        from stable_baselines3.common.env_util import is_wrapped
+
+        return is_wrapped(self.env, wrapper_class)
+
+    def close(self):
+        self.env.close()
+
+
+def _worker_vec_env_class():
+    from stable_baselines3.common.vec_env import VecEnv
     from stable_baselines3.common.vec_env.subproc_vec_env import _stack_obs
 
-    from ials_zoo.processes import recv_from
+    class WorkerVecEnv(VecEnv):
+        """SB3's ``SubprocVecEnv`` on :class:`ials_zoo.processes.Worker`: one env per worker
+        process (fresh interpreters dying with this one), and never a wait without end: a
+        dead, stopped or hung worker raises :class:`ials_zoo.processes.WorkerError` within
+        seconds, and ``close()`` kills workers that do not exit promptly."""
 
-    class SafeSubprocVecEnv(SubprocVecEnv):
-        """SB3's ``SubprocVecEnv`` that never waits forever on a worker: a dead, stopped or
-        hung worker raises :class:`ials_zoo.processes.WorkerError` within seconds, and
-        ``close()`` kills workers that do not exit promptly."""
+        def __init__(self, env_fns):
+            self.workers = [Worker(_EnvServer, (fn,), name=f"env worker {i}") for i, fn in enumerate(env_fns)]
+            start_all(self.workers)
+            self.closed = False
+            observation_space, action_space = self.workers[0].call("spaces")
+            super().__init__(len(env_fns), observation_space, action_space)
 
-        def _recv_all(self):
-            return [recv_from(r, p, "SubprocVecEnv worker") for r, p in zip(self.remotes, self.processes)]
+        def _call(self, method, args=None, indices=None):
+            chosen = [self.workers[i] for i in self._get_indices(indices)]
+            return call_all(chosen, method, args)
+
+        def step_async(self, actions):
+            for w, action in zip(self.workers, actions):
+                w.send("step", action)
 
         def step_wait(self):
-            results = self._recv_all()
-            self.waiting = False
+            try:
+                results = [w.receive() for w in self.workers]
+            except BaseException:
+                self.close(kill=True)
+                raise
             obs, rews, dones, infos, self.reset_infos = zip(*results)
             return _stack_obs(obs, self.observation_space), np.stack(rews), np.stack(dones), infos
 
         def reset(self):
-            for i, remote in enumerate(self.remotes):
-                remote.send(("reset", (self._seeds[i], self._options[i])))
-            obs, self.reset_infos = zip(*self._recv_all())
+            results = self._call("reset", [(self._seeds[i], self._options[i]) for i in range(self.num_envs)])
+            obs, self.reset_infos = zip(*results)
             self._reset_seeds()
             self._reset_options()
             return _stack_obs(obs, self.observation_space)
 
-        def close(self):
+        def get_images(self):
+            return self._call("render")
+
+        def has_attr(self, attr_name):
+            return all(self._call("has_attr", [(attr_name,)] * self.num_envs))
+
+        def get_attr(self, attr_name, indices=None):
+            n = len(self._get_indices(indices))
+            return self._call("get_attr", [(attr_name,)] * n, indices)
+
+        def set_attr(self, attr_name, value, indices=None):
+            n = len(self._get_indices(indices))
+            self._call("set_attr", [(attr_name, value)] * n, indices)
+
+        def env_method(self, method_name, *method_args, indices=None, **method_kwargs):
+            n = len(self._get_indices(indices))
+            return self._call("env_method", [(method_name, method_args, method_kwargs)] * n, indices)
+
+        def env_is_wrapped(self, wrapper_class, indices=None):
+            n = len(self._get_indices(indices))
+            return self._call("is_wrapped", [(wrapper_class,)] * n, indices)
+
+        def close(self, kill: bool = False):
             if self.closed:
                 return
             self.closed = True
-            for remote, proc in zip(self.remotes, self.processes):
-                try:
-                    if self.waiting:
-                        recv_from(remote, proc, "SubprocVecEnv worker", timeout=5.0)
-                    remote.send(("close", None))
-                except Exception:
-                    pass
-            for proc in self.processes:
-                proc.join(timeout=5)
-                if proc.is_alive():
-                    proc.kill()
-                    proc.join(timeout=5)
-            for remote in self.remotes:
-                remote.close()
+            for w in self.workers:
+                w.close(kill=kill)
 
-    return SafeSubprocVecEnv
+    return WorkerVecEnv
 
 
 def make_gs_vec_env(
@@ -187,7 +259,6 @@ def make_gs_vec_env(
     agent: str,
     n_envs: int = 8,
     vec_env: str = "auto",
-    start_method: str = "spawn",
     **options,
 ):
     """``n_envs`` copies of :class:`SingleAgentGS` as an SB3 ``VecEnv``.
@@ -196,8 +267,6 @@ def make_gs_vec_env(
         vec_env: ``"dummy"`` (all copies in this process), ``"subproc"`` (one process per
             copy) or ``"auto"``: subproc for domains that need their own process (SUMO),
             dummy otherwise.
-        start_method: multiprocessing start method of the subprocesses (``spawn``: a fresh
-            interpreter; a forked child would inherit this process's simulator state).
     """
     from stable_baselines3.common.vec_env import DummyVecEnv
 
@@ -214,5 +283,5 @@ def make_gs_vec_env(
     subproc = vec_env == "subproc" or (vec_env == "auto" and own)
     fns = [functools.partial(_make_single_agent_gs, env_id, agent, options, subproc) for _ in range(n_envs)]
     if subproc:
-        return _safe_subproc_vec_env_class()(fns, start_method=start_method)
+        return _worker_vec_env_class()(fns)
     return DummyVecEnv(fns)

@@ -332,7 +332,7 @@ def test_a_dead_or_stopped_worker_is_named_within_seconds_and_nothing_is_left(ho
     from ials_zoo.processes import WorkerError
 
     backend = ProcessBackend(_specs(), unresponsive_after=3.0)
-    pids = [proc.pid for _, _, proc, _ in backend.workers]
+    pids = [w.pid for w in backend.workers]
     os.kill(pids[1], signal.SIGKILL if how == "kill" else signal.SIGSTOP)
     t0 = time.monotonic()
     said = "died" if how == "kill" else "is stopped \\(SIGSTOP"

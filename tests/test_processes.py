@@ -194,3 +194,47 @@ def test_training_in_this_process_keeps_ctrl_c():
     venv = make_gs_vec_env("warehouse_v0", "robot_20", n_envs=2)  # DummyVecEnv: in this process
     venv.close()
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+# -- processes.Worker: the one worker protocol -------------------------------------------------
+
+def test_a_worker_answers_calls_and_names_its_errors():
+    import queue
+    import random
+
+    from ials_zoo.processes import Worker, WorkerError, call_all, start_all
+
+    workers = [Worker(random.Random, (seed,), name=f"test worker {seed}") for seed in (1, 2)]
+    start_all(workers)
+    try:
+        assert call_all(workers, "random") == [random.Random(1).random(), random.Random(2).random()]
+        with pytest.raises(WorkerError, match=r"test worker 1 \(pid \d+\) failed: IndexError(?s:.*)Traceback"):
+            workers[0].call("choice", [])
+        assert workers[1].call("randint", 3, 3) == 3  # the other one is untouched
+    finally:
+        for w in workers:
+            w.close()
+    assert not _alive({w.pid for w in workers})
+    blocked = Worker(queue.Queue, name="blocked worker", detail="a queue")
+    blocked.started()
+    t0 = time.monotonic()
+    with pytest.raises(WorkerError, match=r"blocked worker \(pid \d+, a queue\) did not answer within 1 s"):
+        blocked.call("get", timeout=1.0)  # blocks forever in the worker, which still beats
+    assert time.monotonic() - t0 < 5 and _gone_within({blocked.pid}, 5)
+    with pytest.raises(WorkerError, match="failed: TypeError"):
+        Worker(random.Random, ("a", "b", "c")).started()  # the constructor's error
+
+
+@pytest.mark.parametrize("how", ["kill", "stop"])
+def test_a_dead_or_stopped_worker_is_named_within_seconds(how):
+    import random
+
+    from ials_zoo.processes import Worker, WorkerError
+
+    worker = Worker(random.Random, (0,), name="test worker", unresponsive_after=3.0)
+    worker.started()
+    os.kill(worker.pid, signal.SIGKILL if how == "kill" else signal.SIGSTOP)
+    t0 = time.monotonic()
+    with pytest.raises(WorkerError, match="died" if how == "kill" else "is stopped"):
+        worker.call("random")
+    assert time.monotonic() - t0 < 10 and _gone_within({worker.pid}, 5)

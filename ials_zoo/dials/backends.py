@@ -15,23 +15,20 @@ Every backend runs one :class:`~ials_zoo.dials.shard.AgentShard` per worker and 
 from __future__ import annotations
 
 import socket
-import threading
-import time
-import traceback
 from urllib.parse import urlparse
 
 from ials_zoo.dials.shard import AgentShard, ShardSpec
 from ials_zoo.processes import (
+    Worker,
     WorkerError,
-    die_with_parent,
+    call_all,
     process_state,
     reap_descendants_when_gone,
-    sigint_ignored_at_birth,
+    start_all,
 )
 
 BACKENDS = ("process", "ray")
 UNRESPONSIVE_SECONDS = 20.0
-HEARTBEAT_SECONDS = 0.5
 
 
 class InProcessBackend:
@@ -58,125 +55,30 @@ class InProcessBackend:
         self.shards = []
 
 
-def _heartbeat(conn, stop):
-    while not stop.is_set():
-        try:
-            conn.send(b".")
-        except (OSError, BrokenPipeError):
-            return
-        time.sleep(HEARTBEAT_SECONDS)
-
-
-def _process_worker(conn, beat, spec):
-    die_with_parent(ignore_sigint=True)
-    stop = threading.Event()
-    threading.Thread(target=_heartbeat, args=(beat, stop), daemon=True).start()
-    try:
-        shard = AgentShard(spec)
-        conn.send(("ok", None))
-    except Exception as exc:
-        conn.send(("err", f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}"))
-        return
-    while True:
-        try:
-            method, args = conn.recv()
-        except EOFError:
-            break
-        if method == "__close__":
-            break
-        try:
-            conn.send(("ok", getattr(shard, method)(*args)))
-        except Exception as exc:
-            conn.send(("err", f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}"))
-    stop.set()
-    shard.close()
-
-
 class ProcessBackend:
-    """One worker process per shard (module docstring)."""
+    """One worker process per shard (module docstring): a :class:`~ials_zoo.processes.Worker`
+    holding an :class:`AgentShard`."""
 
     name = "process"
 
     def __init__(self, specs: list[ShardSpec], unresponsive_after: float = UNRESPONSIVE_SECONDS):
-        import multiprocessing
-
-        ctx = multiprocessing.get_context("spawn")
-        self.unresponsive_after = float(unresponsive_after)
         self.workers = []
         try:
-            for spec in specs:
-                conn, child = ctx.Pipe()
-                beat_r, beat_w = ctx.Pipe(duplex=False)
-                proc = ctx.Process(target=_process_worker, args=(child, beat_w, spec), daemon=True)
-                with sigint_ignored_at_birth():
-                    proc.start()
-                child.close()
-                beat_w.close()
-                self.workers.append((conn, beat_r, proc, spec))
-            self._collect()  # each worker built its shard
+            for i, spec in enumerate(specs):
+                self.workers.append(Worker(AgentShard, (spec,), name=f"DIALS worker {i}",
+                                           detail=f"agents {spec.agents[0]}..{spec.agents[-1]}",
+                                           unresponsive_after=unresponsive_after))
+            start_all(self.workers)  # each worker built its shard
         except BaseException:
             self.close(kill=True)
             raise
-
-    def _wait(self, i):
-        conn, beat, proc, spec = self.workers[i]
-        last = time.monotonic()
-        while not conn.poll(0.1):
-            now = time.monotonic()
-            while beat.poll():
-                try:
-                    beat.recv_bytes()
-                except (EOFError, OSError):
-                    break
-                last = now
-            what = f"DIALS worker {i} (pid {proc.pid}, agents {spec.agents[0]}..{spec.agents[-1]})"
-            if not proc.is_alive():
-                if conn.poll(0):
-                    break
-                raise WorkerError(f"{what} died (exit code {proc.exitcode})")
-            if process_state(proc.pid) in ("T", "t"):
-                raise WorkerError(f"{what} is stopped (SIGSTOP or a debugger: process state T)")
-            if now - last > self.unresponsive_after:
-                raise WorkerError(f"{what} stopped answering (no heartbeat for {now - last:.0f} s)")
-        what = f"DIALS worker {i} (pid {proc.pid}, agents {spec.agents[0]}..{spec.agents[-1]})"
-        try:
-            status, payload = conn.recv()
-        except (EOFError, OSError) as exc:
-            proc.join(timeout=2)
-            if proc.exitcode is not None:
-                raise WorkerError(f"{what} died (exit code {proc.exitcode})") from None
-            raise WorkerError(f"{what} closed its pipe ({exc})") from None
-        if status == "err":
-            raise WorkerError(f"{what} failed: {payload}")
-        return payload
-
-    def _collect(self):
-        return [self._wait(i) for i in range(len(self.workers))]
 
     def call(self, method: str, args: list | None = None) -> list:
-        args = args or [()] * len(self.workers)
-        try:
-            for (conn, _, _, _), a in zip(self.workers, args):
-                conn.send((method, tuple(a)))
-            return self._collect()
-        except BaseException:
-            self.close(kill=True)
-            raise
+        return call_all(self.workers, method, args)
 
     def close(self, kill: bool = False):
-        for conn, beat, proc, _ in self.workers:
-            if not kill:
-                try:
-                    conn.send(("__close__", ()))
-                except (OSError, BrokenPipeError):
-                    pass
-        for conn, beat, proc, _ in self.workers:
-            proc.join(timeout=0.1 if kill else 10)
-            if proc.is_alive():
-                proc.kill()
-                proc.join(timeout=5)
-            conn.close()
-            beat.close()
+        for w in self.workers:
+            w.close(kill=kill)
         self.workers = []
 
 

@@ -13,16 +13,15 @@ from __future__ import annotations
 
 import numpy as np
 
+from ials_zoo.core.domains import get_domain
 from ials_zoo.core.streams import derived_seed
-from ials_zoo.processes import WorkerError, die_with_parent, recv_from, sigint_ignored_at_birth
+from ials_zoo.processes import Worker, call_all, start_all
 
 
 class _Copies:
     """Some copies of the GS, stepped in turn (in this process or in a worker)."""
 
     def __init__(self, env_id, agents, options, seeds):
-        from ials_zoo.core.domains import get_domain
-
         self.envs = [get_domain(env_id).parallel_env(learners=agents, **options) for _ in seeds]
         self.agents, self.seeds = list(agents), list(seeds)
 
@@ -50,38 +49,10 @@ class _Copies:
             env.close()
 
 
-def _worker(conn, env_id, agents, options, seeds):
-    die_with_parent(ignore_sigint=True)
-    import torch
-
-    torch.set_num_threads(1)
-    copies = _Copies(env_id, agents, options, seeds)
-    conn.send(("ready", None))
-    while True:
-        try:
-            cmd, arg = conn.recv()
-        except EOFError:
-            break
-        try:
-            if cmd == "reset":
-                conn.send(("ok", copies.reset(arg)))
-            elif cmd == "step":
-                conn.send(("ok", copies.step(arg)))
-            elif cmd == "close":
-                break
-        except Exception as exc:  # report, keep the protocol in step
-            conn.send(("err", f"{type(exc).__name__}: {exc}"))
-    copies.close()
-
-
 class GSVecEnv:
     """``n_envs`` GS copies of ``agents`` (default: every agent) (module docstring)."""
 
     def __init__(self, env_id: str, agents=None, n_envs: int = 1, processes: int = 0, seed: int = 0, **options):
-        import multiprocessing
-
-        from ials_zoo.core.domains import get_domain
-
         domain = get_domain(env_id)
         self.agents = domain.check_agents(agents, **options)
         self.n_envs, self.processes = int(n_envs), int(processes)
@@ -89,69 +60,45 @@ class GSVecEnv:
             raise ValueError("n_envs must be >= 1 and processes >= 0")
         self.observation_space, self.action_space = domain.observation_space, domain.action_space
         seeds = [seed + j for j in range(self.n_envs)]
-        self._local, self._workers = None, []
+        self._local, self._workers, self._shares = None, [], []
         if self.processes == 0:
             self._local = _Copies(env_id, self.agents, options, seeds)
             return
-        ctx = multiprocessing.get_context("spawn")
-        shares = [list(s) for s in np.array_split(seeds, min(self.processes, self.n_envs)) if len(s)]
+        shares = [[int(x) for x in s] for s in np.array_split(seeds, min(self.processes, self.n_envs)) if len(s)]
         try:
-            for share in shares:
-                parent, child = ctx.Pipe()
-                proc = ctx.Process(target=_worker, args=(child, env_id, self.agents, options, [int(x) for x in share]),
-                                   daemon=True)
-                with sigint_ignored_at_birth():
-                    proc.start()
-                child.close()
-                self._workers.append((parent, proc, len(share)))
-            for conn, proc, _ in self._workers:
-                recv_from(conn, proc, "GS worker", timeout=300)
+            for i, share in enumerate(shares):
+                self._workers.append(Worker(_Copies, (env_id, self.agents, options, share), name=f"GS worker {i}",
+                                            detail=f"{len(share)} cop{'ies' if len(share) > 1 else 'y'}"))
+            start_all(self._workers)
         except BaseException:
             self.close()
             raise
+        self._shares = [len(share) for share in shares]
 
-    def _gather(self, cmd, args):
-        for (conn, _, _), arg in zip(self._workers, args):
-            conn.send((cmd, arg))
-        out = []
-        for conn, proc, _ in self._workers:
-            status, payload = recv_from(conn, proc, "GS worker")
-            if status == "err":
-                raise WorkerError(f"a GS worker failed: {payload}")
-            out.append(payload)
-        return out
+    def _bounds(self):
+        ends = np.cumsum([0] + self._shares)
+        return list(zip(ends[:-1], ends[1:]))
 
     def reset(self, seed=None):
         seeds = None if seed is None else [derived_seed(seed, "copy", j) for j in range(self.n_envs)]
         if self._local is not None:
             return self._local.reset(seeds)
-        bounds = np.cumsum([0] + [k for _, _, k in self._workers])
-        shares = [None if seeds is None else seeds[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
-        return np.concatenate(self._gather("reset", shares), axis=1)
+        shares = [(None if seeds is None else seeds[a:b],) for a, b in self._bounds()]
+        return np.concatenate(call_all(self._workers, "reset", shares), axis=1)
 
     def step(self, actions):
         actions = np.asarray(actions)
         if self._local is not None:
             return self._local.step(actions)
-        bounds = np.cumsum([0] + [k for _, _, k in self._workers])
-        parts = self._gather("step", [actions[:, a:b] for a, b in zip(bounds[:-1], bounds[1:])])
+        parts = call_all(self._workers, "step", [(actions[:, a:b],) for a, b in self._bounds()])
         return (np.concatenate([p[0] for p in parts], axis=1), np.concatenate([p[1] for p in parts], axis=1),
                 parts[0][2])
 
     def close(self):
         if self._local is not None:
             self._local.close()
-        for conn, proc, _ in self._workers:
-            try:
-                conn.send(("close", None))
-            except (OSError, BrokenPipeError):
-                pass
-        for conn, proc, _ in self._workers:
-            proc.join(timeout=5)
-            if proc.is_alive():
-                proc.kill()
-                proc.join(timeout=5)
-            conn.close()
+        for w in self._workers:
+            w.close()
         self._workers = []
 
 

@@ -9,14 +9,13 @@ the first. Everything that touches libsumo therefore lives in a *simulation core
   *lease* allows one live in-process simulation per process; asking for a second one raises
   :class:`SimulationBusyError` (also when someone else started a libsumo simulation outside
   this module: ``libsumo.simulation.isLoaded()``);
-* in a **worker process** (``backend="worker"``): a fresh ``python -m
-  ials_zoo.traffic._worker`` interpreter (nothing of the parent is inherited) that holds the
-  core; one pipe round trip per call over two dedicated pipes (SUMO's own console output
-  cannot corrupt the protocol). The worker dies with this process
-  (:func:`ials_zoo.processes.die_with_parent`) and exits when its pipe closes. While a call
-  is under way the worker sends a heartbeat every :data:`HEARTBEAT_SECONDS`; the parent
-  raises :class:`WorkerDiedError` when the worker dies, and :class:`WorkerUnresponsiveError`
-  (and kills it) when it stops beating for ``unresponsive_after`` seconds (a stopped or hung
+* in a **worker process** (``backend="worker"``): a :class:`ials_zoo.processes.Worker` (a
+  fresh interpreter, nothing of the parent inherited) that holds the core; one pipe round
+  trip per call over two dedicated pipes (SUMO's own console output cannot corrupt the
+  protocol). The worker dies with this process and exits when its pipe closes; it sends a
+  heartbeat every :data:`ials_zoo.processes.HEARTBEAT_SECONDS`. The parent raises
+  :class:`WorkerDiedError` when the worker dies, and :class:`WorkerUnresponsiveError` (and
+  kills it) when it is stopped, stops beating for ``unresponsive_after`` seconds (a hung
   process) or a call outlasts ``timeout``. The next ``reset`` spawns a new worker;
 * ``backend="auto"`` (default): in-process when this process holds no live simulation,
   otherwise a worker -- decided once, when the handle is created.
@@ -31,18 +30,13 @@ from __future__ import annotations
 import atexit
 import importlib
 import os
-import subprocess
 import sys
 import threading
-import time
-import traceback
 import weakref
-from multiprocessing.connection import Connection
 
-from ials_zoo.processes import sigint_ignored_at_birth
+from ials_zoo.processes import Worker, WorkerError
 
 BACKENDS = ("auto", "inprocess", "worker")
-HEARTBEAT_SECONDS = 0.5
 CORES_MODULE = "ials_zoo.traffic.cores"
 
 
@@ -71,7 +65,6 @@ def import_libsumo():
     but only SUMO's Parquet outputs use arrow, and the zoo writes none. The switch it reads
     (``LIBSUMO_AS_TRACI=quiet``) also makes ``import traci`` use libsumo, so it is set only
     while libsumo is imported."""
-    import sys
 
     if "libsumo" in sys.modules:
         return sys.modules["libsumo"]
@@ -145,6 +138,27 @@ def _kill_workers():
         h._kill()
 
 
+class _WorkerCore:
+    """A core in a :class:`~ials_zoo.processes.Worker` (holding this worker's lease), whose
+    SUMO errors come back as :class:`SimulationError` with SUMO's message."""
+
+    def __init__(self, core: str, config: dict):
+        _acquire(-1)
+        self.core = _core_class(core)(**config)
+
+    def call(self, method: str, args: tuple):
+        try:
+            return getattr(self.core, method)(*args)
+        except Exception as e:
+            w = wrap_sumo_error(e)
+            if w is e:
+                raise
+            raise w from e
+
+    def close(self):
+        self.core.close()
+
+
 class SimHandle:
     """Runs one core in-process or in a worker process (see the module docstring).
 
@@ -165,9 +179,7 @@ class SimHandle:
         self.timeout = float(timeout)
         self.unresponsive_after = float(unresponsive_after)
         self._core = None
-        self._proc = None
-        self._conn_r = self._conn_w = None
-        self._beat_fd = None
+        self._worker: Worker | None = None
         self.closed = False
         if backend == "auto":
             backend = "inprocess" if inprocess_available() else "worker"
@@ -183,121 +195,42 @@ class SimHandle:
 
     # -- worker
     def _spawn(self):
-        r_child, w_parent = os.pipe()  # parent -> child
-        r_parent, w_child = os.pipe()  # child -> parent
-        beat_r, beat_w = os.pipe()  # child -> parent heartbeats
-        env = dict(os.environ)
-        env.setdefault("OMP_NUM_THREADS", "1")
-        try:
-            with sigint_ignored_at_birth():
-                self._proc = subprocess.Popen(
-                    [sys.executable, "-m", "ials_zoo.traffic._worker", str(r_child), str(w_child), str(beat_w)],
-                    pass_fds=(r_child, w_child, beat_w),
-                    stdin=subprocess.DEVNULL,
-                    stdout=subprocess.DEVNULL,
-                    env=env,
-                    close_fds=True,
-                )
-        finally:
-            for fd in (r_child, w_child, beat_w):
-                os.close(fd)
-        os.set_blocking(beat_r, False)
-        self._beat_fd = beat_r
-        self._conn_w = Connection(w_parent, readable=False)
-        self._conn_r = Connection(r_parent, writable=False)
+        self._worker = Worker(_WorkerCore, (self.core_name, self.config), name="SUMO worker",
+                              unresponsive_after=self.unresponsive_after)
         _live_workers.add(self)
+        self._ask(self._worker.started, self.timeout)
+
+    def _ask(self, method, *args, **kwargs):
+        """``method(*args, **kwargs)`` of the worker, its errors as this module's."""
         try:
-            self._send(("init", self.core_name, self.config))
-            self._recv()
-        except BaseException:
+            return method(*args, **kwargs)
+        except WorkerError as exc:
+            if exc.kind == "failed":
+                name, message, trace = exc.remote
+                if name == "SimulationError":
+                    raise SimulationError(message) from None
+                raise SimulationError(f"error in the SUMO worker: {name}: {message}\n{trace}") from None
+            pid = self._worker.pid
             self._kill()
-            raise
-
-    def _send(self, msg):
-        try:
-            self._conn_w.send(msg)
-        except (BrokenPipeError, OSError) as e:
-            self._died(e)
-
-    def _heard(self) -> bool:
-        """Drain the heartbeat pipe; True when the worker beat since the last look."""
-        heard = False
-        while True:
-            try:
-                chunk = os.read(self._beat_fd, 4096)
-            except BlockingIOError:
-                return heard
-            except OSError:
-                return heard
-            if not chunk:
-                return heard
-            heard = True
-
-    def _recv(self):
-        start = last_beat = time.monotonic()
-        self._heard()  # beats from before this call say nothing about it
-        while not self._conn_r.poll(0.1):
-            now = time.monotonic()
-            if self._proc.poll() is not None:
-                self._died(None)
-            if self._heard():
-                last_beat = now
-            silent = now - last_beat
-            if silent > self.unresponsive_after or now - start > self.timeout:
-                pid = self._proc.pid
-                self._kill()
-                why = (f"sent no heartbeat for {silent:.1f} s (stopped or hung)"
-                       if silent > self.unresponsive_after else f"did not answer within {self.timeout:.0f} s")
-                raise WorkerUnresponsiveError(
-                    f"the SUMO worker (pid {pid}) {why}; it was killed. The episode is lost: call "
-                    "reset() to start a new worker"
-                )
-        try:
-            status, payload = self._conn_r.recv()
-        except (EOFError, OSError) as e:
-            self._died(e)
-        if status == "ok":
-            return payload
-        name, msg, tb = payload
-        if name == "SimulationError":
-            raise SimulationError(msg)
-        raise SimulationError(f"error in the SUMO worker: {name}: {msg}\n{tb}")
-
-    def _died(self, cause):
-        code = self._proc.poll() if self._proc is not None else None
-        self._kill()
-        raise WorkerDiedError(
-            f"the SUMO worker process died (exit code {code}); the episode is lost, call "
-            "reset() to start a new worker"
-        ) from cause
+            if exc.kind == "died":
+                raise WorkerDiedError(f"the SUMO worker process (pid {pid}) died ({exc}); the episode is lost, "
+                                      "call reset() to start a new worker") from None
+            why = {"stopped": "is stopped and sends no heartbeat (SIGSTOP or a debugger)",
+                   "unresponsive": "sent no heartbeat for "
+                                   f"{self.unresponsive_after:.1f} s (stopped or hung)"}.get(
+                exc.kind, f"did not answer within {self.timeout:.0f} s")
+            raise WorkerUnresponsiveError(f"the SUMO worker (pid {pid}) {why}; it was killed. The episode is "
+                                          "lost: call reset() to start a new worker") from None
 
     def _kill(self):
-        proc, self._proc = self._proc, None
-        for c in (self._conn_r, self._conn_w):
-            if c is not None:
-                try:
-                    c.close()
-                except OSError:
-                    pass
-        self._conn_r = self._conn_w = None
-        if self._beat_fd is not None:
-            try:
-                os.close(self._beat_fd)
-            except OSError:
-                pass
-            self._beat_fd = None
-        if proc is not None:
-            if proc.poll() is None:
-                proc.kill()
-            try:
-                proc.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                pass
+        worker, self._worker = self._worker, None
+        if worker is not None:
+            worker.close(kill=True)
         _live_workers.discard(self)
 
     @property
     def worker_pid(self) -> int | None:
-        return self._proc.pid if self._proc is not None else None
+        return self._worker.pid if self._worker is not None else None
 
     # -- public
     def call(self, method: str, *args):
@@ -312,15 +245,14 @@ class SimHandle:
                 if w is e:
                     raise
                 raise w from e
-        if self._proc is None:
+        if self._worker is None:
             if method not in ("reset",):
                 raise WorkerDiedError(
                     "no live SUMO worker (it died or was never started); call reset() first"
                 )
             self._spawn()
         try:
-            self._send(("call", method, args))
-            return self._recv()
+            return self._ask(self._worker.call, "call", method, args, timeout=self.timeout)
         except SimulationError:
             raise  # the worker answered (an error) or is already gone: nothing out of sync
         except BaseException:
@@ -342,61 +274,14 @@ class SimHandle:
                 self._core = None
                 _release(id(self))
         else:
-            if self._proc is not None and self._proc.poll() is None:
-                try:
-                    self._conn_w.send(("exit", None, None))
-                    self._proc.wait(timeout=2)
-                except Exception:
-                    pass
-            self._kill()
+            worker, self._worker = self._worker, None
+            if worker is not None:
+                worker.close()
+            _live_workers.discard(self)
 
     def __del__(self):
         try:
             self.close()
-        except Exception:
-            pass
-
-
-def _heartbeat(fd: int) -> None:
-    while True:
-        try:
-            os.write(fd, b".")
-        except OSError:
-            return
-        time.sleep(HEARTBEAT_SECONDS)
-
-
-def worker_main(r_fd: int, w_fd: int, beat_fd: int | None = None) -> None:
-    """The loop of a worker process: read a request, run it on the core, answer."""
-    from ials_zoo.processes import die_with_parent
-
-    die_with_parent(ignore_sigint=True)
-    if beat_fd is not None:
-        threading.Thread(target=_heartbeat, args=(beat_fd,), daemon=True).start()
-    conn_r = Connection(r_fd, writable=False)
-    conn_w = Connection(w_fd, readable=False)
-    core = None
-    while True:
-        try:
-            kind, a, b = conn_r.recv()
-        except EOFError:
-            break
-        if kind == "exit":
-            break
-        try:
-            if kind == "init":
-                _acquire(-1)
-                core = _core_class(a)(**b)
-                result = None
-            else:
-                result = getattr(core, a)(*b)
-            conn_w.send(("ok", result))
-        except Exception as e:
-            w = wrap_sumo_error(e)
-            conn_w.send(("err", (type(w).__name__, str(w), traceback.format_exc())))
-    if core is not None:
-        try:
-            core.close()
         except Exception:
             pass
 
