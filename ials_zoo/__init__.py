@@ -22,6 +22,7 @@ declare it in the ``ials_zoo.domains`` entry point group).
 
 from ials_zoo._version import __version__
 from ials_zoo.core.domains import Domain, domain_ids, get_domain, register_domain
+from ials_zoo.core.gym_ids import register_ials
 
 
 def make_ials(*args, **kwargs):
@@ -38,13 +39,9 @@ def make_ials_parallel_env(*args, **kwargs):
     return _make(*args, **kwargs)
 
 
-def _register_gymnasium() -> None:
-    from ials_zoo.influence.gym_registration import register_all
-
-    register_all()
-
-
-_register_gymnasium()
+for _env_id in domain_ids():  # every domain's IALS as a Gymnasium id (ials_zoo.core.gym_ids)
+    register_ials(_env_id)
+del _env_id
 
 __all__ = [
     "Domain",

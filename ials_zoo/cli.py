@@ -104,7 +104,7 @@ def _sigterm_interrupts() -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from ials_zoo.commands import CommandError
+    from ials_zoo.errors import BadInput
 
     argv = sys.argv[1:] if argv is None else argv
     command = next((a for a in argv if not a.startswith("-")), None)
@@ -126,7 +126,8 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"ials-zoo {args.command}: interrupted", file=sys.stderr)
         return 130
-    except (CommandError, ValueError, TypeError, FileNotFoundError, PermissionError, IsADirectoryError) as exc:
+    except (BadInput, FileNotFoundError, PermissionError, IsADirectoryError) as exc:
+        # bad input names itself (ials_zoo.errors); any other ValueError/TypeError is a bug: traceback
         if os.environ.get("IALS_ZOO_DEBUG"):
             raise
         print(f"ials-zoo {args.command}: {exc}", file=sys.stderr)

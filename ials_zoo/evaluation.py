@@ -49,6 +49,7 @@ from typing import Any
 import numpy as np
 
 from ials_zoo.core.domains import get_domain
+from ials_zoo.errors import BadInput, BadInputType
 from ials_zoo.policy import (
     PolicyNetwork,
     is_policy_file,
@@ -69,7 +70,7 @@ META_SUFFIX = ".meta.json"
 def eval_seeds(episodes: int = PROTOCOL_EPISODES, base: int = EVAL_SEED_BASE) -> list[int]:
     """The documented evaluation seed set: ``base, base+1, ..., base+episodes-1``."""
     if isinstance(episodes, bool) or int(episodes) < 1:
-        raise ValueError(f"episodes must be >= 1, got {episodes}")
+        raise BadInput(f"episodes must be >= 1, got {episodes}")
     return [base + i for i in range(int(episodes))]
 
 
@@ -231,20 +232,20 @@ def load_model(path: str | os.PathLike, agent: str | None = None) -> NetworkPoli
     """A policy file or an SB3 model zip (with its sidecar), loaded without running code."""
     path = Path(path)
     if not path.is_file():
-        raise ValueError(f"policy file {str(path)!r} does not exist")
+        raise BadInput(f"policy file {str(path)!r} does not exist")
     if is_policy_file(path):
         net = load_policy_file(path)
     elif path.suffix == ".zip":
         mpath = meta_path(path)
         if not mpath.is_file():
-            raise ValueError(f"policy file {str(path)!r} has no metadata sidecar {str(mpath)!r} (written by the "
+            raise BadInput(f"policy file {str(path)!r} has no metadata sidecar {str(mpath)!r} (written by the "
                              "baselines next to the model)")
         try:
             meta = json.loads(mpath.read_text())
         except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-            raise ValueError(f"metadata {str(mpath)!r} is not valid JSON: {exc}") from None
+            raise BadInput(f"metadata {str(mpath)!r} is not valid JSON: {exc}") from None
         if meta.get("sb3_class", "PPO") != "PPO":
-            raise ValueError(f"metadata {str(mpath)!r}: sb3_class {meta.get('sb3_class')!r} is not supported "
+            raise BadInput(f"metadata {str(mpath)!r}: sb3_class {meta.get('sb3_class')!r} is not supported "
                              "(PPO actor-critic MLP policies only)")
         env_id = meta.get("env_id")
         obs = get_domain(env_id).observation_space
@@ -252,7 +253,7 @@ def load_model(path: str | os.PathLike, agent: str | None = None) -> NetworkPoli
         net = policy_from_sb3_zip(path, meta.get("agent") or agent, int(np.prod(obs.shape)),
                                   int(meta.get("frame_stack", 1)), metadata=provenance)
     else:
-        raise ValueError(f"policy file {str(path)!r}: expected a .safetensors policy or an SB3 .zip model")
+        raise BadInput(f"policy file {str(path)!r}: expected a .safetensors policy or an SB3 .zip model")
     return NetworkPolicy(net, name=path.name, file=str(path))
 
 
@@ -263,14 +264,14 @@ def _import_callable(spec: str, frame_stack: int | None) -> CallablePolicy:
     try:
         module = importlib.import_module(module_name)
     except ImportError as exc:
-        raise ValueError(f"policy {spec!r}: cannot import module {module_name!r}: {exc}") from None
+        raise BadInput(f"policy {spec!r}: cannot import module {module_name!r}: {exc}") from None
     fn = module
     for part in attr.split("."):
         fn = getattr(fn, part, None)
         if fn is None:
-            raise ValueError(f"policy {spec!r}: module {module_name!r} has no {attr!r}")
+            raise BadInput(f"policy {spec!r}: module {module_name!r} has no {attr!r}")
     if not callable(fn):
-        raise ValueError(f"policy {spec!r}: {attr!r} is not callable")
+        raise BadInput(f"policy {spec!r}: {attr!r} is not callable")
     return CallablePolicy(fn, spec, frame_stack)
 
 
@@ -283,7 +284,7 @@ def load_policy(spec, env_id: str | None = None, agent: str | None = None,
     the agent it was trained for (a ValueError says so otherwise). ``frame_stack`` may only
     repeat a model's own."""
     if frame_stack is not None and (isinstance(frame_stack, bool) or int(frame_stack) < 1):
-        raise ValueError(f"frame_stack must be >= 1, got {frame_stack}")
+        raise BadInput(f"frame_stack must be >= 1, got {frame_stack}")
     if isinstance(spec, PolicyNetwork):
         spec = NetworkPolicy(spec, deterministic=deterministic, name="policy network")
     if isinstance(spec, Policy):
@@ -295,7 +296,7 @@ def load_policy(spec, env_id: str | None = None, agent: str | None = None,
     elif callable(spec):
         pol = CallablePolicy(spec, getattr(spec, "__name__", "callable"), frame_stack)
     elif not isinstance(spec, (str, os.PathLike)):
-        raise TypeError(f"policy must be a path, 'module:function', 'random' or 'scripted', got {spec!r}")
+        raise BadInputType(f"policy must be a path, 'module:function', 'random' or 'scripted', got {spec!r}")
     else:
         spec = os.fspath(spec)
         if spec == "random":
@@ -308,17 +309,17 @@ def load_policy(spec, env_id: str | None = None, agent: str | None = None,
         elif ":" in spec:
             pol = _import_callable(spec, frame_stack)
         else:
-            raise ValueError(f"policy {spec!r} is neither 'random', 'scripted', an existing policy file, nor "
+            raise BadInput(f"policy {spec!r} is neither 'random', 'scripted', an existing policy file, nor "
                              "'module:function'")
     if pol.kind == "model":
         trained_env = pol.metadata.get("env_id")
         if env_id is not None and trained_env not in (None, env_id):
-            raise ValueError(f"policy {pol.name!r} was trained for {trained_env}, not {env_id}")
+            raise BadInput(f"policy {pol.name!r} was trained for {trained_env}, not {env_id}")
         if agent is not None and agent not in pol.agents:
-            raise ValueError(f"policy {pol.name!r} was trained for {', '.join(pol.agents)}, not {agent!r}; a "
+            raise BadInput(f"policy {pol.name!r} was trained for {', '.join(pol.agents)}, not {agent!r}; a "
                              "policy is scored on the agent it was trained for")
         if frame_stack is not None and int(frame_stack) != pol.frame_stack:
-            raise ValueError(f"frame_stack {frame_stack} contradicts the model's ({pol.frame_stack})")
+            raise BadInput(f"frame_stack {frame_stack} contradicts the model's ({pol.frame_stack})")
     return pol
 
 
@@ -329,7 +330,7 @@ class FrameStack:
 
     def __init__(self, n: int):
         if int(n) < 1:
-            raise ValueError(f"frame_stack must be >= 1, got {n}")
+            raise BadInput(f"frame_stack must be >= 1, got {n}")
         self.n = int(n)
         self._buf = None
 
@@ -416,7 +417,7 @@ def _check_seeds(seeds, episodes) -> list[int]:
 
     seeds = list(eval_seeds(episodes) if seeds is None else seeds)
     if not seeds:
-        raise ValueError("seeds must not be empty")
+        raise BadInput("seeds must not be empty")
     return [check_seed(s, "evaluation seed", allow_none=False) for s in seeds]
 
 
@@ -491,14 +492,14 @@ def evaluate_joint(env_id: str, policy, agents=None, episodes: int = PROTOCOL_EP
     domain = get_domain(env_id)
     pol = load_policy(policy, env_id, deterministic=deterministic)
     if pol.kind == "callable":
-        raise ValueError("the multi-agent track scores joint policy files, 'random' or 'scripted'")
+        raise BadInput("the multi-agent track scores joint policy files, 'random' or 'scripted'")
     if agents is None:
         agents = list(pol.agents) if pol.kind == "model" else domain.agents(**options)
     agents = domain.check_agents(agents, **options)
     if isinstance(pol, NetworkPolicy):
         missing = [a for a in agents if a not in pol.agents]
         if missing:
-            raise ValueError(f"policy {pol.name!r} has no weights for {missing}")
+            raise BadInput(f"policy {pol.name!r} has no weights for {missing}")
         if tuple(agents) != pol.agents:
             pol = pol.for_agents(agents)
     seeds = _check_seeds(seeds, episodes)

@@ -36,6 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ials_zoo.errors import BadInput, BadInputType
 from ials_zoo.utils import loads_untrusted_json
 
 FORMAT = "ials_zoo.policy"
@@ -47,7 +48,7 @@ MAX_FILE_BYTES = 256 * 2**20
 MAX_ZIP_MEMBER_BYTES = 256 * 2**20
 
 
-class PolicyFileError(ValueError):
+class PolicyFileError(BadInput):
     """A policy file is malformed, foreign, or does not fit what it is used for."""
 
 
@@ -142,7 +143,7 @@ class PolicyNetwork:
         if squeeze:
             h = h[:, None, :]
         if h.shape[0] != len(self.agents) or h.shape[-1] != self.input_size:
-            raise ValueError(f"policy input must be [{len(self.agents)}, n, {self.input_size}], got {h.shape}")
+            raise BadInput(f"policy input must be [{len(self.agents)}, n, {self.input_size}], got {h.shape}")
         last = len(self._layers64) - 1
         for i, (w, b) in enumerate(self._layers64):
             h = np.matmul(h, w) + b
@@ -163,7 +164,7 @@ class PolicyNetwork:
         if deterministic:
             return p.argmax(axis=-1)
         if rng is None:
-            raise ValueError("a stochastic policy needs a random generator")
+            raise BadInput("a stochastic policy needs a random generator")
         cum = np.cumsum(p, axis=-1)
         u = rng.random(p.shape[:-1] + (1,))
         return np.minimum((cum < u).sum(axis=-1), self.n_actions - 1)
@@ -209,7 +210,7 @@ def _json_default(o):
         return o.item()
     if isinstance(o, np.ndarray):
         return o.tolist()
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+    raise BadInputType(f"not JSON serialisable: {type(o).__name__}")
 
 
 def load_policy_file(path) -> PolicyNetwork:
@@ -334,7 +335,7 @@ def policy_from_sb3_model(model, agent: str, frame_stack: int = 1, metadata: dic
     state = {k: v.detach().cpu().numpy() for k, v in model.policy.state_dict().items()}
     width = int(np.prod(model.observation_space.shape))
     if width % frame_stack:
-        raise ValueError(f"observation width {width} is not a multiple of frame_stack {frame_stack}")
+        raise BadInput(f"observation width {width} is not a multiple of frame_stack {frame_stack}")
     act = model.policy.activation_fn.__name__.lower() if hasattr(model.policy, "activation_fn") else "tanh"
     return policy_from_state_dict(state, agent, width // frame_stack, frame_stack, act, metadata)
 

@@ -28,13 +28,8 @@ import numpy as np
 from gymnasium import spaces
 
 from ials_zoo.core.domains import get_domain
+from ials_zoo.errors import BadInput, BadInputType
 from ials_zoo.processes import Worker, call_all, start_all
-
-
-def needs_own_process(env_id: str) -> bool:
-    """True when each GS of ``env_id`` must live in its own process (SUMO via libsumo):
-    ``Domain.one_simulation_per_process``."""
-    return get_domain(env_id).one_simulation_per_process
 
 
 def box_space(space: spaces.Space) -> spaces.Box:
@@ -45,16 +40,10 @@ def box_space(space: spaces.Space) -> spaces.Box:
         return spaces.Box(
             space.low.astype(np.float32), space.high.astype(np.float32), dtype=np.float32
         )
-    raise TypeError(
+    raise BadInputType(
         f"observation space {space!r} is not supported by the baselines; expected a Box or "
         "MultiBinary"
     )
-
-
-def check_agent(env_id: str, agent: str, **options) -> str:
-    """Raise a ValueError naming the domain's agents when ``agent`` is not one of them
-    (:meth:`ials_zoo.core.Domain.check_agent`)."""
-    return get_domain(env_id).check_agent(agent, **options)
 
 
 class SingleAgentGS(gymnasium.Env):
@@ -76,7 +65,7 @@ class SingleAgentGS(gymnasium.Env):
 
     def __init__(self, env_id: str, agent: str, scripted_learner: bool = False, **options):
         self.env_id = env_id
-        self.agent = check_agent(env_id, agent, **options)
+        self.agent = get_domain(env_id).check_agent(agent, **options)
         self.scripted_learner = bool(scripted_learner)
         self.options = dict(options)
         dom = get_domain(env_id)
@@ -271,13 +260,13 @@ def make_gs_vec_env(
     from stable_baselines3.common.vec_env import DummyVecEnv
 
     if n_envs < 1:
-        raise ValueError(f"n_envs must be >= 1, got {n_envs}")
+        raise BadInput(f"n_envs must be >= 1, got {n_envs}")
     if vec_env not in ("auto", "dummy", "subproc"):
-        raise ValueError(f"vec_env must be 'auto', 'dummy' or 'subproc', got {vec_env!r}")
-    check_agent(env_id, agent)
-    own = needs_own_process(env_id)
+        raise BadInput(f"vec_env must be 'auto', 'dummy' or 'subproc', got {vec_env!r}")
+    get_domain(env_id).check_agent(agent)
+    own = get_domain(env_id).one_simulation_per_process
     if vec_env == "dummy" and own:
-        raise ValueError(
+        raise BadInput(
             f"{env_id} holds one simulation per process (libsumo); use vec_env='subproc'"
         )
     subproc = vec_env == "subproc" or (vec_env == "auto" and own)

@@ -27,6 +27,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from ials_zoo.errors import BadInput
+
 CI_LEVEL = 0.95
 BOOTSTRAP_RESAMPLES = 9999
 BOOTSTRAP_SEED = 0
@@ -37,9 +39,9 @@ SEEDS_METHOD = "student-t"
 def _values(values) -> np.ndarray:
     x = np.asarray(values, dtype=np.float64)
     if x.ndim != 1 or x.size == 0:
-        raise ValueError(f"need a non-empty 1-D sequence of values, got shape {x.shape}")
+        raise BadInput(f"need a non-empty 1-D sequence of values, got shape {x.shape}")
     if not np.isfinite(x).all():
-        raise ValueError("values must be finite numbers")
+        raise BadInput("values must be finite numbers")
     return x
 
 
@@ -96,7 +98,7 @@ def iqm_interval(per_task: Sequence[Sequence[float]], level: float = CI_LEVEL) -
 
     samples = [_values(x) for x in per_task]
     if not samples:
-        raise ValueError("need the scores of at least one task")
+        raise BadInput("need the scores of at least one task")
     point = iqm(np.concatenate(samples))
     if all(x.size == 1 or np.all(x == x[0]) for x in samples):
         return point, point, point
@@ -143,7 +145,7 @@ def interval(values: Sequence[float], method: str, level: float = CI_LEVEL) -> t
         return bootstrap_interval(values, level)
     if method == SEEDS_METHOD:
         return t_interval(values, level)
-    raise ValueError(f"unknown interval method {method!r}; expected {EPISODES_METHOD!r} or {SEEDS_METHOD!r}")
+    raise BadInput(f"unknown interval method {method!r}; expected {EPISODES_METHOD!r} or {SEEDS_METHOD!r}")
 
 
 __all__ = [

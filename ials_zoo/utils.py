@@ -10,6 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ials_zoo.errors import BadInput, BadInputType
+
 _UMASK = os.umask(0)
 os.umask(_UMASK)
 
@@ -73,12 +75,12 @@ def _float_sized_int(text: str) -> int:
     try:
         float(value)
     except OverflowError:
-        raise ValueError(f"the integer {text[:20]}... does not fit a float") from None
+        raise BadInput(f"the integer {text[:20]}... does not fit a float") from None
     return value
 
 
 def _no_constant(name: str):
-    raise ValueError(f"{name} is not a number JSON allows")
+    raise BadInput(f"{name} is not a number JSON allows")
 
 
 def loads_untrusted_json(text: str | bytes, max_depth: int = MAX_JSON_DEPTH):
@@ -89,7 +91,7 @@ def loads_untrusted_json(text: str | bytes, max_depth: int = MAX_JSON_DEPTH):
         text = text.decode("utf-8")
     depth = json_depth(text)
     if depth > max_depth:
-        raise ValueError(f"JSON nested {depth} deep; at most {max_depth} is accepted")
+        raise BadInput(f"JSON nested {depth} deep; at most {max_depth} is accepted")
     return json.loads(text, parse_int=_float_sized_int, parse_constant=_no_constant)
 
 
@@ -104,13 +106,13 @@ def read_regular_file(path: str | os.PathLike, max_bytes: int, follow_links: boo
         fd = os.open(path, flags)
     except OSError as exc:
         if not follow_links and os.path.islink(path):
-            raise ValueError(f"{str(path)!r} is a symbolic link; only regular files are read") from None
-        raise ValueError(f"cannot read {str(path)!r}: {exc.strerror or exc}") from None
+            raise BadInput(f"{str(path)!r} is a symbolic link; only regular files are read") from None
+        raise BadInput(f"cannot read {str(path)!r}: {exc.strerror or exc}") from None
     try:
         mode = os.fstat(fd).st_mode
         if not stat.S_ISREG(mode):
             kind = "a folder" if stat.S_ISDIR(mode) else "not a regular file"
-            raise ValueError(f"{str(path)!r} is {kind}")
+            raise BadInput(f"{str(path)!r} is {kind}")
         chunks, total = [], 0
         while total <= max_bytes:
             chunk = os.read(fd, min(1 << 20, max_bytes + 1 - total))
@@ -121,7 +123,7 @@ def read_regular_file(path: str | os.PathLike, max_bytes: int, follow_links: boo
     finally:
         os.close(fd)
     if total > max_bytes:
-        raise ValueError(f"{str(path)!r} has more than {max_bytes:,} bytes")
+        raise BadInput(f"{str(path)!r} has more than {max_bytes:,} bytes")
     return b"".join(chunks)
 
 
@@ -133,9 +135,9 @@ def parse_json_object(text: str | None, name: str) -> dict:
     try:
         value = json.loads(text)
     except json.JSONDecodeError as exc:
-        raise ValueError(f"{name} must be a JSON object, got {text!r} ({exc})") from None
+        raise BadInput(f"{name} must be a JSON object, got {text!r} ({exc})") from None
     if not isinstance(value, dict):
-        raise ValueError(f"{name} must be a JSON object, got {text!r}")
+        raise BadInput(f"{name} must be a JSON object, got {text!r}")
     return value
 
 
@@ -148,9 +150,9 @@ def check_seed(seed, name: str = "seed", upper: int = SEED_MAX, allow_none: bool
     if seed is None and allow_none:
         return None
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
-        raise TypeError(f"{name} must be an int in [0, {upper}], got {seed!r}")
+        raise BadInputType(f"{name} must be an int in [0, {upper}], got {seed!r}")
     if not 0 <= int(seed) <= upper:
-        raise ValueError(f"{name} must be an int in [0, {upper}], got {seed!r}")
+        raise BadInput(f"{name} must be an int in [0, {upper}], got {seed!r}")
     return int(seed)
 
 
@@ -161,7 +163,7 @@ def check_reset_options(options, known=()) -> dict:
     if options is None:
         return {}
     if not isinstance(options, dict):
-        raise TypeError(f"reset options must be a dict or None, got {type(options).__name__} {options!r}")
+        raise BadInputType(f"reset options must be a dict or None, got {type(options).__name__} {options!r}")
     unknown = sorted(str(k) for k in options if k not in known)
     if unknown:
         import warnings
@@ -176,17 +178,17 @@ def check_output_file(path, option: str = "--out") -> Path:
     its folder exists (or can be made) and is writable. A ValueError naming ``option``."""
     path = Path(path)
     if path.is_dir():
-        raise ValueError(f"{option} {str(path)!r} is a folder; give a file name")
+        raise BadInput(f"{option} {str(path)!r} is a folder; give a file name")
     parent = path.parent if str(path.parent) else Path(".")
     existing = parent
     while not existing.exists():
         existing = existing.parent
     if not existing.is_dir():
-        raise ValueError(f"{option} {str(path)!r}: {str(existing)!r} is not a folder")
+        raise BadInput(f"{option} {str(path)!r}: {str(existing)!r} is not a folder")
     if not os.access(existing, os.W_OK | os.X_OK):
-        raise ValueError(f"{option} {str(path)!r}: cannot write in {str(existing)!r}")
+        raise BadInput(f"{option} {str(path)!r}: cannot write in {str(existing)!r}")
     if path.exists() and not os.access(path, os.W_OK):
-        raise ValueError(f"{option} {str(path)!r} exists and is not writable")
+        raise BadInput(f"{option} {str(path)!r} exists and is not writable")
     return path
 
 

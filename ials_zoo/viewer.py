@@ -11,6 +11,8 @@ import os
 
 import numpy as np
 
+from ials_zoo.errors import BadInput
+
 _BAR = (250, 250, 250)
 _TEXT = (20, 20, 20)
 
@@ -56,9 +58,9 @@ def save_gif(frames, path: str | os.PathLike, fps: float = 5.0) -> None:
 
     frames = list(frames)
     if not frames:
-        raise ValueError("save_gif needs at least one frame")
+        raise BadInput("save_gif needs at least one frame")
     if not fps > 0:
-        raise ValueError(f"fps must be > 0, got {fps!r}")
+        raise BadInput(f"fps must be > 0, got {fps!r}")
     images = [Image.fromarray(np.asarray(f, dtype=np.uint8)) for f in frames]
     with atomic_path(path, suffix=".gif") as tmp:
         images[0].save(tmp, format="GIF", save_all=True, append_images=images[1:],
@@ -70,7 +72,7 @@ def record_episode(env, actions_fn=None, seed: int | None = None, legend=()) -> 
 
     ``actions_fn(obs) -> {agent: action}``; default: uniformly random actions."""
     if env.render_mode != "rgb_array":
-        raise ValueError(f"record_episode needs render_mode='rgb_array', got {env.render_mode!r}")
+        raise BadInput(f"record_episode needs render_mode='rgb_array', got {env.render_mode!r}")
     obs, _ = env.reset(seed=seed)
     total, t = 0.0, 0
     frames = [annotate(env.render(), "step 0", legend)]

@@ -8,8 +8,8 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import VecEnvWrapper
 
 from ials_zoo.baselines import ppo_shared, ppo_single
-from ials_zoo.baselines.aip_record import predictor_for
 from ials_zoo.evaluation import eval_seeds, evaluate
+from ials_zoo.influence.specs import predictor_for
 from ials_zoo.leaderboard import load_result
 
 ENV, AGENT = "warehouse_v0", "robot_20"
@@ -21,7 +21,7 @@ TINY = dict(env_id=ENV, total_timesteps=1024, n_envs=4, n_steps=64, batch_size=1
 def small_aip(tmp_path_factory):
     """A real (tiny) AIP: Algorithm 1 on the GS, then a short MLP training, saved to a file."""
     from ials_zoo.influence.dataset import collect
-    from ials_zoo.influence.predictors import save_predictor
+    from ials_zoo.influence.files import save_predictor
     from ials_zoo.influence.train import train_predictor
 
     data = collect(ENV, AGENT, steps=1000, progress=False)
@@ -79,7 +79,7 @@ def test_ppo_single_scales_rewards_over_every_step_and_checkpoints_the_scale(tmp
     assert "reward_rms" not in torch.load(plain / "checkpoint.pt", weights_only=True)
 
 def test_ppo_single_on_trained_ials_counts_aip_time(tmp_path, small_aip):
-    from ials_zoo.influence.predictors import load_predictor
+    from ials_zoo.influence.files import load_predictor
 
     out = tmp_path / "run"
     result = ppo_single.main(ppo_single.Args(simulator=small_aip, out_dir=str(out), **TINY))

@@ -40,7 +40,7 @@ def test_ppo_single_traffic_gs(tmp_path):
 @pytest.fixture(scope="module")
 def traffic_aip(tmp_path_factory):
     from ials_zoo.influence.dataset import collect
-    from ials_zoo.influence.predictors import save_predictor
+    from ials_zoo.influence.files import save_predictor
     from ials_zoo.influence.train import train_predictor
 
     data = collect(ENV, AGENT, steps=600, progress=False)

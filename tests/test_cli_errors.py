@@ -61,3 +61,26 @@ def test_bad_input_is_one_clear_error_before_any_work(files, capsys, argv, words
     command = argv[0]
     assert f"ials-zoo {command}" in err and words in err and "Traceback" not in err
     assert not (files / "r").exists() and not (files / "o.pt").exists() and not (files / "c.npz").exists()
+
+
+def test_a_bug_shows_its_traceback_while_bad_input_does_not(monkeypatch, capsys):
+    """Only ``ials_zoo.errors.BadInput`` (what our checks raise) is printed as one line with
+    exit status 2; a ValueError from numpy inside a command is a bug and propagates."""
+    import numpy as np
+
+    from ials_zoo.commands import evaluate
+    from ials_zoo.errors import BadInput
+
+    def bug(args):
+        return np.zeros(-1)  # numpy's own ValueError
+
+    monkeypatch.setattr(evaluate, "run", bug)
+    with pytest.raises(ValueError, match="negative dimensions"):
+        main(["evaluate", "--env", "warehouse_v0", "--policy", "random"])
+
+    def bad(args):
+        raise BadInput("--policy: nothing there")
+
+    monkeypatch.setattr(evaluate, "run", bad)
+    assert main(["evaluate", "--env", "warehouse_v0", "--policy", "random"]) == 2
+    assert capsys.readouterr().err.strip() == "ials-zoo evaluate: --policy: nothing there"

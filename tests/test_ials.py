@@ -5,15 +5,11 @@ import numpy as np
 import pytest
 
 import ials_zoo
+from ials_zoo.influence.constant import FixedPredictor, UniformPredictor
 from ials_zoo.influence.dataset import InfluenceDataset, collect
+from ials_zoo.influence.files import save_predictor
 from ials_zoo.influence.ials import IALSEnv, IALSVecEnv, make_ials, make_ials_vec_env
-from ials_zoo.influence.predictors import (
-    FixedPredictor,
-    GRUPredictor,
-    UniformPredictor,
-    save_predictor,
-    untrained_predictor,
-)
+from ials_zoo.influence.networks import GRUPredictor, untrained_predictor
 from ials_zoo.warehouse import regions as R
 
 ENV = "warehouse_v0"
@@ -255,7 +251,7 @@ def test_collect_and_train_aip_commands(tmp_path, capsys):
     import json
 
     from ials_zoo.cli import main
-    from ials_zoo.influence.predictors import load_predictor
+    from ials_zoo.influence.files import load_predictor
 
     data = tmp_path / "wh.npz"
     assert main(["collect", "--env", ENV, "--agent", AGENT, "--steps", "300", "--seed", "2",

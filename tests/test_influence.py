@@ -9,19 +9,11 @@ import numpy as np
 import pytest
 
 from ials_zoo.core.region import RegionSpec
+from ials_zoo.influence.constant import FixedPredictor, MarginalPredictor, UniformPredictor
 from ials_zoo.influence.dataset import InfluenceDataset
-from ials_zoo.influence.predictors import (
-    FixedPredictor,
-    GRUPredictor,
-    MarginalPredictor,
-    MLPPredictor,
-    UniformPredictor,
-    cross_entropy_per_source,
-    evaluate_cross_entropy,
-    load_predictor,
-    save_predictor,
-    untrained_predictor,
-)
+from ials_zoo.influence.files import load_predictor, save_predictor
+from ials_zoo.influence.metrics import cross_entropy_per_source, evaluate_cross_entropy
+from ials_zoo.influence.networks import GRUPredictor, MLPPredictor, untrained_predictor
 
 D = 6
 
@@ -104,7 +96,7 @@ def test_gru_uses_memory_where_mlp_cannot():
 def test_numpy_inference_matches_torch(arch):
     import torch
 
-    from ials_zoo.influence.predictors import init_arrays
+    from ials_zoo.influence.networks import init_arrays
     from ials_zoo.influence.train import _torch_modules
 
     region = _region()

@@ -5,7 +5,7 @@ import copy
 import numpy as np
 import pytest
 
-from ials_zoo.influence.predictors import GRUPredictor, MLPPredictor
+from ials_zoo.influence.networks import GRUPredictor, MLPPredictor
 from ials_zoo.warehouse import regions as R
 
 

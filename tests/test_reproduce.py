@@ -228,7 +228,7 @@ def test_off_policy_cross_entropy_exposes_a_spurious_cue():
              for k in ("dset", "full")}
     _, test = on.split(0.1)
     ce = X.off_policy_cross_entropy(preds, on, test, {"other": off})
-    from ials_zoo.influence.predictors import evaluate_cross_entropy
+    from ials_zoo.influence.metrics import evaluate_cross_entropy
 
     assert ce["full"]["off_policy"]["other"] == pytest.approx(evaluate_cross_entropy(preds["full"], off))
     assert ce["full"]["on_policy"] < 0.3  # it learned the cue...

@@ -1,5 +1,6 @@
-"""What a single-agent training run says about its simulator: the ``--simulator`` vocabulary
-(GS or an IALS with which AIP) and the AIP record of the result (its file, sha256 and cost).
+"""What a single-agent training run says about its simulator's AIP: the ``training.aip``
+record of the result (its file, sha256 and cost). The ``--simulator`` vocabulary itself is
+:mod:`ials_zoo.influence.specs`'s.
 """
 
 from __future__ import annotations
@@ -10,27 +11,7 @@ from pathlib import Path
 
 from ials_zoo.evaluation import sha256_file
 from ials_zoo.influence.ials import pretrained_path
-from ials_zoo.influence.specs import parse_simulator
-from ials_zoo.influence.specs import simulator_label as label
-
-GS = "gs"
-
-
-def predictor_for(simulator: str) -> str | None:
-    """The ``predictor`` argument of the IALS factory for a ``--simulator`` value, or None for
-    the GS (the vocabulary of :mod:`ials_zoo.influence.specs`; a ValueError naming it for
-    anything else)."""
-
-    spec = parse_simulator(simulator)
-    return None if spec is None else str(spec)
-
-
-def simulator_label(simulator: str, aip: dict | None) -> str:
-    """The training-simulator name a result carries for a ``--simulator`` value (a predictor
-    file is named by what it holds: ``ials`` for a trained AIP; the file itself, with its
-    sha256, is recorded in ``training.aip``)."""
-
-    return label(simulator, (aip or {}).get("variant"))
+from ials_zoo.influence.specs import GS, predictor_for
 
 
 def predictor_record(venv, simulator: str, env_id: str, agent: str, made_now: bool = True) -> dict | None:
@@ -65,7 +46,7 @@ def predictor_record(venv, simulator: str, env_id: str, agent: str, made_now: bo
     return {
         "variant": str(meta.get("variant") or predictor_for(simulator)),
         "class": type(pred).__name__ if pred is not None else None,
-        "file": _portable(file) if file else None,
+        "file": portable_path(file) if file else None,
         "charged": bool(made_now),
         "sha256": sha,
         "collection_seconds": float(collect or 0.0),
@@ -74,7 +55,7 @@ def predictor_record(venv, simulator: str, env_id: str, agent: str, made_now: bo
     }
 
 
-def _portable(path) -> str:
+def portable_path(path) -> str:
     """A file inside the installed package as ``ials_zoo/<path in the package>``; any other
     file as given."""
     import ials_zoo

@@ -8,6 +8,7 @@ import argparse
 import dataclasses
 import typing
 
+from ials_zoo.errors import BadInput
 from ials_zoo.processes import WorkerError
 from ials_zoo.utils import parse_json_object
 
@@ -66,7 +67,7 @@ def run_cli(module) -> int:
     except KeyboardInterrupt:
         print(f"{name}: interrupted", file=sys.stderr)
         return 130
-    except (ValueError, TypeError, FileNotFoundError) as exc:
+    except (BadInput, FileNotFoundError) as exc:  # any other ValueError is a bug: traceback
         print(f"{name}: {exc}", file=sys.stderr)
         return 2
     except RuntimeError as exc:  # a worker died or stopped: named by the error, no traceback
@@ -115,17 +116,17 @@ def check_ppo_settings(args) -> None:
     import math
 
     if args.n_epochs < 1:
-        raise ValueError(f"n_epochs must be >= 1, got {args.n_epochs}")
+        raise BadInput(f"n_epochs must be >= 1, got {args.n_epochs}")
     for name in ("learning_rate", "clip_range", "max_grad_norm"):
         value = getattr(args, name)
         if not (math.isfinite(value) and value > 0):
-            raise ValueError(f"{name} must be a finite number > 0, got {value}")
+            raise BadInput(f"{name} must be a finite number > 0, got {value}")
     for name in ("ent_coef", "vf_coef"):
         if not (math.isfinite(getattr(args, name)) and getattr(args, name) >= 0):
-            raise ValueError(f"{name} must be a finite number >= 0, got {getattr(args, name)}")
+            raise BadInput(f"{name} must be a finite number >= 0, got {getattr(args, name)}")
     for name in ("gamma", "gae_lambda"):
         if not 0.0 <= getattr(args, name) <= 1.0:
-            raise ValueError(f"{name} must be in [0, 1], got {getattr(args, name)}")
+            raise BadInput(f"{name} must be in [0, 1], got {getattr(args, name)}")
 
 
 def parse_env_options(text: str | None) -> dict:

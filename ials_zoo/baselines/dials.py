@@ -25,8 +25,10 @@ The loop (the authors' follow-up, SPEC §6):
    (:mod:`ials_zoo.dials.shard`).
 
 ``--aip``: ``trained`` (collected and trained at step 0, timed), ``untrained`` (random
-networks), ``uniform``, ``fixed:P``, ``shipped`` (the AIPs that ship with the package; their
-recorded collection and training time is charged) or a predictor-set file.
+networks), ``uniform``, ``fixed:P``, ``shipped`` (the AIPs that ship with the package) or a
+predictor-set file. Only what the run does is on its clock: a shipped set's or a file's
+recorded collection and training seconds are reported in ``training.aip`` (``charged:
+false``), not added.
 
 **Learners**: ``--learner batched`` (default: every agent's PPO in one torch program,
 :mod:`ials_zoo.learners.batched_ppo`) or ``sb3`` (one stable-baselines3 PPO per agent, the
@@ -53,11 +55,12 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from ials_zoo.baselines.aip_record import portable_path
 from ials_zoo.baselines.arguments import arg, parse_env_options, run_cli
 from ials_zoo.baselines.driver import RunPlan, check_run_args, run
 from ials_zoo.baselines.multiagent import (
     JointActor,
-    MultiPPOSettings,
+    MultiAgentRunArgs,
     check_multi_ppo,
     frame_stack_of,
     merge_shard_stats,
@@ -69,6 +72,7 @@ from ials_zoo.baselines.multiagent import (
 from ials_zoo.core.domains import domain_ids, get_domain
 from ials_zoo.dials.backends import BACKENDS, InProcessBackend, check_ray_address, make_backend
 from ials_zoo.dials.shard import LEARNERS, ShardSpec, split_agents
+from ials_zoo.errors import BadInput
 from ials_zoo.evaluation import sha256_file
 from ials_zoo.influence.dataset import collect_all
 from ials_zoo.influence.files import load_predictor_set
@@ -92,13 +96,9 @@ def _refresh_text(domain) -> str:
 
 
 @dataclass
-class Args(MultiPPOSettings):
+class Args(MultiAgentRunArgs):
     """Arguments of :func:`main` (``python -m baselines.dials --help``)."""
 
-    env_id: str | None = arg(None, "domain id (required)", aliases=("--env",))
-    agents: str = arg("all", "learning agents, comma-separated, or 'all'")
-    seed: int = arg(0, "run seed")
-    total_timesteps: int | None = arg(None, "environment steps per agent (default: the domain's multi-agent budget)")
     refresh: str = arg("default", lambda: "retrain the AIPs every N steps per agent, 'once' (at the start), 'never', "
                        f"or 'default' (the domain's: {_per_domain(_refresh_text)})")
     aip: str = arg("trained", "initial AIPs: trained | untrained | uniform | fixed:P | shipped | FILE.pt")
@@ -116,16 +116,7 @@ class Args(MultiPPOSettings):
     workers: int | None = arg(None, "worker processes (default: one per core; 0: this process)")
     backend: str = arg("process", "process | ray")
     ray_address: str | None = arg(None, "an existing Ray cluster (host:port); default: a local Ray")
-    env_options: str = arg("", "domain options as a JSON object")
-    eval_every: int | None = arg(None, "GS evaluation every N steps per agent (default: a tenth of the budget)")
-    eval_episodes: int = arg(10, "GS episodes per evaluation")
-    final_eval_episodes: int = arg(20, "GS episodes of the final score (the protocol's 20)")
     out_dir: str | None = arg(None, "output folder (default: runs/<env>__dials__s<seed>)")
-    resume: bool = arg(False, "continue the unfinished run in --out-dir from its last checkpoint")
-    overwrite: bool = arg(False, "replace whatever --out-dir holds")
-    progress: bool = arg(True, "show a progress bar")
-    submitter: str = arg("", "submitter name for result.json")
-    notes: str = arg("", "notes for result.json")
 
 
 def parse_refresh(text: str, default: int) -> int | None:
@@ -142,14 +133,14 @@ def parse_refresh(text: str, default: int) -> int | None:
     except ValueError:
         n = 0
     if n < 1:
-        raise ValueError(f"--refresh {text!r}: expected a number of steps >= 1, 'once', 'never' or 'default'")
+        raise BadInput(f"--refresh {text!r}: expected a number of steps >= 1, 'once', 'never' or 'default'")
     return n
 
 
 def check_args(args: Args):
     """Clear errors before anything starts; returns (domain, agents, options, refresh, copies)."""
     if args.env_id is None:
-        raise ValueError(f"name the domain to train on: --env, one of {', '.join(domain_ids())}")
+        raise BadInput(f"name the domain to train on: --env, one of {', '.join(domain_ids())}")
     domain = get_domain(args.env_id)
     options = parse_env_options(args.env_options)
     agents = domain.check_agents(None if args.agents == "all" else args.agents, **options)
@@ -158,33 +149,33 @@ def check_args(args: Args):
     refresh = parse_refresh(args.refresh, domain.dials.refresh)
     if args.aip == "shipped":
         if not shipped_set_path(args.env_id).is_file():
-            raise ValueError(f"--aip shipped: no AIPs ship for {args.env_id}")
+            raise BadInput(f"--aip shipped: no AIPs ship for {args.env_id}")
         if refresh is not None:
-            raise ValueError("--aip shipped is a fixed AIP set: use --refresh never (retraining would replace it)")
+            raise BadInput("--aip shipped is a fixed AIP set: use --refresh never (retraining would replace it)")
     else:
         spec = parse_predictor(args.aip)
         if spec.kind == "file" and not os.path.isfile(spec.path):
-            raise ValueError(f"--aip {args.aip!r}: file not found")
+            raise BadInput(f"--aip {args.aip!r}: file not found")
         if spec.kind not in ("trained", "file") and refresh is not None:
-            raise ValueError(f"--aip {args.aip} is a fixed AIP: use --refresh never (retraining would replace it)")
+            raise BadInput(f"--aip {args.aip} is a fixed AIP: use --refresh never (retraining would replace it)")
     check_run_args(args)
     if args.aip_lr is not None and not (math.isfinite(args.aip_lr) and args.aip_lr > 0):
-        raise ValueError(f"aip_lr must be a finite number > 0, got {args.aip_lr}")
+        raise BadInput(f"aip_lr must be a finite number > 0, got {args.aip_lr}")
     for name in ("collect_steps", "aip_epochs"):
         v = getattr(args, name)
         if v is not None and v < 1:
-            raise ValueError(f"{name} must be >= 1, got {v}")
+            raise BadInput(f"{name} must be >= 1, got {v}")
     copies = int(args.n_envs or domain.dials.copies)
     ppo_config(args, copies)
     if args.workers is not None and args.workers < 0:
-        raise ValueError(f"workers must be >= 0, got {args.workers}")
+        raise BadInput(f"workers must be >= 0, got {args.workers}")
     if args.learner not in LEARNERS:
-        raise ValueError(f"unknown learner {args.learner!r}; expected one of {LEARNERS}")
+        raise BadInput(f"unknown learner {args.learner!r}; expected one of {LEARNERS}")
     if args.backend not in BACKENDS:
-        raise ValueError(f"unknown backend {args.backend!r}; expected one of {BACKENDS}")
+        raise BadInput(f"unknown backend {args.backend!r}; expected one of {BACKENDS}")
     if args.ray_address is not None:
         if args.backend != "ray":
-            raise ValueError("--ray-address needs --backend ray")
+            raise BadInput("--ray-address needs --backend ray")
         check_ray_address(args.ray_address)
     return domain, agents, options, refresh, copies
 
@@ -200,17 +191,15 @@ def default_workers(n_agents: int) -> int:
 
 
 def initial_aips(args, env_id, agents, options, seed) -> tuple[dict, float]:
-    """``({agent: AIP}, seconds to charge)`` before round 0's collection (if any)."""
+    """``({agent: AIP}, seconds to charge)`` before round 0's collection (if any). Only AIPs
+    this run trains are charged: a shipped set's recorded cost is reported in
+    ``training.aip``, not added to this run's wall-clock."""
 
     if args.aip in ("trained", "untrained"):  # "trained": replaced by round 0's AIPs
         preds = resolve_predictor_set("untrained", env_id, agents, seed=seed, options=options)
         return dict(zip(agents, preds)), 0.0
-    if args.aip == "shipped":
-        preds = resolve_predictor_set(str(shipped_set_path(env_id)), env_id, agents, options=options)
-        cost = max((p.metadata.get("dataset", {}).get("collect_seconds") or 0.0) + (p.metadata.get("train_seconds") or 0.0)
-                   for p in preds)
-        return dict(zip(agents, preds)), float(cost)
-    preds = resolve_predictor_set(args.aip, env_id, agents, seed=seed, options=options)
+    source = str(shipped_set_path(env_id)) if args.aip == "shipped" else args.aip
+    preds = resolve_predictor_set(source, env_id, agents, seed=seed, options=options)
     return dict(zip(agents, preds)), 0.0
 
 
@@ -263,7 +252,7 @@ class ShardsLearner:
         if state is None:
             self.aips, self.charged_seconds = initial_aips(args, args.env_id, self.agents, self.options, args.seed)
             if args.aip != "trained":
-                self.training["aip"] = _fixed_aip_record(args.aip, args.env_id, self.aips, self.charged_seconds)
+                self.training["aip"] = _fixed_aip_record(args.aip, args.env_id, self.aips)
             return
         self.aips = load_predictor_set(self.out / "aips.pt", env_id=args.env_id)
         self.state = state
@@ -378,23 +367,26 @@ def main(args: Args | None = None) -> dict:
                f"{args.aip}, retrained {refresh_text}", domain)
 
 
-def _fixed_aip_record(aip: str, env_id: str, aips: dict, charged: float) -> dict:
-    """``training.aip`` of AIPs that DIALS does not train (untrained, fixed, shipped, a file)."""
+def _fixed_aip_record(aip: str, env_id: str, aips: dict) -> dict:
+    """``training.aip`` of AIPs that DIALS does not train (untrained, fixed, shipped, a file):
+    a file's recorded collection and training seconds, not charged to this run."""
 
     path = shipped_set_path(env_id) if aip == "shipped" else (aip if aip.endswith(".pt") else None)
     first = next(iter(aips.values()))
     collect = max(float(p.metadata.get("dataset", {}).get("collect_seconds") or 0.0) for p in aips.values())
-    return {"variant": first.metadata.get("variant", aip) if path else aip, "file": None if path is None else str(path),
-            "sha256": None if path is None else sha256_file(path),
-            "collection_seconds": collect if charged else 0.0,
-            "training_seconds": max(charged - collect, 0.0) if charged else 0.0, "refreshes": 0}
+    train = max(float(p.metadata.get("train_seconds") or 0.0) for p in aips.values())
+    return {"variant": first.metadata.get("variant", aip) if path else aip,
+            "file": None if path is None else portable_path(path),
+            "sha256": None if path is None else sha256_file(path), "charged": False,
+            "collection_seconds": collect if path else 0.0, "training_seconds": train if path else 0.0,
+            "refreshes": 0}
 
 
 def _shard_state(by_agent: dict, chunk: list) -> dict:
     """The saved state of a shard holding ``chunk`` (a run resumes with the same split)."""
     state = by_agent.get(chunk[0])
     if state is None or state["agents"] != chunk:
-        raise ValueError("resume with the same number of workers as the run had (its checkpoint is per worker)")
+        raise BadInput("resume with the same number of workers as the run had (its checkpoint is per worker)")
     return {k: v for k, v in state.items() if k != "agents"}
 
 

@@ -33,6 +33,7 @@ from tqdm.auto import tqdm
 import ials_zoo
 from ials_zoo.baselines.multiagent import TrainingLog, final_results, joint_policy, policy_file, write_curve
 from ials_zoo.baselines.runs import Clock, RunFolder, load_training_state, save_training_state
+from ials_zoo.errors import BadInput
 from ials_zoo.evaluation import evaluate_joint
 from ials_zoo.leaderboard import now_iso
 from ials_zoo.utils import format_seconds
@@ -102,8 +103,11 @@ def run(plan: RunPlan, learner: MultiAgentLearner, description: str, domain) -> 
     ``description`` opens the run's first line (the driver adds the budget and the folder)."""
     out = plan.out
     folder = RunFolder(out, resume=plan.resume, overwrite=plan.overwrite, settings=plan.settings)
-    print(f"{description}\n  {plan.total:,} steps per agent; writing {out}/" + (" (resuming)" if folder.resuming else ""),
-          flush=True)
+    rate = domain.study.multi_agent_steps_per_second.get("gs" if learner.simulator == "gs" else "ials", 10_000.0)
+    estimate = plan.total * len(plan.agents) / max(rate, 1.0)
+    print(f"{description}\n  {plan.total:,} steps per agent; about {format_seconds(estimate)} of training at the "
+          f"study's speed ({rate:,.0f} agent-steps/s on 2 cores; evaluations extra); writing {out}/"
+          + (" (resuming)" if folder.resuming else ""), flush=True)
     meta = dict({"algorithm": plan.algorithm, "env_id": plan.env_id, "env_options": plan.options, "seed": plan.seed,
                  "package_version": ials_zoo.__version__, "created": now_iso()}, **plan.meta)
     training = plan.training
@@ -213,11 +217,11 @@ def check_run_args(args) -> None:
     """Clear errors for the arguments every multi-agent run shares."""
     for name in ("eval_episodes", "final_eval_episodes"):
         if getattr(args, name) < 1:
-            raise ValueError(f"{name} must be >= 1, got {getattr(args, name)}")
+            raise BadInput(f"{name} must be >= 1, got {getattr(args, name)}")
     for name in ("n_envs", "total_timesteps", "eval_every"):
         v = getattr(args, name)
         if v is not None and v < 1:
-            raise ValueError(f"{name} must be >= 1, got {v}")
+            raise BadInput(f"{name} must be >= 1, got {v}")
 
 
 __all__ = ["MultiAgentLearner", "RunPlan", "check_run_args", "run"]

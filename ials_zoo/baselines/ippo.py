@@ -29,7 +29,7 @@ import torch
 from ials_zoo.baselines.arguments import arg, parse_env_options, run_cli
 from ials_zoo.baselines.driver import RunPlan, check_run_args, run
 from ials_zoo.baselines.multiagent import (
-    MultiPPOSettings,
+    MultiAgentRunArgs,
     check_multi_ppo,
     frame_stack_of,
     merge_shard_stats,
@@ -38,6 +38,7 @@ from ials_zoo.baselines.multiagent import (
     whole_updates,
 )
 from ials_zoo.core.domains import domain_ids, get_domain
+from ials_zoo.errors import BadInput
 from ials_zoo.learners.batched_ppo import BatchedPPO, PPOConfig
 from ials_zoo.learners.gs_vec import GSVecEnv
 from ials_zoo.learners.rollout import RolloutTrainer
@@ -45,34 +46,21 @@ from ials_zoo.utils import check_seed
 
 
 @dataclass
-class Args(MultiPPOSettings):
+class Args(MultiAgentRunArgs):
     """Arguments of :func:`main` (``python -m baselines.ippo --help``)."""
 
-    env_id: str | None = arg(None, "domain id (required)", aliases=("--env",))
     simulator: str = arg("gs", "gs (IPPO trains on the GS; for IALS use `train dials`)")
-    agents: str = arg("all", "learning agents, comma-separated, or 'all'")
-    seed: int = arg(0, "run seed")
-    total_timesteps: int | None = arg(None, "environment steps per agent (default: the domain's multi-agent budget)")
     n_envs: int = arg(2, "GS copies")
     gs_processes: int | None = arg(None, "worker processes of the GS copies (default: one per copy for SUMO, else 0)")
-    env_options: str = arg("", "domain options as a JSON object")
-    eval_every: int | None = arg(None, "GS evaluation every N steps per agent (default: a tenth of the budget)")
-    eval_episodes: int = arg(10, "GS episodes per evaluation")
-    final_eval_episodes: int = arg(20, "GS episodes of the final score (the protocol's 20)")
     out_dir: str | None = arg(None, "output folder (default: runs/<env>__ippo__s<seed>)")
-    resume: bool = arg(False, "continue the unfinished run in --out-dir from its last checkpoint")
-    overwrite: bool = arg(False, "replace whatever --out-dir holds")
-    progress: bool = arg(True, "show a progress bar")
-    submitter: str = arg("", "submitter name for result.json")
-    notes: str = arg("", "notes for result.json")
 
 
 def check_args(args: Args):
     """Clear errors before anything starts; returns (domain, agents, options, worker processes)."""
     if args.env_id is None:
-        raise ValueError(f"name the domain to train on: --env, one of {', '.join(domain_ids())}")
+        raise BadInput(f"name the domain to train on: --env, one of {', '.join(domain_ids())}")
     if args.simulator != "gs":
-        raise ValueError(f"ippo trains on the GS (--simulator gs); every agent on its own IALS is `ials-zoo train "
+        raise BadInput(f"ippo trains on the GS (--simulator gs); every agent on its own IALS is `ials-zoo train "
                          f"dials`, not --simulator {args.simulator!r}")
     domain = get_domain(args.env_id)
     options = parse_env_options(args.env_options)
@@ -82,7 +70,7 @@ def check_args(args: Args):
     check_run_args(args)
     processes = (args.n_envs if domain.one_simulation_per_process else 0) if args.gs_processes is None else args.gs_processes
     if processes < 0:
-        raise ValueError(f"gs_processes must be >= 0, got {processes}")
+        raise BadInput(f"gs_processes must be >= 0, got {processes}")
     return domain, agents, options, processes
 
 

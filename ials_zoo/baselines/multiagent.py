@@ -14,6 +14,7 @@ import numpy as np
 
 from ials_zoo.baselines.arguments import AblatedPPOSettings, arg, check_ppo_settings
 from ials_zoo.baselines.ppo_single import _hidden
+from ials_zoo.errors import BadInput
 from ials_zoo.evaluation import evaluate_joint, load_model
 from ials_zoo.influence.files import save_predictor_set
 from ials_zoo.leaderboard import make_result, write_result
@@ -49,15 +50,34 @@ PREVIOUS_PPO_SETTINGS = {"learning_rate": 2.5e-4, "anneal_lr": True, "n_epochs":
 """The multi-agent PPO settings before the ablation of ``ials_zoo.reproduce.ablation`` (SPEC §3
 with the authors' buffer of 128): kept to measure against (``ials-zoo bench``, the ablation)."""
 
+@dataclass
+class MultiAgentRunArgs(MultiPPOSettings):
+    """The arguments every multi-agent baseline (:mod:`.ippo`, :mod:`.dials`) shares: what to
+    train, for how long, how it is scored and where its run goes."""
+
+    env_id: str | None = arg(None, "domain id (required)", aliases=("--env",))
+    agents: str = arg("all", "learning agents, comma-separated, or 'all'")
+    seed: int = arg(0, "run seed")
+    total_timesteps: int | None = arg(None, "environment steps per agent (default: the domain's multi-agent budget)")
+    env_options: str = arg("", "domain options as a JSON object")
+    eval_every: int | None = arg(None, "GS evaluation every N steps per agent (default: a tenth of the budget)")
+    eval_episodes: int = arg(10, "GS episodes per evaluation")
+    final_eval_episodes: int = arg(20, "GS episodes of the final score (the protocol's 20)")
+    resume: bool = arg(False, "continue the unfinished run in --out-dir from its last checkpoint")
+    overwrite: bool = arg(False, "replace whatever --out-dir holds")
+    progress: bool = arg(True, "show a progress bar")
+    submitter: str = arg("", "submitter name for result.json")
+    notes: str = arg("", "notes for result.json")
+
 
 def check_multi_ppo(args) -> list[int]:
     """Clear errors for the PPO settings; returns the hidden sizes."""
 
     for name in ("samples_per_update", "batch_size"):
         if getattr(args, name) < 1:
-            raise ValueError(f"{name} must be >= 1, got {getattr(args, name)}")
+            raise BadInput(f"{name} must be >= 1, got {getattr(args, name)}")
     if args.frame_stack is not None and args.frame_stack < 1:
-        raise ValueError(f"frame_stack must be >= 1, got {args.frame_stack}")
+        raise BadInput(f"frame_stack must be >= 1, got {args.frame_stack}")
     check_ppo_settings(args)
     return _hidden(args.hidden)
 
@@ -67,7 +87,7 @@ def whole_updates(total: int, per_update: int) -> int:
     between updates is rounded down and said so (never silently changed)."""
     total = int(total)
     if total < per_update:
-        raise ValueError(f"--total-timesteps {total:,} is less than one PPO update ({per_update:,} samples per agent: "
+        raise BadInput(f"--total-timesteps {total:,} is less than one PPO update ({per_update:,} samples per agent: "
                          "--samples-per-update); give at least that")
     if total % per_update:
         print(f"note: --total-timesteps {total:,} rounded down to {total // per_update * per_update:,}, a whole number "
@@ -84,7 +104,7 @@ def frame_stack_of(args, domain) -> int:
 def ppo_config(args, copies: int) -> dict:
     """:class:`~ials_zoo.learners.batched_ppo.PPOConfig` fields for ``copies`` per agent."""
     if args.samples_per_update % copies:
-        raise ValueError(f"samples_per_update ({args.samples_per_update}) must be a multiple of the copies per "
+        raise BadInput(f"samples_per_update ({args.samples_per_update}) must be a multiple of the copies per "
                          f"agent ({copies})")
     return {"n_steps": args.samples_per_update // copies, "n_envs": copies, "batch_size": args.batch_size,
             "n_epochs": args.n_epochs, "learning_rate": args.learning_rate, "anneal_lr": args.anneal_lr,

@@ -42,8 +42,8 @@ from ials_zoo.baselines.ppo_single import _hidden, check_ppo_args
 from ials_zoo.baselines.runs import RunFolder, training_logger
 from ials_zoo.baselines.sb3_run import Evaluator, TrainingRun, as_float_box, estimate_seconds, make_ppo
 from ials_zoo.core.domains import domain_ids, get_domain
+from ials_zoo.errors import BadInput
 from ials_zoo.leaderboard import make_result, now_iso, write_result
-from ials_zoo.single_agent import needs_own_process
 from ials_zoo.utils import format_seconds
 
 
@@ -100,12 +100,12 @@ def make_shared_vec_env(env_id: str, learners=None, n_copies: int = 1, seed: int
 
 
     if n_copies < 1:
-        raise ValueError(f"n_copies must be >= 1, got {n_copies}")
+        raise BadInput(f"n_copies must be >= 1, got {n_copies}")
     par = get_domain(env_id).parallel_env(learners=learners, **options)
     vec = ss.pettingzoo_env_to_vec_env_v1(par)
     # SUMO: one simulation per process, so one process per copy (SuperSuit runs a single copy
     # in this process; nothing else in the training process may start libsumo then).
-    num_cpus = n_copies if needs_own_process(env_id) else 0
+    num_cpus = n_copies if get_domain(env_id).one_simulation_per_process else 0
     gym_vec = ss.concat_vec_envs_v1(vec, n_copies, num_cpus=num_cpus, base_class="gymnasium")
     venv = TruncationAwareSB3VecEnv(gym_vec)
     if seed is not None:
@@ -157,7 +157,7 @@ def main(args: Args | None = None) -> list[dict]:
     args = args or Args()
 
     if args.env_id is None:
-        raise ValueError(f"name the domain to train on: --env, one of {', '.join(domain_ids())}")
+        raise BadInput(f"name the domain to train on: --env, one of {', '.join(domain_ids())}")
     check_ppo_args(args, positive=("total_timesteps", "n_copies"))
     torch.set_num_threads(1)
     dom = get_domain(args.env_id)
@@ -167,7 +167,7 @@ def main(args: Args | None = None) -> list[dict]:
     eval_agents = _agent_list(args.eval_agents, args.env_id, default_eval, **options)
     outside = [a for a in eval_agents if a not in learners]
     if outside or not eval_agents:
-        raise ValueError(f"eval_agents {outside or eval_agents} must be learners ({learners})")
+        raise BadInput(f"eval_agents {outside or eval_agents} must be learners ({learners})")
     hidden = _hidden(args.net_arch)
     frame_stack = int(args.frame_stack or dom.frame_stack)
     out = Path(args.out_dir or f"runs/{args.env_id}__shared__s{args.seed}")

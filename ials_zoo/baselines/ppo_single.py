@@ -54,15 +54,16 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
-from ials_zoo.baselines.aip_record import predictor_for, predictor_record, simulator_label
+from ials_zoo.baselines.aip_record import predictor_record
 from ials_zoo.baselines.arguments import AblatedPPOSettings, arg, check_ppo_settings, parse_env_options, run_cli
 from ials_zoo.baselines.runs import RunFolder, training_logger
 from ials_zoo.baselines.sb3_run import Evaluator, TrainingRun, as_float_box, estimate_seconds, make_ppo, scale_rewards
 from ials_zoo.core.domains import domain_ids, get_domain
+from ials_zoo.errors import BadInput
 from ials_zoo.influence.ials import make_ials_vec_env, trained_predictor
-from ials_zoo.influence.specs import parse_predictor
+from ials_zoo.influence.specs import parse_predictor, predictor_for, simulator_label
 from ials_zoo.leaderboard import make_result, now_iso, write_result
-from ials_zoo.single_agent import check_agent, make_gs_vec_env
+from ials_zoo.single_agent import make_gs_vec_env
 from ials_zoo.utils import check_seed, format_seconds
 
 
@@ -112,7 +113,7 @@ def _hidden(net_arch: str) -> list[int]:
     except ValueError:
         sizes = []
     if not sizes or min(sizes) < 1:
-        raise ValueError(f"net_arch {net_arch!r}: expected comma-separated positive ints, e.g. 256,128")
+        raise BadInput(f"net_arch {net_arch!r}: expected comma-separated positive ints, e.g. 256,128")
     return sizes
 
 
@@ -123,12 +124,12 @@ def check_ppo_args(args, positive=()) -> None:
                  *positive):
         value = getattr(args, name, None)
         if value is not None and int(value) < 1:
-            raise ValueError(f"{name} must be >= 1, got {value}")
+            raise BadInput(f"{name} must be >= 1, got {value}")
     check_ppo_settings(args)
     if args.eval_every < 0:
-        raise ValueError(f"eval_every must be >= 0, got {args.eval_every}")
+        raise BadInput(f"eval_every must be >= 0, got {args.eval_every}")
     if args.frame_stack is not None and args.frame_stack < 1:
-        raise ValueError(f"frame_stack must be >= 1, got {args.frame_stack}")
+        raise BadInput(f"frame_stack must be >= 1, got {args.frame_stack}")
     check_seed(args.seed, "seed")
     _hidden(args.net_arch)
     parse_env_options(args.env_options)
@@ -138,7 +139,7 @@ def check_args(args: Args) -> None:
     """Clear errors for bad arguments before anything is built."""
 
     if args.env_id is None:
-        raise ValueError(f"name the domain to train on: --env, one of {', '.join(domain_ids())}")
+        raise BadInput(f"name the domain to train on: --env, one of {', '.join(domain_ids())}")
     check_ppo_args(args, positive=("total_timesteps",))
     predictor_for(args.simulator)
 
@@ -190,7 +191,7 @@ def main(args: Args | None = None) -> dict:
     torch.set_num_threads(1)
     dom = get_domain(args.env_id)
     options = parse_env_options(args.env_options)
-    agent = check_agent(args.env_id, args.agent or dom.default_agents[0], **options)
+    agent = dom.check_agent(args.agent or dom.default_agents[0], **options)
     if args.total_timesteps is None:
         args.total_timesteps = dom.study.budget
     frame_stack = int(args.frame_stack or dom.dials.frame_stack or dom.frame_stack)
@@ -217,7 +218,7 @@ def main(args: Args | None = None) -> dict:
         model = make_ppo(venv, args, _hidden(args.net_arch))
         model.set_logger(training_logger(out))
         training = {
-            "simulator": simulator_label(args.simulator, aip), "aip": aip, "seeds": [args.seed], "env_steps": 0,
+            "simulator": simulator_label(args.simulator, (aip or {}).get("variant")), "aip": aip, "seeds": [args.seed], "env_steps": 0,
             "wall_clock_seconds": 0.0, "aip_seconds": aip_seconds,
             "hyperparameters": dataclasses.asdict(args),
         }

@@ -29,6 +29,7 @@ import sys
 import time
 from pathlib import Path
 
+from ials_zoo.errors import BadInput
 from ials_zoo.utils import atomic_path, atomic_write_text, remove_stale_temporaries
 
 STATUS = "status.json"
@@ -73,11 +74,11 @@ class RunFolder:
 
     def __init__(self, path, resume: bool = False, overwrite: bool = False, settings: dict | None = None):
         if resume and overwrite:
-            raise ValueError("choose one of resume and overwrite")
+            raise BadInput("choose one of resume and overwrite")
         self.path = Path(path)
         self.settings = json.loads(json.dumps(settings or {}, default=str))
         if self.path.exists() and not self.path.is_dir():
-            raise ValueError(f"--out-dir {str(self.path)!r} is a file, not a folder")
+            raise BadInput(f"--out-dir {str(self.path)!r} is a file, not a folder")
         self._lock_fd = None
         self._claim()
         try:
@@ -99,7 +100,7 @@ class RunFolder:
         except BlockingIOError:
             holder = os.read(fd, 64).decode(errors="replace").strip() or "?"
             os.close(fd)
-            raise ValueError(f"{self.path} is in use by another run (pid {holder}); use another --out-dir") from None
+            raise BadInput(f"{self.path} is in use by another run (pid {holder}); use another --out-dir") from None
         os.ftruncate(fd, 0)
         os.write(fd, f"{os.getpid()}\n".encode())
         self._lock_fd = fd
@@ -115,22 +116,22 @@ class RunFolder:
         used = self.path.is_dir() and any(not p.name.startswith(".") for p in self.path.iterdir())
         self.resuming = False
         if state == RUNNING:
-            raise ValueError(f"{self.path} is in use by a run that is still going (pid "
+            raise BadInput(f"{self.path} is in use by a run that is still going (pid "
                              f"{self._status().get('pid')}); use another --out-dir")
         if resume:
             if state is None:
-                raise ValueError(f"nothing to resume in {self.path}: it holds no run")
+                raise BadInput(f"nothing to resume in {self.path}: it holds no run")
             if state == FINISHED:
-                raise ValueError(f"{self.path} holds a finished run; nothing to resume")
+                raise BadInput(f"{self.path} holds a finished run; nothing to resume")
             old = self._status().get("settings", {})
             if old != self.settings:
                 diff = sorted(k for k in set(old) | set(self.settings) if old.get(k) != self.settings.get(k))
-                raise ValueError(f"cannot resume {self.path} with other settings ({', '.join(diff)})")
+                raise BadInput(f"cannot resume {self.path} with other settings ({', '.join(diff)})")
             self.resuming = True
         elif used:
             what = f"a {state} run" if state else "files"
             if not overwrite:
-                raise ValueError(f"{self.path} already holds {what}; pass --resume to continue it or "
+                raise BadInput(f"{self.path} already holds {what}; pass --resume to continue it or "
                                  "--overwrite to replace it, or use another --out-dir")
             for p in self.path.iterdir():  # all but the lock this run holds
                 if p.name != LOCK:
@@ -220,9 +221,9 @@ def load_training_state(folder) -> tuple[dict, dict]:
         state = torch.load(folder / "checkpoint.pt", map_location="cpu", weights_only=True)
         info = json.loads((folder / "checkpoint.json").read_text())
     except FileNotFoundError:
-        raise ValueError(f"{folder} has no checkpoint to resume from (it was killed before the first one)") from None
+        raise BadInput(f"{folder} has no checkpoint to resume from (it was killed before the first one)") from None
     except Exception as exc:
-        raise ValueError(f"{folder}: the checkpoint cannot be read ({type(exc).__name__}: {exc})") from None
+        raise BadInput(f"{folder}: the checkpoint cannot be read ({type(exc).__name__}: {exc})") from None
     return state, info
 
 

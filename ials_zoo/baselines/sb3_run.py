@@ -10,10 +10,10 @@ import time
 
 import numpy as np
 
-from ials_zoo.baselines.aip_record import GS
 from ials_zoo.baselines.runs import Clock, load_training_state, save_training_state
 from ials_zoo.core.domains import get_domain
 from ials_zoo.evaluation import NetworkPolicy, _evaluate_worker, evaluate, load_model
+from ials_zoo.influence.specs import GS
 from ials_zoo.policy import PolicyNetwork, policy_from_sb3_model, save_policy
 from ials_zoo.processes import shutdown_pool, spawn_pool
 from ials_zoo.single_agent import box_space

@@ -20,7 +20,7 @@ from stable_baselines3.common.vec_env import VecEnv
 from ials_zoo.baselines.ppo_single import Args, _hidden, make_training_env
 from ials_zoo.baselines.sb3_run import as_float_box, make_ppo
 from ials_zoo.core.domains import get_domain
-from ials_zoo.single_agent import check_agent
+from ials_zoo.errors import BadInput
 
 NO_SIMULATOR = "none"
 
@@ -82,10 +82,10 @@ def ppo_throughput(env_id: str, agent: str, simulator: str, steps: int = 30_000,
 
 
     if steps < 1 or n_envs < 1:
-        raise ValueError(f"steps and n_envs must be >= 1, got {steps} and {n_envs}")
+        raise BadInput(f"steps and n_envs must be >= 1, got {steps} and {n_envs}")
     torch.set_num_threads(1)
     dom = get_domain(env_id)
-    agent = check_agent(env_id, agent)
+    agent = dom.check_agent(agent)
     args = Args(env_id=env_id, agent=agent, simulator="ials" if simulator == NO_SIMULATOR else simulator,
                 n_envs=n_envs, seed=seed)
     venv, _ = make_training_env(args, agent)
@@ -114,7 +114,7 @@ def ppo_bound(rows: list[dict]) -> dict:
     simulator, its wall-clock per step relative to the GS, and the floor set by PPO alone."""
     by = {r["simulator"]: r for r in rows}
     if "gs" not in by or NO_SIMULATOR not in by:
-        raise ValueError("ppo_bound needs a 'gs' row and a 'none' row")
+        raise BadInput("ppo_bound needs a 'gs' row and a 'none' row")
     t_gs = 1.0 / by["gs"]["steps_per_s"]
     out = {name: (1.0 / r["steps_per_s"]) / t_gs for name, r in by.items()}
     return {"time_per_step_vs_gs": out, "floor": out[NO_SIMULATOR]}

@@ -6,5 +6,8 @@ before any long work starts. A command raises :class:`CommandError` for that.
 """
 
 
-class CommandError(Exception):
+from ials_zoo.errors import BadInput
+
+
+class CommandError(BadInput):
     """Bad input to a command: printed as ``ials-zoo <command>: <message>``, exit status 2."""

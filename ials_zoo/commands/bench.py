@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import json
 import os
-import platform
 import time
 
 import numpy as np
@@ -65,27 +64,23 @@ def configure(parser):
 
 
 def machine_info() -> dict:
-    """What the numbers were measured on."""
+    """What the numbers were measured on: the leaderboard's ``hardware`` record
+    (:func:`ials_zoo.leaderboard.hardware_info`) plus SUMO, torch's threads and the date."""
     import torch
 
     import ials_zoo
+    from ials_zoo.leaderboard import hardware_info
 
-    cpu = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo") as f:
-            cpu = next((ln.split(":", 1)[1].strip() for ln in f if ln.startswith("model name")), cpu)
-    except OSError:
-        pass
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    hardware = hardware_info()
     try:
         from importlib.metadata import version
 
         sumo = version("eclipse-sumo")
     except Exception:  # not installed
         sumo = None
-    return {"cpu": cpu, "cores": cores, "python": platform.python_version(), "numpy": np.__version__,
-            "torch": torch.__version__, "torch_threads": torch.get_num_threads(), "sumo": sumo,
-            "ials_zoo": ials_zoo.__version__, "platform": platform.platform(),
+    return {"cpu": hardware["processor"], "cores": hardware["cpu_count"], "python": hardware["python"],
+            "numpy": np.__version__, "torch": torch.__version__, "torch_threads": torch.get_num_threads(),
+            "sumo": sumo, "ials_zoo": ials_zoo.__version__, "platform": hardware["platform"],
             "date": time.strftime("%Y-%m-%d %H:%M:%S")}
 
 

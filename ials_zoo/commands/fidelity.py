@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 
 from ials_zoo.core.domains import get_domain
+from ials_zoo.errors import BadInput
 from ials_zoo.influence.fidelity import fidelity_report, markdown
 from ials_zoo.utils import atomic_write_text, check_output_file, check_seed
 
@@ -44,20 +45,20 @@ def run(args) -> int:
 
     domain = get_domain(args.env)
     if args.episodes < 2:
-        raise ValueError(f"--episodes must be >= 2 (intervals over episodes), got {args.episodes}")
+        raise BadInput(f"--episodes must be >= 2 (intervals over episodes), got {args.episodes}")
     if not args.tolerance >= 0:
-        raise ValueError(f"--tolerance must be >= 0, got {args.tolerance}")
+        raise BadInput(f"--tolerance must be >= 0, got {args.tolerance}")
     check_seed(args.seed, "--seed")
     policies = [p.strip() for p in args.policies.split(",") if p.strip()]
     for p in policies:
         if p not in ("random", "constant", "scripted") and not os.path.isfile(p):
-            raise ValueError(f"--policies: {p!r} is neither random, constant, scripted nor a policy file")
+            raise BadInput(f"--policies: {p!r} is neither random, constant, scripted nor a policy file")
     watched = None if args.agents is None else domain.check_agents(args.agents)
     for name in ("collect_steps", "aip_epochs"):
         if getattr(args, name) is not None and getattr(args, name) < 1:
-            raise ValueError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
+            raise BadInput(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
     if args.aip_lr is not None and not (math.isfinite(args.aip_lr) and args.aip_lr > 0):
-        raise ValueError(f"--aip-lr must be a finite number > 0, got {args.aip_lr}")
+        raise BadInput(f"--aip-lr must be a finite number > 0, got {args.aip_lr}")
     if args.out:
         check_output_file(args.out)
     report = fidelity_report(args.env, policies, episodes=args.episodes, seed=args.seed, watched=watched,

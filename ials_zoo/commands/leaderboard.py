@@ -20,6 +20,7 @@ from __future__ import annotations
 import sys
 
 from ials_zoo import leaderboard as lb
+from ials_zoo.errors import BadInput
 from ials_zoo.evaluation import load_model
 from ials_zoo.policy import save_policy
 from ials_zoo.utils import atomic_write_text, check_output_file
@@ -100,7 +101,7 @@ def run(args) -> int:
         elif args.action == "convert":
 
             if not args.out.endswith(".safetensors"):
-                raise ValueError("--out must name a .safetensors file")
+                raise BadInput("--out must name a .safetensors file")
             check_output_file(args.out, "--out")
             pol = load_model(args.file)
             save_policy(pol.net, args.out)

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 from ials_zoo.commands import CommandError
 from ials_zoo.core.domains import domain_ids, get_domain
+from ials_zoo.errors import BadInput
 from ials_zoo.reproduce import build_plan, describe_plan, settings
 from ials_zoo.reproduce.plan import (
     DEFAULT_MEMORY_BUDGET,
@@ -109,7 +110,7 @@ def parse_budget(text, default: int, default_domains: dict) -> tuple[int, dict]:
         try:
             steps = int(value.replace("_", ""))
         except ValueError:
-            raise ValueError(f"--budget {text!r}: {part!r} is not N or DOMAIN=N with N an int") from None
+            raise BadInput(f"--budget {text!r}: {part!r} is not N or DOMAIN=N with N an int") from None
         if sep:
             per[key] = steps
         else:

@@ -26,8 +26,7 @@ from ials_zoo.commands import CommandError
 from ials_zoo.commands.collect import add_collect_arguments, check_collect_arguments
 from ials_zoo.core.domains import get_domain
 from ials_zoo.influence.dataset import InfluenceDataset, collect, collect_all
-from ials_zoo.influence.files import save_predictor_set
-from ials_zoo.influence.predictors import save_predictor
+from ials_zoo.influence.files import save_predictor, save_predictor_set
 from ials_zoo.influence.train import format_report, train_predictor, train_predictors
 from ials_zoo.utils import atomic_write_text, check_output_file
 

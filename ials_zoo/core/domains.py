@@ -30,6 +30,7 @@ from gymnasium import spaces
 
 from ials_zoo.core.local import LocalSimulator
 from ials_zoo.core.region import RegionSpec
+from ials_zoo.errors import BadInput, BadInputType
 
 ENTRY_POINT_GROUP = "ials_zoo.domains"
 
@@ -48,6 +49,10 @@ class StudySettings:
             ``ls_probe(local_simulator)`` return the ages of the items in a region (0: no
             item), for the memory experiment's item-lifetime histograms; None without items.
         multi_agent_budget: PPO steps *per agent* of a multi-agent (DIALS / IPPO) run.
+        multi_agent_steps_per_second: agent-steps per second of training of a multi-agent
+            run with every agent learning, on the GS (IPPO) and on IALS (DIALS, AIP time
+            included), as measured by the study on 2 cores; only for the duration estimate
+            a run prints first.
     """
 
     budget: int = 500_000
@@ -55,6 +60,7 @@ class StudySettings:
     memory_variant: dict | None = None
     lifetime_probes: tuple | None = None
     multi_agent_budget: int = 200_000
+    multi_agent_steps_per_second: dict = field(default_factory=lambda: {"gs": 10_000.0, "ials": 10_000.0})
 
 
 @dataclass(frozen=True)
@@ -171,12 +177,12 @@ class Domain:
 
     def __post_init__(self):
         if self.default_predictor not in ("gru", "mlp"):
-            raise ValueError(f"{self.env_id}: default_predictor must be 'gru' or 'mlp'")
+            raise BadInput(f"{self.env_id}: default_predictor must be 'gru' or 'mlp'")
         if not self.default_agents:
-            raise ValueError(f"{self.env_id}: default_agents must name at least one agent")
+            raise BadInput(f"{self.env_id}: default_agents must name at least one agent")
         bad = {k: v for k, v in self.metrics.items() if v not in ("lower", "higher")}
         if bad:
-            raise ValueError(f"{self.env_id}: metrics must map names to 'lower' or 'higher' (better), got {bad}")
+            raise BadInput(f"{self.env_id}: metrics must map names to 'lower' or 'higher' (better), got {bad}")
 
     def agents(self, **options) -> list[str]:
         """Every agent id under ``options`` (only :attr:`agent_options` are looked at)."""
@@ -188,7 +194,7 @@ class Domain:
         agents = self.agents(**options)
         if not isinstance(agent, str) or agent not in agents:
             shown = ", ".join(agents[:6]) + (f", ... ({len(agents)} in all)" if len(agents) > 6 else "")
-            raise ValueError(f"unknown agent {agent!r} for {self.env_id}; expected one of: {shown}")
+            raise BadInput(f"unknown agent {agent!r} for {self.env_id}; expected one of: {shown}")
         return agent
 
     def check_agents(self, agents, **options) -> list[str]:
@@ -199,10 +205,10 @@ class Domain:
             agents = [a for a in agents.split(",") if a.strip()]
         out = [self.check_agent(a.strip() if isinstance(a, str) else a, **options) for a in agents]
         if not out:
-            raise ValueError(f"agents must name at least one agent of {self.env_id}")
+            raise BadInput(f"agents must name at least one agent of {self.env_id}")
         dup = sorted({a for a in out if out.count(a) > 1})
         if dup:
-            raise ValueError(f"agents repeat: {dup}")
+            raise BadInput(f"agents repeat: {dup}")
         return out
 
     @property
@@ -238,9 +244,9 @@ def _entry_point_loaders() -> dict[str, Callable[[], Domain]]:
             obj = ep.load()
             domain = getattr(obj, "DOMAIN", obj)
             if not isinstance(domain, Domain):
-                raise TypeError(f"entry point {ep.name} = {ep.value!r} is not an ials_zoo Domain")
+                raise BadInputType(f"entry point {ep.name} = {ep.value!r} is not an ials_zoo Domain")
             if domain.env_id != ep.name:
-                raise ValueError(f"entry point {ep.name!r} loads domain {domain.env_id!r}")
+                raise BadInput(f"entry point {ep.name!r} loads domain {domain.env_id!r}")
             return domain
 
         out.setdefault(ep.name, load)
@@ -273,7 +279,7 @@ def get_domain(env_id: str) -> Domain:
             return _loaded[env_id]
         load = _loaders().get(env_id) if isinstance(env_id, str) else None
         if load is None:
-            raise ValueError(f"unknown domain {env_id!r}; available: {', '.join(domain_ids())}")
+            raise BadInput(f"unknown domain {env_id!r}; available: {', '.join(domain_ids())}")
         domain = _loaded[env_id] = load()
         return domain
 
@@ -282,11 +288,11 @@ def register_domain(domain: Domain, replace: bool = False) -> Domain:
     """Make ``domain`` available under its ``env_id`` (and ``ials_zoo/IALS-<env_id>`` in
     Gymnasium). An id already taken is refused unless ``replace``."""
     if not isinstance(domain, Domain):
-        raise TypeError(f"register_domain needs an ials_zoo.core.Domain, got {type(domain).__name__}")
+        raise BadInputType(f"register_domain needs an ials_zoo.core.Domain, got {type(domain).__name__}")
     with _lock:
         taken = domain.env_id in _registered or domain.env_id in _loaders()
         if taken and not replace:
-            raise ValueError(f"a domain {domain.env_id!r} is already registered; pass replace=True")
+            raise BadInput(f"a domain {domain.env_id!r} is already registered; pass replace=True")
         _registered[domain.env_id] = domain
     from ials_zoo.core.gym_ids import register_ials
 
@@ -310,7 +316,7 @@ def domain_of_agent(agent: str, **options) -> str:
     owners = [d for d in domain_ids() if agent in get_domain(d).agents(**options)]
     if len(owners) != 1:
         why = "no domain has" if not owners else f"several domains ({', '.join(owners)}) have"
-        raise ValueError(f"{why} an agent {agent!r}; name the domain too")
+        raise BadInput(f"{why} an agent {agent!r}; name the domain too")
     return owners[0]
 
 

@@ -28,6 +28,7 @@ import numpy as np
 from gymnasium import spaces
 
 from ials_zoo.core.region import RegionSpec
+from ials_zoo.errors import BadInput, BadInputType
 
 
 def agent_list(agents) -> tuple[str, ...]:
@@ -36,17 +37,17 @@ def agent_list(agents) -> tuple[str, ...]:
         return (agents,)
     out = tuple(agents)
     if not out:
-        raise ValueError("a local simulator needs at least one agent")
+        raise BadInput("a local simulator needs at least one agent")
     if len(set(out)) != len(out):
-        raise ValueError(f"agents repeat: {list(out)}")
+        raise BadInput(f"agents repeat: {list(out)}")
     return out
 
 
 def check_n_envs(n_envs) -> int:
     if isinstance(n_envs, bool) or not isinstance(n_envs, (int, np.integer)):
-        raise TypeError(f"n_envs must be a positive int, got {n_envs!r}")
+        raise BadInputType(f"n_envs must be a positive int, got {n_envs!r}")
     if n_envs < 1:
-        raise ValueError(f"n_envs must be a positive int, got {n_envs!r}")
+        raise BadInput(f"n_envs must be a positive int, got {n_envs!r}")
     return int(n_envs)
 
 

@@ -34,6 +34,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from gymnasium import spaces
 
+from ials_zoo.errors import BadInput
+
 DSET_KINDS = ("dset", "full")
 """The d-set kinds: the paper's minimal d-set, or the agent's whole observation."""
 
@@ -48,7 +50,7 @@ def dset_key(kind: str) -> str:
 
 def check_dset_kind(kind: str) -> str:
     if kind not in DSET_KINDS:
-        raise ValueError(f"unknown d-set kind {kind!r}; expected one of {DSET_KINDS}")
+        raise BadInput(f"unknown d-set kind {kind!r}; expected one of {DSET_KINDS}")
     return kind
 
 
@@ -76,9 +78,9 @@ class RegionSpec:
 
     def __post_init__(self):
         if len(self.influence_names) != len(self.influence_classes):
-            raise ValueError("influence_names and influence_classes differ in length")
+            raise BadInput("influence_names and influence_classes differ in length")
         if set(self.dset_names) != set(DSET_KINDS):
-            raise ValueError(f"dset_names must define exactly the kinds {DSET_KINDS}")
+            raise BadInput(f"dset_names must define exactly the kinds {DSET_KINDS}")
 
     @property
     def n_sources(self) -> int:

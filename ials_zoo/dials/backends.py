@@ -18,6 +18,7 @@ import socket
 from urllib.parse import urlparse
 
 from ials_zoo.dials.shard import AgentShard, ShardSpec
+from ials_zoo.errors import BadInput
 from ials_zoo.processes import (
     Worker,
     WorkerError,
@@ -89,11 +90,11 @@ def check_ray_address(address: str, timeout: float = 5.0) -> None:
         return
     parsed = urlparse(address if "://" in address else f"tcp://{address}")
     if not parsed.hostname or not parsed.port:
-        raise ValueError(f"--ray-address {address!r}: expected host:port or ray://host:port")
+        raise BadInput(f"--ray-address {address!r}: expected host:port or ray://host:port")
     try:
         socket.create_connection((parsed.hostname, parsed.port), timeout=timeout).close()
     except OSError as exc:
-        raise ValueError(f"--ray-address {address!r}: nothing answers there ({exc}); start the cluster "
+        raise BadInput(f"--ray-address {address!r}: nothing answers there ({exc}); start the cluster "
                          "with `ray start --head` or leave --ray-address out for a local Ray") from None
 
 
@@ -106,7 +107,7 @@ class RayBackend:
         try:
             import ray
         except ImportError:
-            raise ValueError('the Ray backend needs Ray: pip install "ials-zoo[ray]"') from None
+            raise BadInput('the Ray backend needs Ray: pip install "ials-zoo[ray]"') from None
         if address is not None:
             check_ray_address(address)
         self.ray = ray
@@ -174,9 +175,9 @@ def make_backend(name: str, specs: list[ShardSpec], address: str | None = None):
     if name == "ray":
         return RayBackend(specs, address)
     if address is not None:
-        raise ValueError("--ray-address needs --backend ray")
+        raise BadInput("--ray-address needs --backend ray")
     if name != "process":
-        raise ValueError(f"unknown backend {name!r}; expected one of {BACKENDS}")
+        raise BadInput(f"unknown backend {name!r}; expected one of {BACKENDS}")
     return ProcessBackend(specs)
 
 

@@ -20,6 +20,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ials_zoo.errors import BadInput
+
 LEARNERS = ("batched", "sb3")
 
 
@@ -61,7 +63,7 @@ class AgentShard:
         elif spec.learner == "sb3":
             self._init_sb3(spec)
         else:
-            raise ValueError(f"unknown learner {spec.learner!r}; expected one of {LEARNERS}")
+            raise BadInput(f"unknown learner {spec.learner!r}; expected one of {LEARNERS}")
         self.steps = 0  # samples per agent so far
 
     # -- the batched learner on the shard's multi-agent IALS

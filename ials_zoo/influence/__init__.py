@@ -2,8 +2,11 @@
 
 * :mod:`ials_zoo.influence.dataset` -- :func:`collect` ``(d_t, u_t)`` data from a GS,
   :class:`InfluenceDataset` (``.npz`` files);
-* :mod:`ials_zoo.influence.predictors` -- the :class:`InfluencePredictor` interface and its
-  implementations (GRU, MLP, untrained, fixed, marginal), numpy inference, predictor files;
+* :mod:`ials_zoo.influence.base` -- the :class:`InfluencePredictor` interface and sampling;
+  :mod:`~ials_zoo.influence.networks` (GRU, MLP, untrained; numpy inference),
+  :mod:`~ials_zoo.influence.constant` (uniform, fixed, marginal),
+  :mod:`~ials_zoo.influence.files` (predictor files: weights + JSON),
+  :mod:`~ials_zoo.influence.metrics` (cross-entropies);
 * :mod:`ials_zoo.influence.train` -- :func:`train_predictor` (torch);
 * :mod:`ials_zoo.influence.ials` -- :class:`IALSEnv`, :class:`IALSVecEnv`, :func:`make_ials`,
   :func:`make_ials_vec_env`.
@@ -11,19 +14,12 @@
 Heavy imports (torch, stable-baselines3) happen only where needed.
 """
 
+from ials_zoo.influence.base import InfluencePredictor
+from ials_zoo.influence.constant import FixedPredictor, MarginalPredictor, UniformPredictor
 from ials_zoo.influence.dataset import InfluenceDataset, collect
-from ials_zoo.influence.predictors import (
-    FixedPredictor,
-    GRUPredictor,
-    InfluencePredictor,
-    MarginalPredictor,
-    MLPPredictor,
-    UniformPredictor,
-    evaluate_cross_entropy,
-    load_predictor,
-    save_predictor,
-    untrained_predictor,
-)
+from ials_zoo.influence.files import load_predictor, save_predictor
+from ials_zoo.influence.metrics import evaluate_cross_entropy
+from ials_zoo.influence.networks import GRUPredictor, MLPPredictor, untrained_predictor
 
 
 def __getattr__(name):

@@ -28,6 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from ials_zoo.core.region import RegionSpec, check_dset_kind
+from ials_zoo.errors import BadInput, BadInputType
 
 _max_reduce = np.maximum.reduce
 _add_accumulate = np.add.accumulate
@@ -59,15 +60,15 @@ class InfluencePredictor:
 
     def __init__(self, region: RegionSpec, dset_kind: str = "dset", metadata: dict | None = None):
         if not isinstance(region, RegionSpec):
-            raise TypeError(f"region must be a RegionSpec, got {type(region).__name__}")
+            raise BadInputType(f"region must be a RegionSpec, got {type(region).__name__}")
         self.region = region
         self.dset_kind = check_dset_kind(dset_kind)
         self.metadata = dict(metadata or {})
         classes = np.asarray(region.influence_classes, dtype=np.int64)
         if classes.size == 0:
-            raise ValueError(f"region of {region.agent!r} has no influence sources")
+            raise BadInput(f"region of {region.agent!r} has no influence sources")
         if (classes < 2).any():
-            raise ValueError(f"every influence source needs >= 2 classes, got {tuple(classes)}")
+            raise BadInput(f"every influence source needs >= 2 classes, got {tuple(classes)}")
         self.n_sources = int(classes.size)
         self.n_classes = classes
         self.max_classes = int(classes.max())
@@ -102,7 +103,7 @@ class InfluencePredictor:
         """Start ``n`` new parallel histories (zero the recurrent state, if any)."""
         n = int(n)
         if n < 1:
-            raise ValueError(f"n must be >= 1, got {n}")
+            raise BadInput(f"n must be >= 1, got {n}")
         self.n = n
         if self.autoregressive:
             self._previous = np.zeros((n, int(self._offsets[-1])), np.float32)
@@ -115,7 +116,7 @@ class InfluencePredictor:
             return
         u = np.asarray(influences)
         if u.shape != (self.n, self.n_sources):
-            raise ValueError(f"expected influences of shape {(self.n, self.n_sources)}, got {u.shape}")
+            raise BadInput(f"expected influences of shape {(self.n, self.n_sources)}, got {u.shape}")
         self._previous = one_hot_influences(u, self._offsets)
 
     def probs_padded(self, dsets: np.ndarray) -> np.ndarray:
@@ -142,14 +143,14 @@ class InfluencePredictor:
     def _check_dsets(self, dsets) -> np.ndarray:
         d = np.asarray(dsets)
         if d.ndim != 2 or d.shape[1] != self.dset_size:
-            raise ValueError(
+            raise BadInput(
                 f"{type(self).__name__} for {self.region.agent!r} expects d-sets of shape "
                 f"[n, {self.dset_size}] ({self.dset_kind!r}), got {d.shape}"
             )
         if self.n == 0:
             raise RuntimeError(f"{type(self).__name__}: call reset(n) before probs()/sample()")
         if d.shape[0] != self.n:
-            raise ValueError(f"reset({self.n}) was called but got {d.shape[0]} d-sets")
+            raise BadInput(f"reset({self.n}) was called but got {d.shape[0]} d-sets")
         return d
 
     def _input(self, d: np.ndarray) -> np.ndarray:
@@ -248,9 +249,9 @@ def previous_influences(u: np.ndarray, offsets) -> np.ndarray:
 def _check_shapes(arrays, shapes, who):
     missing = set(shapes) - set(arrays)
     if missing:
-        raise ValueError(f"{who}: missing weight arrays {sorted(missing)}")
+        raise BadInput(f"{who}: missing weight arrays {sorted(missing)}")
     for k, s in shapes.items():
         if arrays[k].shape != s:
-            raise ValueError(f"{who}: weight {k!r} has shape {arrays[k].shape}, expected {s}")
+            raise BadInput(f"{who}: weight {k!r} has shape {arrays[k].shape}, expected {s}")
         if not np.isfinite(arrays[k]).all():
-            raise ValueError(f"{who}: weight {k!r} is not finite")
+            raise BadInput(f"{who}: weight {k!r} is not finite")

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ials_zoo.errors import BadInput, BadInputType
 from ials_zoo.influence.base import InfluencePredictor
 
 
@@ -15,11 +16,11 @@ class _ConstantPredictor(InfluencePredictor):
         super().__init__(region, dset_kind, metadata)
         table = np.zeros((self.n_sources, self.max_classes))
         if len(probs) != self.n_sources:
-            raise ValueError(f"need {self.n_sources} probability vectors, got {len(probs)}")
+            raise BadInput(f"need {self.n_sources} probability vectors, got {len(probs)}")
         for m, (p, k) in enumerate(zip(probs, self.n_classes)):
             p = np.asarray(p, dtype=np.float64)
             if p.shape != (k,) or (p < 0).any() or not np.isclose(p.sum(), 1.0, atol=1e-6):
-                raise ValueError(
+                raise BadInput(
                     f"source {region.influence_names[m]!r}: expected {k} probabilities summing "
                     f"to 1, got {p.tolist()}"
                 )
@@ -82,13 +83,13 @@ class FixedPredictor(_ConstantPredictor):
         try:
             p = float(p)
         except (TypeError, ValueError):
-            raise TypeError(f"fixed influence probability must be a number in [0, 1], got {p!r}") from None
+            raise BadInputType(f"fixed influence probability must be a number in [0, 1], got {p!r}") from None
         if not 0.0 <= p <= 1.0:
-            raise ValueError(f"fixed influence probability must be in [0, 1], got {p}")
+            raise BadInput(f"fixed influence probability must be in [0, 1], got {p}")
         null_class = int(null_class)
         for k in region.influence_classes:
             if not 0 <= null_class < k:
-                raise ValueError(f"null_class {null_class} out of range for a source with {k} classes")
+                raise BadInput(f"null_class {null_class} out of range for a source with {k} classes")
         self.p = p
         self.null_class = null_class
         probs = []
@@ -114,7 +115,7 @@ class MarginalPredictor(_ConstantPredictor):
         if table is not None:
             probs = [np.asarray(t)[:k] for t, k in zip(table, region.influence_classes)]
         if probs is None:
-            raise ValueError("MarginalPredictor needs probs (use MarginalPredictor.fit(dataset))")
+            raise BadInput("MarginalPredictor needs probs (use MarginalPredictor.fit(dataset))")
         super().__init__(region, probs, dset_kind, metadata)
 
     @staticmethod

@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from ials_zoo.core.region import DSET_KINDS, INFLUENCE_KEY, RegionSpec, dset_key
+from ials_zoo.errors import BadInput, BadInputType
 from ials_zoo.utils import check_seed
 
 FORMAT = "ials_zoo.influence_dataset"
@@ -52,25 +53,25 @@ class InfluenceDataset:
     def __post_init__(self):
         u = np.asarray(self.influences)
         if u.ndim != 3 or u.shape[2] != self.region.n_sources:
-            raise ValueError(
+            raise BadInput(
                 f"influences must have shape [episodes, T, {self.region.n_sources}], got {u.shape}"
             )
         if u.dtype.kind not in "iub" and u.size and not (np.isfinite(u).all() and (u == np.round(u)).all()):
-            raise ValueError("influences must be whole class numbers (no NaN, no fractions such as 1.5)")
+            raise BadInput("influences must be whole class numbers (no NaN, no fractions such as 1.5)")
         self.influences = u.astype(np.int64, copy=False)
         if set(self.dsets) != set(DSET_KINDS):
-            raise ValueError(f"dsets must hold exactly the kinds {DSET_KINDS}, got {sorted(self.dsets)}")
+            raise BadInput(f"dsets must hold exactly the kinds {DSET_KINDS}, got {sorted(self.dsets)}")
         for kind in DSET_KINDS:
             d = np.asarray(self.dsets[kind])
             want = (u.shape[0], u.shape[1], self.region.dset_size(kind))
             if d.shape != want:
-                raise ValueError(f"d-set {kind!r} has shape {d.shape}, expected {want}")
+                raise BadInput(f"d-set {kind!r} has shape {d.shape}, expected {want}")
             if d.size and not np.isin(d, (0, 1)).all():
-                raise ValueError(f"d-set {kind!r} must hold bits (0 or 1); found other values (NaN, fractions, ...)")
+                raise BadInput(f"d-set {kind!r} must hold bits (0 or 1); found other values (NaN, fractions, ...)")
             self.dsets[kind] = d.astype(np.uint8, copy=False)
         classes = np.asarray(self.region.influence_classes)
         if u.size and ((u < 0).any() or (u >= classes).any()):
-            raise ValueError(f"influence values out of range for classes {tuple(classes)}")
+            raise BadInput(f"influence values out of range for classes {tuple(classes)}")
 
     @property
     def n_episodes(self) -> int:
@@ -97,7 +98,7 @@ class InfluenceDataset:
         """Random split *by episode* into (train, test) index arrays (at least 1 test episode
         when there are >= 2 episodes)."""
         if not 0.0 <= test_fraction < 1.0:
-            raise ValueError(f"test_fraction must be in [0, 1), got {test_fraction}")
+            raise BadInput(f"test_fraction must be in [0, 1), got {test_fraction}")
         E = self.n_episodes
         perm = np.random.default_rng(seed).permutation(E)
         n_test = int(round(E * test_fraction))
@@ -146,23 +147,23 @@ class InfluenceDataset:
             why = f"{type(exc).__name__}: {exc}"
             if "pickle" in str(exc):  # numpy's advice to allow pickles is not ours to give
                 why = "not an .npz archive of arrays; pickled content is never loaded"
-            raise ValueError(f"not an ials_zoo influence data set: {path} ({why})") from None
+            raise BadInput(f"not an ials_zoo influence data set: {path} ({why})") from None
         try:
             meta = json.loads(str(arrays["metadata"]))
             if meta.get("format") != FORMAT:
-                raise ValueError(f"no {FORMAT!r} tag")
+                raise BadInput(f"no {FORMAT!r} tag")
             if meta.get("format_version") != FORMAT_VERSION:
-                raise ValueError(
+                raise BadInput(
                     f"format version {meta.get('format_version')!r}, this ials_zoo reads {FORMAT_VERSION}"
                 )
             region = RegionSpec.from_dict(meta["region"])
             ds = cls(region, {"dset": arrays["dset"], "full": arrays["full"]}, arrays["influences"], meta)
         except (ValueError, KeyError, TypeError) as exc:
-            raise ValueError(f"not an ials_zoo influence data set: {path} ({exc})") from None
+            raise BadInput(f"not an ials_zoo influence data set: {path} ({exc})") from None
         if env_id is not None and region.domain != env_id:
-            raise ValueError(f"{path} holds data of domain {region.domain!r}, not {env_id!r}")
+            raise BadInput(f"{path} holds data of domain {region.domain!r}, not {env_id!r}")
         if agent is not None and region.agent != agent:
-            raise ValueError(f"{path} holds data of agent {region.agent!r}, not {agent!r}")
+            raise BadInput(f"{path} holds data of agent {region.agent!r}, not {agent!r}")
         return ds
 
 
@@ -180,7 +181,7 @@ def as_policy(policy, action_space, seed: int) -> tuple[Callable, str]:
         return policy, getattr(policy, "__name__", type(policy).__name__)
     if callable(getattr(policy, "predict", None)):
         return (lambda obs: policy.predict(obs, deterministic=False)[0]), type(policy).__name__
-    raise TypeError(f"policy must be None, a callable obs -> action, or have predict(); got {policy!r}")
+    raise BadInputType(f"policy must be None, a callable obs -> action, or have predict(); got {policy!r}")
 
 
 class _JointActor:
@@ -194,7 +195,7 @@ class _JointActor:
         if isinstance(policy, dict):
             missing = [a for a in agents if a not in policy]
             if missing:
-                raise ValueError(f"the policy dict has no entry for {missing}")
+                raise BadInput(f"the policy dict has no entry for {missing}")
             per = {a: policy[a] for a in agents}
         else:
             per = dict.fromkeys(agents, policy)
@@ -270,18 +271,24 @@ def collect_all(
 
     steps = int(steps)
     if steps < 1:
-        raise ValueError(f"steps must be >= 1, got {steps}")
+        raise BadInput(f"steps must be >= 1, got {steps}")
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-        raise ValueError(f"workers must be a positive int, got {workers!r}")
+        raise BadInput(f"workers must be a positive int, got {workers!r}")
     check_seed(seed)
     domain = get_domain(env_id)
     gs_options = dict(gs_options or {})
     if "learners" in gs_options:
-        raise ValueError("gs_options must not set 'learners': the collected agents are the learners")
+        raise BadInput("gs_options must not set 'learners': the collected agents are the learners")
     agents = domain.check_agents(agents, **gs_options)
     if workers > 1:
         return _collect_in_processes(env_id, agents, steps, policy, seed, gs_options, progress, workers)
+    return _collect_in_process(domain, env_id, agents, steps, policy, seed, gs_options, progress)
 
+
+def _collect_in_process(domain, env_id: str, agents: list, steps: int, policy, seed: int, gs_options: dict,
+                        progress: bool) -> dict[str, InfluenceDataset]:
+    """:func:`collect_all` in this process, its arguments checked: one GS run of whole episodes
+    until ``steps`` are recorded."""
     t0 = time.perf_counter()
     env = domain.parallel_env(learners=agents, **gs_options)
     try:
@@ -379,7 +386,7 @@ def _collect_in_processes(env_id, agents, steps, policy, seed, gs_options, progr
     try:
         pickle.dumps(policy)
     except Exception as exc:
-        raise ValueError(f"collect(workers={workers}) sends the policy to other processes, but it cannot be "
+        raise BadInput(f"collect(workers={workers}) sends the policy to other processes, but it cannot be "
                          f"pickled ({exc}); use workers=1 or a picklable policy") from None
     t0 = time.perf_counter()
     share = -(-steps // workers)

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ials_zoo.core.region import RegionSpec
+from ials_zoo.errors import BadInput, BadInputType
 from ials_zoo.influence.base import InfluencePredictor
 from ials_zoo.influence.constant import FixedPredictor, MarginalPredictor, UniformPredictor
 from ials_zoo.influence.networks import ARCHS, GRUPredictor, MLPPredictor
@@ -45,10 +46,10 @@ def _payload(predictor: InfluencePredictor) -> dict:
     import torch
 
     if not isinstance(predictor, InfluencePredictor):
-        raise TypeError(f"expected an InfluencePredictor, got {type(predictor).__name__}")
+        raise BadInputType(f"expected an InfluencePredictor, got {type(predictor).__name__}")
     cls_name = type(predictor).__name__
     if cls_name not in _CLASSES:
-        raise TypeError(f"cannot save predictor class {cls_name}")
+        raise BadInputType(f"cannot save predictor class {cls_name}")
     meta = dict(predictor.metadata)
     meta.setdefault("created", time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()))
     meta["package_version"] = meta.get("package_version") or _package_version()
@@ -109,21 +110,21 @@ def _json_default(o):
         return o.item()
     if isinstance(o, np.ndarray):
         return o.tolist()
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+    raise BadInputType(f"not JSON serialisable: {type(o).__name__}")
 
 
 def _from_payload(payload, where) -> InfluencePredictor:
     if not isinstance(payload, dict) or payload.get("format") != FORMAT:
-        raise ValueError(f"not an ials_zoo influence predictor: {where} (no {FORMAT!r} header)")
+        raise BadInput(f"not an ials_zoo influence predictor: {where} (no {FORMAT!r} header)")
     if payload.get("format_version") != FORMAT_VERSION:
-        raise ValueError(
+        raise BadInput(
             f"{where}: influence predictor format version {payload.get('format_version')!r}, this "
             f"ials_zoo reads version {FORMAT_VERSION}"
         )
     try:
         meta = loads_untrusted_json(payload["metadata_json"])
         if not isinstance(meta, dict):
-            raise TypeError("metadata_json must hold a JSON object")
+            raise BadInputType("metadata_json must hold a JSON object")
         cls = _CLASSES[payload["class"]]
         region = RegionSpec.from_dict(meta["region"])
         arrays = {k: v.numpy() for k, v in payload["arrays"].items()}
@@ -132,7 +133,7 @@ def _from_payload(payload, where) -> InfluencePredictor:
             return cls(region, dset_kind=meta["dset_kind"], arrays=arrays, metadata=meta, **kwargs)
         return cls(region, dset_kind=meta["dset_kind"], metadata=meta, table=arrays["table"], **kwargs)
     except (KeyError, TypeError, ValueError, AttributeError, UnicodeDecodeError) as exc:
-        raise ValueError(f"not an ials_zoo influence predictor: {where} (bad content: {exc})") from None
+        raise BadInput(f"not an ials_zoo influence predictor: {where} (bad content: {exc})") from None
 
 
 def _torch_load(path):
@@ -144,7 +145,7 @@ def _torch_load(path):
     try:
         return torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # torch raises many kinds for a corrupt/foreign file
-        raise ValueError(f"not an ials_zoo influence predictor: {path} ({type(exc).__name__}: {exc})") from None
+        raise BadInput(f"not an ials_zoo influence predictor: {path} ({type(exc).__name__}: {exc})") from None
 
 
 def load_predictor_set(path, env_id: str | None = None) -> dict:
@@ -152,21 +153,21 @@ def load_predictor_set(path, env_id: str | None = None) -> dict:
     pickle)."""
     payload = _torch_load(path)
     if not isinstance(payload, dict) or payload.get("format") != SET_FORMAT:
-        raise ValueError(f"not an ials_zoo influence predictor set: {path}")
+        raise BadInput(f"not an ials_zoo influence predictor set: {path}")
     if payload.get("format_version") != FORMAT_VERSION:
-        raise ValueError(f"{path}: influence predictor set format version {payload.get('format_version')!r}, this "
+        raise BadInput(f"{path}: influence predictor set format version {payload.get('format_version')!r}, this "
                          f"ials_zoo reads version {FORMAT_VERSION}")
     members = payload.get("members")
     if not isinstance(members, list) or not members:
-        raise ValueError(f"not an ials_zoo influence predictor set: {path} (members must be a non-empty list, got "
+        raise BadInput(f"not an ials_zoo influence predictor set: {path} (members must be a non-empty list, got "
                          f"{type(members).__name__})")
     out = {}
     for i, member in enumerate(members):
         pred = _from_payload(member, f"{path} (member {i})")
         if env_id is not None and pred.region.domain != env_id:
-            raise ValueError(f"{path} holds predictors of {pred.region.domain!r}, not {env_id!r}")
+            raise BadInput(f"{path} holds predictors of {pred.region.domain!r}, not {env_id!r}")
         if pred.region.agent in out:
-            raise ValueError(f"{path}: two members are predictors of {pred.region.agent!r}")
+            raise BadInput(f"{path}: two members are predictors of {pred.region.agent!r}")
         out[pred.region.agent] = pred
     return out
 
@@ -182,11 +183,11 @@ def load_predictor(path, env_id: str | None = None, agent: str | None = None) ->
     pred = _from_payload(_torch_load(path), path)
     region = pred.region
     if env_id is not None and region.domain != env_id:
-        raise ValueError(
+        raise BadInput(
             f"{path} is an influence predictor for domain {region.domain!r}, not {env_id!r}"
         )
     if agent is not None and region.agent != agent:
-        raise ValueError(
+        raise BadInput(
             f"{path} is an influence predictor for agent {region.agent!r} of {region.domain}, "
             f"not for agent {agent!r}"
         )

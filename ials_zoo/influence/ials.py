@@ -31,15 +31,11 @@ import gymnasium as gym
 import numpy as np
 
 from ials_zoo.core.region import check_dset_kind
-from ials_zoo.influence.predictors import (
-    FixedPredictor,
-    InfluencePredictor,
-    MarginalPredictor,
-    UniformPredictor,
-    load_predictor,
-    save_predictor,
-    untrained_predictor,
-)
+from ials_zoo.errors import BadInput, BadInputType
+from ials_zoo.influence.base import InfluencePredictor
+from ials_zoo.influence.constant import FixedPredictor, MarginalPredictor, UniformPredictor
+from ials_zoo.influence.files import load_predictor, save_predictor
+from ials_zoo.influence.networks import untrained_predictor
 from ials_zoo.influence.specs import parse_predictor
 from ials_zoo.utils import check_seed
 
@@ -68,7 +64,7 @@ class IALSEnv(gym.Env):
 
     def __init__(self, local_simulator, predictor: InfluencePredictor, seed: int | None = None):
         if local_simulator.n_copies != 1:
-            raise ValueError(f"IALSEnv needs a local simulator with one copy, got {local_simulator.n_copies}")
+            raise BadInput(f"IALSEnv needs a local simulator with one copy, got {local_simulator.n_copies}")
         _check_compatible(local_simulator, predictor)
         self.ls = local_simulator
         self.predictor = predictor
@@ -127,7 +123,7 @@ class IALSEnv(gym.Env):
         else:
             a = int(_scalar_action(action))
         if not 0 <= a < self._n_actions:
-            raise ValueError(f"actions must be in 0..{self._n_actions - 1}, got values {a}..{a}")
+            raise BadInput(f"actions must be in 0..{self._n_actions - 1}, got values {a}..{a}")
         rng = self._np_random  # the np_random property's lazy creation, without its cost
         if rng is None:
             rng = self.np_random
@@ -145,16 +141,16 @@ class IALSEnv(gym.Env):
 def _scalar_action(action):
     a = np.asarray(action)
     if a.size != 1 or a.dtype.kind not in "iu":
-        raise ValueError(f"expected one integer action, got {action!r}")
+        raise BadInput(f"expected one integer action, got {action!r}")
     return a.reshape(())
 
 
 def _check_compatible(ls, predictor):
     if not isinstance(predictor, InfluencePredictor):
-        raise TypeError(f"predictor must be an InfluencePredictor, got {type(predictor).__name__}")
+        raise BadInputType(f"predictor must be an InfluencePredictor, got {type(predictor).__name__}")
     a, b = predictor.region, ls.region
     if (a.domain, a.agent) != (b.domain, b.agent):
-        raise ValueError(
+        raise BadInput(
             f"the influence predictor is for {a.domain}/{a.agent} but the local simulator is "
             f"{b.domain}/{b.agent}"
         )
@@ -162,7 +158,7 @@ def _check_compatible(ls, predictor):
         diff = {
             k: (a.to_dict()[k], b.to_dict()[k]) for k in a.to_dict() if a.to_dict()[k] != b.to_dict()[k]
         }
-        raise ValueError(
+        raise BadInput(
             f"the influence predictor for {a.domain}/{a.agent} was built for another region "
             f"setting (predictor vs local simulator: {diff})"
         )
@@ -395,22 +391,22 @@ def resolve_predictor(
                 trained = trained_predictor(env_id, agent, kind, options=options)
                 marg = trained.metadata.get("marginal")
                 if marg is None:
-                    raise ValueError(
+                    raise BadInput(
                         f"the trained AIP of {env_id}/{agent} carries no data marginal; build a "
                         "MarginalPredictor.fit(dataset) from collected data instead"
                     )
                 pred = MarginalPredictor(region, marg, dset_kind=kind, metadata={"from": "trained AIP data"})
     else:
-        raise TypeError(
+        raise BadInputType(
             f"predictor must be a name, a path or an InfluencePredictor, got {type(predictor).__name__}"
         )
     if pred.region.domain != env_id or pred.region.agent != agent:
-        raise ValueError(
+        raise BadInput(
             f"the influence predictor is for {pred.region.domain}/{pred.region.agent}, not "
             f"{env_id}/{agent}"
         )
     if dset_kind is not None and pred.dset_kind != check_dset_kind(dset_kind):
-        raise ValueError(f"the influence predictor reads the {pred.dset_kind!r} d-set, not {dset_kind!r}")
+        raise BadInput(f"the influence predictor reads the {pred.dset_kind!r} d-set, not {dset_kind!r}")
     return pred
 
 
@@ -437,7 +433,7 @@ def make_ials(
     from ials_zoo.core.domains import get_domain
 
     if render_mode is not None:
-        raise ValueError(f"IALS envs do not render; got render_mode={render_mode!r}")
+        raise BadInput(f"IALS envs do not render; got render_mode={render_mode!r}")
     domain = get_domain(env_id)
     domain.check_agent(agent, **options)
     pred = resolve_predictor(predictor, env_id, agent, dset_kind, seed, options)
@@ -476,7 +472,7 @@ def make_ials_vec_env(
     from ials_zoo.core.domains import get_domain
 
     if isinstance(n_envs, bool) or not isinstance(n_envs, (int, np.integer)) or n_envs < 1:
-        raise ValueError(f"n_envs must be a positive int, got {n_envs!r}")
+        raise BadInput(f"n_envs must be a positive int, got {n_envs!r}")
     domain = get_domain(env_id)
     domain.check_agent(agent, **options)
     pred = resolve_predictor(predictor, env_id, agent, dset_kind, seed, options)

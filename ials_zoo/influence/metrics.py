@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ials_zoo.errors import BadInput
 from ials_zoo.influence.base import InfluencePredictor
 
 
@@ -23,7 +24,7 @@ def evaluate_cross_entropy(predictor: InfluencePredictor, dataset, episodes=None
 def cross_entropy_per_source(predictor, dataset, episodes=None) -> np.ndarray:
     """Per-source mean cross-entropy (nats), shape ``[M]``; see :func:`evaluate_cross_entropy`."""
     if predictor.region.influence_classes != dataset.region.influence_classes:
-        raise ValueError(
+        raise BadInput(
             f"predictor sources {predictor.region.influence_classes} do not match the data "
             f"set's {dataset.region.influence_classes}"
         )
@@ -33,7 +34,7 @@ def cross_entropy_per_source(predictor, dataset, episodes=None) -> np.ndarray:
         d, u = d[episodes], u[episodes]
     E, T, M = u.shape
     if E == 0:
-        raise ValueError("cannot evaluate the cross-entropy on an empty data set")
+        raise BadInput("cannot evaluate the cross-entropy on an empty data set")
     nll = np.zeros(M)
     rows = np.arange(E)[:, None]
     cols = np.arange(M)[None, :]

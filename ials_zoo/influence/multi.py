@@ -35,8 +35,9 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
 from ials_zoo.core.region import INFLUENCE_KEY, check_dset_kind
+from ials_zoo.errors import BadInput, BadInputType
+from ials_zoo.influence.base import InfluencePredictor
 from ials_zoo.influence.ials import PRETRAINED_DIR, cache_dir, resolve_predictor
-from ials_zoo.influence.predictors import InfluencePredictor
 from ials_zoo.influence.stacked import StackedPredictor
 from ials_zoo.utils import check_reset_options, check_seed
 
@@ -106,7 +107,7 @@ def resolve_predictor_set(predictor, env_id: str, agents, dset_kind: str | None 
     if isinstance(predictor, dict):
         missing = [a for a in agents if a not in predictor]
         if missing:
-            raise ValueError(f"no influence predictor for {missing}")
+            raise BadInput(f"no influence predictor for {missing}")
         return [resolve_predictor(predictor[a], env_id, a, dset_kind, seed, options) for a in agents]
     if isinstance(predictor, (str, os.PathLike)):
         spec = parse_predictor(predictor)
@@ -133,10 +134,10 @@ class MultiAgentIALS:
 
     def __init__(self, local_simulator, predictor: StackedPredictor):
         if list(predictor.agents) != list(local_simulator.agents) or predictor.n_envs != local_simulator.n_envs:
-            raise ValueError("the stacked predictor must hold the local simulator's agents and copies")
+            raise BadInput("the stacked predictor must hold the local simulator's agents and copies")
         for p, r in zip(predictor.predictors, local_simulator.regions):
             if p.region.to_dict() != r.to_dict():
-                raise ValueError(f"the influence predictor of {r.agent} was built for another region setting")
+                raise BadInput(f"the influence predictor of {r.agent} was built for another region setting")
         self.ls, self.predictor = local_simulator, predictor
         self.agents = list(local_simulator.agents)
         self.n_envs = local_simulator.n_envs
@@ -194,7 +195,7 @@ class IALSParallelEnv(ParallelEnv):
 
     def __init__(self, core: MultiAgentIALS, null_influence: int = 0, seed: int | None = None):
         if core.n_envs != 1:
-            raise ValueError("IALSParallelEnv needs one copy per agent")
+            raise BadInput("IALSParallelEnv needs one copy per agent")
         self.core = core
         self.possible_agents = list(core.agents)
         self.agents = []
@@ -242,11 +243,11 @@ class IALSParallelEnv(ParallelEnv):
         if not self.agents:
             raise RuntimeError("the episode is over (or reset() was never called); call reset()")
         if not isinstance(actions, dict):
-            raise TypeError(f"actions must be a dict agent -> action, got {type(actions).__name__}")
+            raise BadInputType(f"actions must be a dict agent -> action, got {type(actions).__name__}")
         missing = [a for a in self.agents if a not in actions]
         extra = [a for a in actions if a not in self.agents]
         if missing or extra:
-            raise ValueError(f"actions must have one entry per live agent; missing {missing}, unknown {extra}")
+            raise BadInput(f"actions must have one entry per live agent; missing {missing}, unknown {extra}")
         acts = np.empty(len(self.agents), np.int64)
         n = int(self.action_spaces[self.agents[0]].n)
         for i, a in enumerate(self.agents):
@@ -254,7 +255,7 @@ class IALSParallelEnv(ParallelEnv):
             if isinstance(v, np.ndarray) and v.shape == ():
                 v = v[()]
             if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or not 0 <= v < n:
-                raise ValueError(f"action of {a!r} must be an int in 0..{n - 1}, got {actions[a]!r}")
+                raise BadInput(f"action of {a!r} must be an int in 0..{n - 1}, got {actions[a]!r}")
             acts[i] = v
         obs, rewards, dsets, u, done = self.core.step(acts[:, None])
         agents = self.agents
@@ -276,13 +277,13 @@ def make_multi_agent_ials(env_id: str, agents=None, n_envs: int = 1, predictor="
 
     domain = get_domain(env_id)
     if isinstance(agents, str):
-        raise TypeError(f"agents must be a list of agent ids (or None for all), got the string {agents!r}; "
+        raise BadInputType(f"agents must be a list of agent ids (or None for all), got the string {agents!r}; "
                         f"did you mean [{agents!r}]?")
     agents = domain.check_agents(agents, **options)
     if isinstance(predictor, dict):
         unknown = sorted(set(predictor) - set(agents))
         if unknown:
-            raise ValueError(f"predictors given for {unknown}, which are not among the agents {agents}")
+            raise BadInput(f"predictors given for {unknown}, which are not among the agents {agents}")
     preds = resolve_predictor_set(predictor, env_id, agents, dset_kind, seed, options)
     ls = domain.local_simulator(agents, n_envs=n_envs, **options)
     try:
@@ -310,7 +311,7 @@ def make_ials_parallel_env(env_id: str, agents=None, predictor="trained", dset_k
     domain = get_domain(env_id)
     for gs_only in ("learners", "scripted_learners", "render_mode"):
         if gs_only in options:
-            raise ValueError(f"{gs_only!r} is a GS option; the multi-agent IALS has no scripted agents and no renderer")
+            raise BadInput(f"{gs_only!r} is a GS option; the multi-agent IALS has no scripted agents and no renderer")
     core = make_multi_agent_ials(env_id, agents, 1, predictor, dset_kind, seed, **options)
     return IALSParallelEnv(core, domain.null_influence, seed)
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ials_zoo.errors import BadInput
 from ials_zoo.influence.base import (
     _HALF32,
     _ONE32,
@@ -267,13 +268,13 @@ def init_arrays(arch: str, d: int, hidden: int, n_logits: int, seed: int = 0) ->
             "w_out": u(b, (hidden, n_logits)),
             "b_out": u(b, (n_logits,)),
         }
-    raise ValueError(f"unknown AIP architecture {arch!r}; expected one of {sorted(ARCHS)}")
+    raise BadInput(f"unknown AIP architecture {arch!r}; expected one of {sorted(ARCHS)}")
 
 
 def untrained_predictor(region, arch="gru", dset_kind="dset", hidden=64, seed=0, autoregressive=False):
     """A randomly initialised network AIP: the paper's untrained-IALS (SPEC §3)."""
     if arch not in ARCHS:
-        raise ValueError(f"unknown AIP architecture {arch!r}; expected one of {sorted(ARCHS)}")
+        raise BadInput(f"unknown AIP architecture {arch!r}; expected one of {sorted(ARCHS)}")
     pred = ARCHS[arch](region, dset_kind=dset_kind, hidden=hidden, seed=seed, autoregressive=autoregressive)
     pred.metadata.update({"variant": "untrained", "seed": int(seed)})
     return pred

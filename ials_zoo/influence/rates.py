@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ials_zoo.errors import BadInput
+
 
 def influence_rates(env_id: str, agent: str, predictor, episodes: int = 3, seed: int = 0) -> dict:
     """Mean of ``info["influence"]`` (in traffic, where each source is a 0/1 entry bit: vehicles
@@ -14,7 +16,7 @@ def influence_rates(env_id: str, agent: str, predictor, episodes: int = 3, seed:
     from ials_zoo.influence.ials import make_ials
 
     if episodes < 1:
-        raise ValueError(f"episodes must be >= 1, got {episodes}")
+        raise BadInput(f"episodes must be >= 1, got {episodes}")
     env = make_ials(env_id, agent, predictor=predictor, seed=seed)
     env.action_space.seed(seed)
     influence, obs_mean = [], []

@@ -28,6 +28,8 @@ import math
 import os
 from dataclasses import dataclass
 
+from ials_zoo.errors import BadInput, BadInputType
+
 PREDICTOR_SPECS = ("trained, trained:gru, trained:mlp, train, train:gru, train:mlp, untrained, uniform, fixed:P, "
                    "marginal or a .pt file")
 SIMULATOR_SPECS = "gs, ials, untrained-ials, uniform, fixed:P, marginal, trained:gru|mlp or a .pt file"
@@ -77,18 +79,18 @@ def parse_predictor(text) -> PredictorSpec:
     if is_path(text):
         return PredictorSpec("file", path=os.fspath(text))
     if not isinstance(text, str):
-        raise TypeError(f"a predictor spec must be a string or a path, got {type(text).__name__}")
+        raise BadInputType(f"a predictor spec must be a string or a path, got {type(text).__name__}")
     name = text.strip().lower()
     if name in ("trained", "untrained", "uniform", "marginal"):
         return PredictorSpec(name)
     if name in ("random-init", "random_init"):
-        raise ValueError(f"predictor {text!r} is now called 'untrained' (a randomly initialised network)")
+        raise BadInput(f"predictor {text!r} is now called 'untrained' (a randomly initialised network)")
     if name == "train":
         return PredictorSpec("trained", train_if_missing=True)
     if name.startswith(("trained:", "train:")):
         word, arch = name.split(":", 1)
         if arch not in ("gru", "mlp"):
-            raise ValueError(f"bad predictor {text!r}; expected '{word}:gru' or '{word}:mlp'")
+            raise BadInput(f"bad predictor {text!r}; expected '{word}:gru' or '{word}:mlp'")
         return PredictorSpec("trained", arch=arch, train_if_missing=word == "train")
     if name.startswith("fixed:"):
         try:
@@ -96,9 +98,9 @@ def parse_predictor(text) -> PredictorSpec:
         except ValueError:
             p = math.nan
         if not 0.0 <= p <= 1.0:
-            raise ValueError(f"bad predictor {text!r}; expected fixed:P with P a number in [0, 1]")
+            raise BadInput(f"bad predictor {text!r}; expected fixed:P with P a number in [0, 1]")
         return PredictorSpec("fixed", p=p)
-    raise ValueError(f"unknown influence predictor {text!r}; expected {PREDICTOR_SPECS}")
+    raise BadInput(f"unknown influence predictor {text!r}; expected {PREDICTOR_SPECS}")
 
 
 def parse_simulator(text) -> PredictorSpec | None:
@@ -110,10 +112,17 @@ def parse_simulator(text) -> PredictorSpec | None:
     try:
         spec = parse_predictor(text)
     except ValueError:
-        raise ValueError(f"unknown simulator {text!r}; expected {SIMULATOR_SPECS}") from None
+        raise BadInput(f"unknown simulator {text!r}; expected {SIMULATOR_SPECS}") from None
     if spec.kind == "file" and not os.path.isfile(spec.path):
-        raise ValueError(f"simulator {text!r}: predictor file not found")
+        raise BadInput(f"simulator {text!r}: predictor file not found")
     return spec
+
+
+def predictor_for(simulator: str) -> str | None:
+    """The ``predictor`` argument of the IALS factories for a ``--simulator`` value, or None
+    for the GS (a BadInput naming the vocabulary for anything else)."""
+    spec = parse_simulator(simulator)
+    return None if spec is None else str(spec)
 
 
 def simulator_label(text, aip_variant: str | None = None) -> str:
@@ -139,5 +148,6 @@ __all__ = [
     "PredictorSpec",
     "parse_predictor",
     "parse_simulator",
+    "predictor_for",
     "simulator_label",
 ]

@@ -21,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from ials_zoo.core.streams import CopyStreams
+from ials_zoo.errors import BadInput, BadInputType
 from ials_zoo.influence.base import InfluencePredictor, _sigmoid, one_hot_influences
 from ials_zoo.influence.constant import _ConstantPredictor
 from ials_zoo.influence.networks import GRUPredictor, MLPPredictor
@@ -35,7 +36,7 @@ def _group_key(p: InfluencePredictor) -> tuple:
         return ("gru", p.hidden, p.autoregressive)
     if isinstance(p, _ConstantPredictor):
         return ("table",)
-    raise TypeError(f"cannot stack a {type(p).__name__}")
+    raise BadInputType(f"cannot stack a {type(p).__name__}")
 
 
 class _Group:
@@ -121,18 +122,18 @@ class StackedPredictor:
     def __init__(self, predictors, n_envs: int = 1):
         self.predictors = list(predictors)
         if not self.predictors:
-            raise ValueError("a stacked predictor needs at least one predictor")
+            raise BadInput("a stacked predictor needs at least one predictor")
         first = self.predictors[0]
         for p in self.predictors:
             if not isinstance(p, InfluencePredictor):
-                raise TypeError(f"expected InfluencePredictors, got {type(p).__name__}")
+                raise BadInputType(f"expected InfluencePredictors, got {type(p).__name__}")
             if (p.region.influence_classes, p.dset_size, p.dset_kind) != (
                     first.region.influence_classes, first.dset_size, first.dset_kind):
-                raise ValueError(f"the predictors of {first.region.agent} and {p.region.agent} read or predict "
+                raise BadInput(f"the predictors of {first.region.agent} and {p.region.agent} read or predict "
                                  "different layouts; the regions of a batch must share one")
         self.agents = [p.region.agent for p in self.predictors]
         if len(set(self.agents)) != len(self.agents):
-            raise ValueError(f"one predictor per agent, got {self.agents}")
+            raise BadInput(f"one predictor per agent, got {self.agents}")
         self.dset_kind = first.dset_kind
         self.n_sources, self.max_classes = first.n_sources, first.max_classes
         self._layout = first
@@ -166,7 +167,7 @@ class StackedPredictor:
         for agent, p in predictors.items():
             i = self.agents.index(agent)
             if p.region.agent != agent or p.region.influence_classes != self._layout.region.influence_classes:
-                raise ValueError(f"a predictor for {p.region.agent} cannot replace {agent}'s")
+                raise BadInput(f"a predictor for {p.region.agent} cannot replace {agent}'s")
             self.predictors[i] = p
         running = [(g.members, g.h, g.previous) for g in self.groups]
         self._build()
@@ -185,7 +186,7 @@ class StackedPredictor:
         class probabilities ``[rows, M, Kmax]``."""
         d = np.asarray(dsets)
         if d.shape != (self.rows, self._layout.dset_size):
-            raise ValueError(f"expected d-sets of shape {(self.rows, self._layout.dset_size)}, got {d.shape}")
+            raise BadInput(f"expected d-sets of shape {(self.rows, self._layout.dset_size)}, got {d.shape}")
         out = np.empty((self.rows, self.n_sources, self.max_classes))
         view = out.reshape(len(self.agents), self.n_envs, self.n_sources, self.max_classes)
         dg = d.reshape(len(self.agents), self.n_envs, -1)
@@ -203,7 +204,7 @@ class StackedPredictor:
         at the next step (teacher forcing; :meth:`sample` does this with its own draws)."""
         u = np.asarray(influences)
         if u.shape != (self.rows, self.n_sources):
-            raise ValueError(f"expected influences of shape {(self.rows, self.n_sources)}, got {u.shape}")
+            raise BadInput(f"expected influences of shape {(self.rows, self.n_sources)}, got {u.shape}")
         ug = u.reshape(len(self.agents), self.n_envs, self.n_sources)
         for g in self.groups:
             g.remember(ug[g.members])
@@ -215,7 +216,7 @@ class StackedPredictor:
         single-agent predictors sample)."""
         d = np.asarray(dsets)
         if d.shape != (self.rows, self._layout.dset_size):
-            raise ValueError(f"expected d-sets of shape {(self.rows, self._layout.dset_size)}, got {d.shape}")
+            raise BadInput(f"expected d-sets of shape {(self.rows, self._layout.dset_size)}, got {d.shape}")
         A, n, M = len(self.agents), self.n_envs, self.n_sources
         r = self.streams.next().reshape(A, n, M, 1)
         out = np.empty((A, n, M), np.int64)

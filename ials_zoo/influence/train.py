@@ -22,6 +22,7 @@ import time
 
 import numpy as np
 
+from ials_zoo.errors import BadInput
 from ials_zoo.influence.base import previous_influences
 from ials_zoo.influence.predictors import (
     ARCHS,
@@ -39,63 +40,7 @@ DEFAULTS = {
 
 
 def _torch_modules():
-    import torch
-    from torch import nn
-
-    class TorchMLP(nn.Module):
-        def __init__(self, d, hidden, n_logits):
-            super().__init__()
-            self.lin1 = nn.Linear(d, hidden)
-            self.out = nn.Linear(hidden, n_logits)
-
-        def forward(self, x):
-            return self.out(torch.relu(self.lin1(x)))
-
-        def load_numpy(self, a):
-            with torch.no_grad():
-                self.lin1.weight.copy_(torch.from_numpy(a["w1"].T.copy()))
-                self.lin1.bias.copy_(torch.from_numpy(a["b1"]))
-                self.out.weight.copy_(torch.from_numpy(a["w_out"].T.copy()))
-                self.out.bias.copy_(torch.from_numpy(a["b_out"]))
-
-        def to_numpy(self):
-            g = lambda t: t.detach().cpu().numpy().astype(np.float32)
-            return {
-                "w1": g(self.lin1.weight).T.copy(),
-                "b1": g(self.lin1.bias),
-                "w_out": g(self.out.weight).T.copy(),
-                "b_out": g(self.out.bias),
-            }
-
-    class TorchGRU(nn.Module):
-        def __init__(self, d, hidden, n_logits):
-            super().__init__()
-            self.gru = nn.GRU(d, hidden, batch_first=True)
-            self.out = nn.Linear(hidden, n_logits)
-
-        def forward(self, x):
-            h, _ = self.gru(x)
-            return self.out(h)
-
-        def load_numpy(self, a):
-            with torch.no_grad():
-                self.gru.weight_ih_l0.copy_(torch.from_numpy(a["w_ih"].T.copy()))
-                self.gru.weight_hh_l0.copy_(torch.from_numpy(a["w_hh"].T.copy()))
-                self.gru.bias_ih_l0.copy_(torch.from_numpy(a["b_ih"]))
-                self.gru.bias_hh_l0.copy_(torch.from_numpy(a["b_hh"]))
-                self.out.weight.copy_(torch.from_numpy(a["w_out"].T.copy()))
-                self.out.bias.copy_(torch.from_numpy(a["b_out"]))
-
-        def to_numpy(self):
-            g = lambda t: t.detach().cpu().numpy().astype(np.float32)
-            return {
-                "w_ih": g(self.gru.weight_ih_l0).T.copy(),
-                "w_hh": g(self.gru.weight_hh_l0).T.copy(),
-                "b_ih": g(self.gru.bias_ih_l0),
-                "b_hh": g(self.gru.bias_hh_l0),
-                "w_out": g(self.out.weight).T.copy(),
-                "b_out": g(self.out.bias),
-            }
+    from ials_zoo.influence.torch_nets import TorchGRU, TorchMLP
 
     return {"mlp": TorchMLP, "gru": TorchGRU}
 
@@ -194,7 +139,7 @@ def hyperparameters(arch: str, epochs, lr, hidden, batch_size, min_epochs: int) 
     if batch_size is not None:
         hp["batch_episodes" if arch == "gru" else "batch_size"] = int(batch_size)
     if int(hp["epochs"]) < min_epochs:
-        raise ValueError(f"epochs must be >= {min_epochs}, got {hp['epochs']}")
+        raise BadInput(f"epochs must be >= {min_epochs}, got {hp['epochs']}")
     return hp
 
 
@@ -214,11 +159,11 @@ def _train(dataset, arch, dset_kind, epochs, seed, progress, lr, hidden, batch_s
     from ials_zoo.core.region import check_dset_kind
 
     if arch not in ARCHS:
-        raise ValueError(f"unknown AIP architecture {arch!r}; expected one of {sorted(ARCHS)}")
+        raise BadInput(f"unknown AIP architecture {arch!r}; expected one of {sorted(ARCHS)}")
     check_dset_kind(dset_kind)
     hp = hyperparameters(arch, epochs, lr, hidden, batch_size, min_epochs=0)
     if dataset.n_episodes < 2:
-        raise ValueError(f"need at least 2 episodes to split train/test, got {dataset.n_episodes}")
+        raise BadInput(f"need at least 2 episodes to split train/test, got {dataset.n_episodes}")
 
     region = dataset.region
     train_idx, test_idx = dataset.split(test_fraction, seed=seed)
@@ -335,50 +280,7 @@ def format_report(report: dict) -> str:
 
 
 def _stacked_modules():
-    import torch
-    from torch import nn
-
-    class StackedMLP(nn.Module):
-        def __init__(self, arrays: list[dict]):
-            super().__init__()
-            st = lambda k: nn.Parameter(torch.from_numpy(np.stack([a[k] for a in arrays]).astype(np.float32)))
-            self.w1, self.b1, self.w_out, self.b_out = st("w1"), st("b1"), st("w_out"), st("b_out")
-
-        def forward(self, x):  # x [G, B, D]
-            h = torch.relu(torch.bmm(x, self.w1) + self.b1[:, None])
-            return torch.bmm(h, self.w_out) + self.b_out[:, None]
-
-        def arrays(self, g):
-            return {k: getattr(self, k)[g].detach().numpy().copy() for k in ("w1", "b1", "w_out", "b_out")}
-
-    class StackedGRU(nn.Module):
-        def __init__(self, arrays: list[dict]):
-            super().__init__()
-            st = lambda k: nn.Parameter(torch.from_numpy(np.stack([a[k] for a in arrays]).astype(np.float32)))
-            for k in ("w_ih", "w_hh", "b_ih", "b_hh", "w_out", "b_out"):
-                setattr(self, k, st(k))
-            self.hidden = arrays[0]["w_hh"].shape[0]
-
-        def forward(self, x):  # x [G, B, T, D]; torch.nn.GRU's equations and gate order (r, z, n)
-            G, B, T, _ = x.shape
-            H = self.hidden
-            h = x.new_zeros(G, B, H)
-            gi_all = torch.matmul(x, self.w_ih[:, None]) + self.b_ih[:, None, None]  # [G, B, T, 3H]
-            outs = []
-            for t in range(T):
-                gi = gi_all[:, :, t]
-                gh = torch.bmm(h, self.w_hh) + self.b_hh[:, None]
-                r = torch.sigmoid(gi[..., :H] + gh[..., :H])
-                z = torch.sigmoid(gi[..., H:2 * H] + gh[..., H:2 * H])
-                n = torch.tanh(gi[..., 2 * H:] + r * gh[..., 2 * H:])
-                h = (1 - z) * n + z * h
-                outs.append(h)
-            hs = torch.stack(outs, dim=2)  # [G, B, T, H]
-            return torch.matmul(hs, self.w_out[:, None]) + self.b_out[:, None, None]
-
-        def arrays(self, g):
-            return {k: getattr(self, k)[g].detach().numpy().copy()
-                    for k in ("w_ih", "w_hh", "b_ih", "b_hh", "w_out", "b_out")}
+    from ials_zoo.influence.torch_nets import StackedGRU, StackedMLP
 
     return {"mlp": StackedMLP, "gru": StackedGRU}
 
@@ -392,7 +294,7 @@ def _initial_arrays(agent: str, old, arch: str, D: int, H: int, n_logits: int, d
     if old is None:
         return init_arrays(arch, D, H, n_logits, seed=(seed * 1_000_003 + agent_key(agent)) % 2**32)
     if old.name != arch or old.hidden != H or old.dset_kind != dset_kind or old.autoregressive != bool(autoregressive):
-        raise ValueError(f"cannot warm-start a {arch} AIP (hidden {H}, autoregressive {bool(autoregressive)}) "
+        raise BadInput(f"cannot warm-start a {arch} AIP (hidden {H}, autoregressive {bool(autoregressive)}) "
                          f"from {old!r}")
     return {k: np.asarray(v, np.float32) for k, v in old._arrays().items()}
 
@@ -447,14 +349,14 @@ def train_predictors(datasets: dict, arch: str, hidden: int | None = None, lr: f
     from ials_zoo.core.streams import agent_key
 
     if arch not in ARCHS:
-        raise ValueError(f"unknown AIP architecture {arch!r}; expected one of {sorted(ARCHS)}")
+        raise BadInput(f"unknown AIP architecture {arch!r}; expected one of {sorted(ARCHS)}")
     agents = list(datasets)
     if not agents:
-        raise ValueError("no data sets to train on")
+        raise BadInput("no data sets to train on")
     first = datasets[agents[0]]
     for a in agents:
         if datasets[a].influences.shape != first.influences.shape:
-            raise ValueError(f"the data sets differ in shape ({a}: {datasets[a].influences.shape} vs "
+            raise BadInput(f"the data sets differ in shape ({a}: {datasets[a].influences.shape} vs "
                              f"{first.influences.shape}); collect them in one GS run")
     hp = hyperparameters(arch, epochs, lr, hidden, batch_size, min_epochs=1)
     region = first.region

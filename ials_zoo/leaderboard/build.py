@@ -22,6 +22,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from ials_zoo.errors import BadInput
 from ials_zoo.stats import EPISODES_METHOD, SEEDS_METHOD, t_interval
 
 SCHEMA_VERSION = 2
@@ -59,7 +60,7 @@ def split_env_id(env_id: str) -> tuple[str, int]:
     """``"warehouse_v0"`` -> ``("warehouse", 0)``."""
     m = re.fullmatch(r"([a-z][a-z0-9_]*)_v([0-9]+)", env_id or "")
     if not m:
-        raise ValueError(f"env_id {env_id!r} is not of the form '<domain>_v<version>'")
+        raise BadInput(f"env_id {env_id!r} is not of the form '<domain>_v<version>'")
     return m.group(1), int(m.group(2))
 
 
@@ -123,15 +124,15 @@ def make_result(evaluations: Sequence, *, algorithm: str, training: dict | None 
     import ials_zoo
 
     if not evaluations:
-        raise ValueError("make_result needs at least one evaluation")
+        raise BadInput("make_result needs at least one evaluation")
     first = evaluations[0]
     for ev in evaluations[1:]:
         if (ev.env_id, ev.agent, list(ev.agents), ev.seeds, ev.options) != (
                 first.env_id, first.agent, list(first.agents), first.seeds, first.options):
-            raise ValueError("all evaluations of a result must share domain, agents, seeds and options")
+            raise BadInput("all evaluations of a result must share domain, agents, seeds and options")
     seeds = list(training_seeds) if training_seeds is not None else [None] * len(evaluations)
     if len(seeds) != len(evaluations):
-        raise ValueError(f"{len(seeds)} training seeds for {len(evaluations)} evaluations")
+        raise BadInput(f"{len(seeds)} training seeds for {len(evaluations)} evaluations")
     track = SINGLE if first.agent is not None else MULTI
     domain, version = split_env_id(first.env_id)
     scores = []
@@ -190,7 +191,7 @@ def reference_result(env_id: str, agent: str | None, policy: str, episodes: int 
     from ials_zoo.evaluation import PROTOCOL_EPISODES, REFERENCE_POLICIES, evaluate, evaluate_joint
 
     if policy not in REFERENCE_POLICIES:
-        raise ValueError(f"reference policy must be one of {REFERENCE_POLICIES}, got {policy!r}")
+        raise BadInput(f"reference policy must be one of {REFERENCE_POLICIES}, got {policy!r}")
     episodes = PROTOCOL_EPISODES if episodes is None else episodes
     if agent is None:
         ev = evaluate_joint(env_id, policy, episodes=episodes, **options)
@@ -210,14 +211,14 @@ def result_for(env_id, agent, policy, episodes, deterministic=False, frame_stack
     meta = pol.metadata if pol.kind == "model" else {}
     env_id = env_id or meta.get("env_id")
     if env_id is None:
-        raise ValueError("--env is required unless the policy is a model that names its domain")
+        raise BadInput("--env is required unless the policy is a model that names its domain")
     domain = get_domain(env_id)
     if pol.kind == "model" and len(pol.agents) > 1 and agent is None:
         joint = True
     options = meta.get("env_options", {}) if options is None else options
     if joint:
         if agent is not None:
-            raise ValueError("--joint scores every agent: leave out --agent")
+            raise BadInput("--joint scores every agent: leave out --agent")
         ev = evaluate_joint(env_id, pol, episodes=episodes, deterministic=deterministic, progress=progress, **options)
     else:
         agent = agent or (pol.agents[0] if pol.kind == "model" else domain.default_agents[0])

@@ -20,6 +20,7 @@ are exported; references (scripted, random) have no training run and are left ou
 
 from __future__ import annotations
 
+from ials_zoo.errors import BadInput
 from ials_zoo.leaderboard.store import load_entries
 
 
@@ -66,7 +67,7 @@ def compare_entries(first: dict, second: dict) -> str:
 
     for field in ("env_id", "agents"):
         if first[field] != second[field]:
-            raise ValueError(f"the entries differ in {field}: {first[field]!r} vs {second[field]!r}")
+            raise BadInput(f"the entries differ in {field}: {first[field]!r} vs {second[field]!r}")
     lines = []
     seeds = []
     for name, d in (("first", first), ("second", second)):
@@ -84,7 +85,7 @@ def compare_entries(first: dict, second: dict) -> str:
 def export_board(fmt: str, directory=None) -> dict:
     """The board of ``directory`` in format ``fmt`` (only ``"marl-eval"``)."""
     if fmt != "marl-eval":
-        raise ValueError(f"unknown export format {fmt!r}; expected 'marl-eval'")
+        raise BadInput(f"unknown export format {fmt!r}; expected 'marl-eval'")
     entries, _bad = load_entries(directory)
     return marl_eval(entries)
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from ials_zoo.errors import BadInput
 from ials_zoo.leaderboard.build import MULTI, now_iso, overall_metrics, overall_score, per_agent_scores
 from ials_zoo.leaderboard.validate import ResultError, validate_result
 
@@ -16,7 +17,7 @@ def merge_results(results: Sequence[dict], submitter: str | None = None, notes: 
     ``training.env_steps`` must agree; ``wall_clock_seconds`` and ``aip_seconds`` become the
     means over seeds (documented in SCHEMA.md)."""
     if len(results) < 2:
-        raise ValueError("merge needs at least two results")
+        raise BadInput("merge needs at least two results")
     for i, r in enumerate(results):
         try:
             validate_result(r)

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ials_zoo.errors import BadInput
 from ials_zoo.leaderboard.build import MULTI, OFFICIAL, SINGLE
 from ials_zoo.leaderboard.store import ARCHIVE_SUBDIR, board_path, load_entries
 from ials_zoo.stats import iqm_interval
@@ -113,7 +114,7 @@ def show(directory=None, sort: str = "score") -> str:
     entries, problems = load_entries(board)
     known = metric_names(entries)
     if sort != "score" and sort not in known:
-        raise ValueError(f"--sort {sort!r}: expected 'score' or a metric of the board's domains: "
+        raise BadInput(f"--sort {sort!r}: expected 'score' or a metric of the board's domains: "
                          f"{', '.join(f'{k} ({v} is better)' for k, v in known.items()) or 'none'}")
     lines = [f"leaderboard: {board.resolve()}"]
     for p, why in problems:

@@ -28,6 +28,7 @@ import re
 import shutil
 from pathlib import Path
 
+from ials_zoo.errors import BadInput
 from ials_zoo.leaderboard.validate import ResultError, load_result, validate_result
 from ials_zoo.utils import atomic_path, remove_stale_temporaries
 
@@ -44,7 +45,7 @@ def board_path(directory=None, must_exist: bool = True) -> Path:
         directory = os.environ.get(BOARD_ENV) or "leaderboard"
     path = Path(directory)
     if must_exist and not (path / RESULTS_SUBDIR).is_dir():
-        raise ValueError(f"no leaderboard at {str(path.resolve())!r} (no {RESULTS_SUBDIR}/ folder there); run "
+        raise BadInput(f"no leaderboard at {str(path.resolve())!r} (no {RESULTS_SUBDIR}/ folder there); run "
                          f"from the repository root, or give --dir, or set {BOARD_ENV}")
     return path
 

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ials_zoo.errors import BadInput
 from ials_zoo.leaderboard.build import MULTI, SCHEMA_VERSION, SINGLE, overall_score, protocol_of, split_env_id
 from ials_zoo.stats import bootstrap_interval
 from ials_zoo.utils import loads_untrusted_json, read_regular_file
@@ -37,7 +38,7 @@ ABS_TOL = 1e-12
 MAX_RESULT_BYTES = 4 * 2**20
 
 
-class ResultError(ValueError):
+class ResultError(BadInput):
     """A result file is malformed or inconsistent; ``field`` names the offending field."""
 
     def __init__(self, field: str, message: str):
@@ -93,8 +94,6 @@ def _schema_check(data: dict) -> None:
 def validate_result(data) -> dict:
     """Check ``data`` (module docstring); return it, or raise :class:`ResultError` naming the
     offending field."""
-    from ials_zoo.core.domains import domain_ids, get_domain
-
     if not isinstance(data, dict):
         raise ResultError("(top level)", f"a result must be a JSON object, got {type(data).__name__}")
     if data.get("schema_version") != SCHEMA_VERSION:
@@ -102,6 +101,27 @@ def validate_result(data) -> dict:
                           f"{SCHEMA_VERSION} (re-evaluate the policy with `ials-zoo evaluate`)")
     check_finite(data)
     _schema_check(data)
+
+    domain = _check_domain(data)
+    _check_track_and_protocol(data)
+    kind = data["policy"]["kind"]
+    if kind in ("random", "scripted"):
+        # a reference policy is a reference entry: nothing was trained, and it is named as itself
+        if data["training"] is not None or data["algorithm"] != kind or data["trained_agents"]:
+            raise ResultError("training", f"the reference policy {kind!r} makes a reference entry: training null, "
+                              f"algorithm {kind!r}, no trained agents")
+    if "provenance" in data and kind != "model":
+        raise ResultError("provenance", "only trained policies have a provenance")
+    _check_seed_scores(data, kind)
+    _check_overall_score(data)
+    _check_metrics(data, domain.metrics)
+    _check_training(data, kind)
+    return data
+
+
+def _check_domain(data: dict):
+    """The domain, its version, its GS options and its agents exist; return the domain."""
+    from ials_zoo.core.domains import domain_ids, get_domain
 
     env_id = data["env_id"]
     if env_id not in domain_ids():
@@ -127,6 +147,13 @@ def validate_result(data) -> dict:
                 raise ResultError(f"{field}.{i}", f"{a!r} is not an agent of {env_id}")
     if len(set(data["agents"])) != len(data["agents"]):
         raise ResultError("agents", "agents repeat")
+    return domain
+
+
+def _check_track_and_protocol(data: dict) -> None:
+    """``agent``/``agents``/``neighbours`` match the track; the seeds make ``evaluation.protocol``."""
+    ev = data["evaluation"]
+    env_id = data["env_id"]
     track = data["track"]
     if track == SINGLE and (data["agent"] is None or data["agents"] != [data["agent"]]):
         raise ResultError("agent", "a single-agent result scores one agent: agent, and agents == [agent]")
@@ -145,14 +172,12 @@ def validate_result(data) -> dict:
     if ev["protocol"] != want:
         raise ResultError("evaluation.protocol", f"{ev['protocol']!r}, but these seeds, options and agents make "
                           f"it {want!r}")
-    kind = data["policy"]["kind"]
-    if kind in ("random", "scripted"):
-        # a reference policy is a reference entry: nothing was trained, and it is named as itself
-        if data["training"] is not None or data["algorithm"] != kind or data["trained_agents"]:
-            raise ResultError("training", f"the reference policy {kind!r} makes a reference entry: training null, "
-                              f"algorithm {kind!r}, no trained agents")
-    if "provenance" in data and kind != "model":
-        raise ResultError("provenance", "only trained policies have a provenance")
+
+
+def _check_seed_scores(data: dict, kind: str) -> None:
+    """Each seed's returns (and a multi-agent episode's agents' returns), mean, interval and policy file."""
+    ev = data["evaluation"]
+    track = data["track"]
     for i, s in enumerate(data["scores"]):
         where = f"scores.{i}"
         if len(s["returns"]) != ev["episodes"]:
@@ -178,6 +203,11 @@ def validate_result(data) -> dict:
             raise ResultError(f"{where}.policy_sha256", f"must be null for the reference policy {kind!r}")
         if kind == "model" and (s["policy_sha256"] is None or not s["policy_file"]):
             raise ResultError(f"{where}.policy_sha256", "a model needs the file and the sha256 of its policy")
+
+
+def _check_overall_score(data: dict) -> None:
+    """The overall score (and a multi-agent result's per-agent scores) from the per-seed scores."""
+    track = data["track"]
     want_score = overall_score(data["scores"])
     for key in ("mean", "ci_low", "ci_high"):
         if not _close(data["score"][key], want_score[key]):
@@ -192,8 +222,9 @@ def validate_result(data) -> dict:
                 _close(data["per_agent_scores"][a], v) for a, v in want_agents.items()):
             raise ResultError("per_agent_scores", "does not match the per-agent returns")
 
-    _check_metrics(data, domain.metrics)
 
+def _check_training(data: dict, kind: str) -> None:
+    """A model's training record matches its seeds; learning curves do not go back in env_steps."""
     training = data["training"]
     if training is None:
         if kind == "model":
@@ -206,7 +237,6 @@ def validate_result(data) -> dict:
         steps = [p["env_steps"] for p in curve["points"]]
         if steps != sorted(steps):
             raise ResultError(f"learning_curves.{i}.points", "env_steps must not decrease")
-    return data
 
 
 def _check_metrics(data: dict, known: dict) -> None:

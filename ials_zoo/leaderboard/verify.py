@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ials_zoo.errors import BadInput
 from ials_zoo.leaderboard.remeasure import remeasure_result
 from ials_zoo.leaderboard.store import board_path, resolve_policy_file
 from ials_zoo.leaderboard.validate import ResultError, load_result
@@ -30,7 +31,7 @@ def verify(path, policies=None, progress: bool = False, directory=None) -> list[
     if kind == "callable":
         raise ResultError("policy.kind", "a callable policy is code; verify never imports or runs it")
     if policies is not None and len(policies) != len(data["scores"]):
-        raise ValueError(f"{len(policies)} policy files given for {len(data['scores'])} per-seed scores")
+        raise BadInput(f"{len(policies)} policy files given for {len(data['scores'])} per-seed scores")
     try:
         board = board_path(directory)
     except ValueError:
@@ -42,10 +43,10 @@ def verify(path, policies=None, progress: bool = False, directory=None) -> list[
             given = policies[i] if policies else s["policy_file"]
             found = resolve_policy_file(given, path, board)
             if found is None:
-                raise ValueError(f"scores.{i}: policy file {given!r} not found; pass it with --policy")
+                raise BadInput(f"scores.{i}: policy file {given!r} not found; pass it with --policy")
             digest = sha256_file(found)
             if digest != s["policy_sha256"]:
-                raise ValueError(f"scores.{i}.policy_sha256: {str(found)!r} has sha256 {digest}, the result "
+                raise BadInput(f"scores.{i}.policy_sha256: {str(found)!r} has sha256 {digest}, the result "
                                  f"claims {s['policy_sha256']}")
             files.append(str(found))
         provenance = training_provenance(data, [load_model(f, data["agent"]).net for f in files])

@@ -15,6 +15,7 @@ import numpy as np
 
 from ials_zoo.core.domains import get_domain
 from ials_zoo.core.streams import derived_seed
+from ials_zoo.errors import BadInput
 from ials_zoo.processes import Worker, call_all, start_all
 
 
@@ -57,7 +58,7 @@ class GSVecEnv:
         self.agents = domain.check_agents(agents, **options)
         self.n_envs, self.processes = int(n_envs), int(processes)
         if self.n_envs < 1 or self.processes < 0:
-            raise ValueError("n_envs must be >= 1 and processes >= 0")
+            raise BadInput("n_envs must be >= 1 and processes >= 0")
         self.observation_space, self.action_space = domain.observation_space, domain.action_space
         seeds = [seed + j for j in range(self.n_envs)]
         self._local, self._workers, self._shares = None, [], []

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ials_zoo.core.streams import derived_seed
+from ials_zoo.errors import BadInput
 from ials_zoo.learners.batched_ppo import BatchedPPO, gae
 
 
@@ -80,7 +81,7 @@ class RolloutTrainer:
 
     def __init__(self, learner: BatchedPPO, env, frame_stack: int = 1, seed: int | None = None):
         if list(env.agents) != list(learner.agents) or env.n_envs != learner.cfg.n_envs:
-            raise ValueError("the learner and the env must hold the same agents and copies")
+            raise BadInput("the learner and the env must hold the same agents and copies")
         self.learner, self.env, self.seed = learner, env, seed
         self.stack = FrameStack(frame_stack)
         A, n = len(env.agents), env.n_envs
@@ -114,14 +115,14 @@ class RolloutTrainer:
         """Continue where :meth:`state` was taken: the same episode, replayed to the same step.
         Only a seeded trainer can (an unseeded episode cannot be replayed)."""
         if self.seed is None:
-            raise ValueError("an unseeded RolloutTrainer cannot restore an episode")
+            raise BadInput("an unseeded RolloutTrainer cannot restore an episode")
         self.episode, self.steps = int(state["episode"]), int(state["steps"])
         self._start_episode()
         for a in state["actions"]:
             a = np.asarray(a, np.int64).reshape(self.running.shape)
             obs, _, done = self.env.step(a)
             if done:
-                raise ValueError("the saved episode ended while it was replayed: not the run that saved it")
+                raise BadInput("the saved episode ended while it was replayed: not the run that saved it")
             self.x = self.stack.push(obs)
             self.actions.append(a)
         self.running = np.asarray(state["running"], float).reshape(self.running.shape)

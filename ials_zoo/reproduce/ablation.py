@@ -31,6 +31,7 @@ import numpy as np
 from ials_zoo.baselines.ippo import Args
 from ials_zoo.baselines.multiagent import DETERMINISTIC_RESULT, PREVIOUS_PPO_SETTINGS
 from ials_zoo.core.domains import get_domain
+from ials_zoo.errors import BadInput
 from ials_zoo.evaluation import evaluate_joint
 from ials_zoo.stats import t_interval
 from ials_zoo.utils import atomic_write_text
@@ -80,7 +81,7 @@ def domain_cells(domain, round_: int = 1) -> list[str]:
 def cell_settings(env_id: str, cell: str) -> dict:
     """The IPPO settings of ``cell`` in ``env_id``."""
     if cell not in CHANGES:
-        raise ValueError(f"unknown cell {cell!r}; expected one of {', '.join(CHANGES)}")
+        raise BadInput(f"unknown cell {cell!r}; expected one of {', '.join(CHANGES)}")
     change = CHANGES[cell]
     if cell == "old defaults":
         return dict(OLD_DEFAULTS)

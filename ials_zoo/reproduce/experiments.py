@@ -22,15 +22,13 @@ from pathlib import Path
 import numpy as np
 
 from ials_zoo.core.domains import get_domain
+from ials_zoo.errors import BadInput
+from ials_zoo.influence.constant import MarginalPredictor, UniformPredictor
 from ials_zoo.influence.dataset import collect
+from ials_zoo.influence.files import save_predictor
 from ials_zoo.influence.ials import make_ials
-from ials_zoo.influence.predictors import (
-    MarginalPredictor,
-    UniformPredictor,
-    evaluate_cross_entropy,
-    save_predictor,
-    untrained_predictor,
-)
+from ials_zoo.influence.metrics import evaluate_cross_entropy
+from ials_zoo.influence.networks import untrained_predictor
 from ials_zoo.influence.train import train_predictor, untrained_probs
 from ials_zoo.leaderboard.build import result_for
 from ials_zoo.utils import atomic_path, atomic_write_text
@@ -99,9 +97,9 @@ def item_lifetimes(ages) -> list[int]:
     in). Items still present in the last row are censored and left out."""
     a = np.asarray(ages)
     if a.ndim != 2:
-        raise ValueError(f"ages must have shape [T, K], got {a.shape}")
+        raise BadInput(f"ages must have shape [T, K], got {a.shape}")
     if a.size and (a < 0).any():
-        raise ValueError("ages must be >= 0")
+        raise BadInput("ages must be >= 0")
     cur, nxt = a[:-1], a[1:]
     ended = (cur > 0) & (nxt != cur + 1)
     return sorted(int(x) for x in cur[ended])
@@ -116,7 +114,7 @@ def record_item_ages(env_id: str, agent: str, simulator: str = "gs", episodes: i
 
     domain = get_domain(env_id)
     if domain.study.lifetime_probes is None:
-        raise ValueError(f"{env_id} has no items whose lifetimes could be measured "
+        raise BadInput(f"{env_id} has no items whose lifetimes could be measured "
                          "(Domain.study.lifetime_probes is not set)")
     gs_probe, ls_probe = domain.study.lifetime_probes
     rng = np.random.default_rng(seed)
@@ -226,7 +224,7 @@ def off_policy_cross_entropy(predictors: dict, on_policy, on_policy_episodes, of
     Returns ``{name: {"on_policy": ce, "off_policy": {data: ce}, "increase": {data: ce - on}}}``."""
 
     if not predictors:
-        raise ValueError("predictors must not be empty")
+        raise BadInput("predictors must not be empty")
     out = {}
     for name, pred in predictors.items():
         on = evaluate_cross_entropy(pred, on_policy, on_policy_episodes)

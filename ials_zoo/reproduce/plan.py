@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ials_zoo.core.domains import domain_ids, domain_of_agent, get_domain
+from ials_zoo.errors import BadInput
 from ials_zoo.utils import atomic_write_text
 
 EXPERIMENTS = ("training", "memory", "dset", "dials")
@@ -96,39 +97,39 @@ class Config:
                               ("simulators", KNOWN_SIMULATORS)):
             values = tuple(getattr(self, name))
             if not values:
-                raise ValueError(f"{name} must not be empty; expected some of {allowed}")
+                raise BadInput(f"{name} must not be empty; expected some of {allowed}")
             bad = [v for v in values if v not in allowed]
             if bad:
-                raise ValueError(f"unknown {name} {bad}; expected some of {list(allowed)}")
+                raise BadInput(f"unknown {name} {bad}; expected some of {list(allowed)}")
         if "gs" not in self.simulators:
-            raise ValueError(f"simulators {list(self.simulators)} must include 'gs' (the reference)")
+            raise BadInput(f"simulators {list(self.simulators)} must include 'gs' (the reference)")
         for env_id, steps in dict(self.domain_budgets).items():
             if env_id not in domain_ids():
-                raise ValueError(f"unknown domain {env_id!r} in domain_budgets; expected one of {domain_ids()}")
+                raise BadInput(f"unknown domain {env_id!r} in domain_budgets; expected one of {domain_ids()}")
             if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
-                raise ValueError(f"budget of {env_id} must be a positive int, got {steps!r}")
+                raise BadInput(f"budget of {env_id} must be a positive int, got {steps!r}")
         for name in ("budget", "seeds", "jobs", "collect_workers", "n_envs", "eval_points", "eval_episodes",
                      "final_eval_episodes", "aip_steps", "dset_offpolicy_steps", "lifetime_episodes"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise ValueError(f"{name} must be a positive int, got {v!r}")
+                raise BadInput(f"{name} must be a positive int, got {v!r}")
         if self.memory_budget is not None and (isinstance(self.memory_budget, bool)
                                                or not isinstance(self.memory_budget, int) or self.memory_budget < 1):
-            raise ValueError(f"memory_budget must be None or a positive int, got {self.memory_budget!r}")
+            raise BadInput(f"memory_budget must be None or a positive int, got {self.memory_budget!r}")
         if self.aip_epochs is not None and (not isinstance(self.aip_epochs, int) or self.aip_epochs < 0):
-            raise ValueError(f"aip_epochs must be None or an int >= 0, got {self.aip_epochs!r}")
+            raise BadInput(f"aip_epochs must be None or an int >= 0, got {self.aip_epochs!r}")
         bad = [v for v in self.dials_variants if v not in DIALS_VARIANTS]
         if bad or not self.dials_variants:
-            raise ValueError(f"unknown dials_variants {bad}; expected some of {list(DIALS_VARIANTS)}")
+            raise BadInput(f"unknown dials_variants {bad}; expected some of {list(DIALS_VARIANTS)}")
         for env_id, steps in dict(self.dials_budgets).items():
             if env_id not in domain_ids():
-                raise ValueError(f"unknown domain {env_id!r} in dials_budgets; expected one of {domain_ids()}")
+                raise BadInput(f"unknown domain {env_id!r} in dials_budgets; expected one of {domain_ids()}")
             if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
-                raise ValueError(f"dials budget of {env_id} must be a positive int, got {steps!r}")
+                raise BadInput(f"dials budget of {env_id} must be a positive int, got {steps!r}")
         for name in ("dials_workers", "dials_eval_points"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise ValueError(f"{name} must be a positive int, got {v!r}")
+                raise BadInput(f"{name} must be a positive int, got {v!r}")
         for a in self.agents:
             domain_of_agent(a)  # one domain has it, else a ValueError naming the problem
         return self

@@ -20,6 +20,7 @@ import sys
 import time
 from pathlib import Path
 
+from ials_zoo.errors import BadInput
 from ials_zoo.reproduce.plan import Job
 
 
@@ -42,15 +43,15 @@ def run_jobs(jobs: list[Job], n_jobs: int = 2, progress: bool = True, poll: floa
     passes its ``--out``). Returns ``{"done": [...], "skipped": [...], "failed": [...],
     "blocked": [...]}`` (job ids)."""
     if isinstance(n_jobs, bool) or not isinstance(n_jobs, int) or n_jobs < 1:
-        raise ValueError(f"n_jobs must be a positive int, got {n_jobs!r}")
+        raise BadInput(f"n_jobs must be a positive int, got {n_jobs!r}")
     ids = {j.id for j in jobs}
     for j in jobs:
         missing = [d for d in j.deps if d not in ids]
         if missing:
-            raise ValueError(f"job {j.id} depends on {missing}, which are not in the plan")
+            raise BadInput(f"job {j.id} depends on {missing}, which are not in the plan")
     conflicts = [f"  {j.id}: {j.conflict()}" for j in jobs if j.conflict()]
     if conflicts:
-        raise ValueError("these run folders hold runs with other settings; use another --out or "
+        raise BadInput("these run folders hold runs with other settings; use another --out or "
                          "remove them:\n" + "\n".join(conflicts))
     status = {j.id: ("skipped" if j.done else "pending") for j in jobs}
     if any(v == "pending" for v in status.values()):

@@ -13,6 +13,7 @@ from pathlib import Path
 
 from ials_zoo.baselines.ppo_single import Args
 from ials_zoo.baselines.runs import run_state
+from ials_zoo.errors import BadInput
 from ials_zoo.processes import die_with_parent
 from ials_zoo.reproduce import experiments as X
 from ials_zoo.reproduce.plan import Job
@@ -50,7 +51,7 @@ def run_job(job) -> None:
     elif job.kind == "dset":
         X.dset_ablation(p, job.dir)
     else:
-        raise ValueError(f"unknown job kind {job.kind!r}")
+        raise BadInput(f"unknown job kind {job.kind!r}")
 
 
 def _run_multiagent(params: dict) -> None:

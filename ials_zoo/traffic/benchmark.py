@@ -28,6 +28,7 @@ import time
 
 import numpy as np
 
+from ials_zoo.errors import BadInput
 from ials_zoo.traffic.env import TrafficGridEnv
 from ials_zoo.traffic.local import TrafficLocalSimulator
 
@@ -79,7 +80,7 @@ def _ls(n, episodes, seed=0):
 
 def breakdown(sizes=(1, 8, 64), steps: int = 300, seed: int = 0, verbose: bool = True) -> dict:
     """CPU time of the parts of the LS step, per size: ``{n: {part: ms per step}}``."""
-    from ials_zoo.traffic.sim import SimulationBusyError
+    from ials_zoo.traffic.lease import SimulationBusyError
 
     out = {}
     keys = ("lights+add", "SUMO step", "reads", "rest", "total")
@@ -173,7 +174,7 @@ def configure(parser) -> None:
 
 def run(args) -> int:
     if args.episodes < 1 or args.repeats < 1:
-        raise ValueError("--episodes and --repeats must be >= 1")
+        raise BadInput("--episodes and --repeats must be >= 1")
     if args.breakdown:
         breakdown()
     else:

@@ -18,6 +18,7 @@ import time
 
 import numpy as np
 
+from ials_zoo.errors import BadInput
 from ials_zoo.traffic.env import TrafficGridEnv
 
 
@@ -40,7 +41,7 @@ def calibrate(
         the rewards are episodic sums over the first ``max_cycles`` steps.
     """
     if steps < max_cycles:
-        raise ValueError(f"steps ({steps}) must be >= max_cycles ({max_cycles})")
+        raise BadInput(f"steps ({steps}) must be >= max_cycles ({max_cycles})")
     env = TrafficGridEnv(
         learners=list(agents), grid=grid, max_cycles=steps, scripted_learners=True
     )
@@ -117,6 +118,6 @@ def configure(parser) -> None:
 
 def run(args) -> int:
     if args.episodes < 1:
-        raise ValueError(f"--episodes must be >= 1, got {args.episodes}")
+        raise BadInput(f"--episodes must be >= 1, got {args.episodes}")
     calibrate(args.episodes, args.steps, args.agents, tuple(args.grid), seed=args.seed)
     return 0

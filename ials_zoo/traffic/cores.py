@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ials_zoo.errors import BadInput
 from ials_zoo.traffic.lease import import_libsumo
 from ials_zoo.traffic.network import CELL_LENGTH, N_CELLS, SPEED_LIMIT
 
@@ -310,7 +311,7 @@ class GridCore:
     def query(self, domain: str, method: str, *args):
         """Raw libsumo getter (tests and diagnostics), e.g. ``("lane", "getLength", id)``."""
         if not method.startswith("get"):
-            raise ValueError(f"only getters can be queried, got {method!r}")
+            raise BadInput(f"only getters can be queried, got {method!r}")
         return getattr(getattr(self.ls, domain), method)(*args)
 
     def close(self):

@@ -8,6 +8,7 @@ from pettingzoo import ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec, parallel_to_aec_wrapper
 
 from ials_zoo.core.region import INFLUENCE_KEY, RegionSpec
+from ials_zoo.errors import BadInput, BadInputType
 from ials_zoo.traffic import network
 from ials_zoo.traffic.cores import PHASE_NAMES, observation
 from ials_zoo.traffic.lease import SimHandle
@@ -43,11 +44,11 @@ def agent_index(agent, grid=(5, 5)) -> int:
     elif isinstance(agent, str) and agent.startswith("tls_") and agent[4:].isdigit():
         idx = int(agent[4:])
     else:
-        raise ValueError(
+        raise BadInput(
             f"unknown agent {agent!r}; agents are 'tls_0'..'tls_{rows * cols - 1}'"
         )
     if not 0 <= idx < rows * cols:
-        raise ValueError(
+        raise BadInput(
             f"unknown agent {agent!r}: a {rows}x{cols} grid has 'tls_0'..'tls_{rows * cols - 1}'"
         )
     return idx
@@ -80,9 +81,9 @@ def region_spec(
 
 def _check_int(name, value, low):
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise TypeError(f"{name} must be an int, got {value!r}")
+        raise BadInputType(f"{name} must be an int, got {value!r}")
     if value < low:
-        raise ValueError(f"{name} must be >= {low}, got {value}")
+        raise BadInput(f"{name} must be >= {low}, got {value}")
     return int(value)
 
 
@@ -93,11 +94,11 @@ def check_action(agent, action) -> int:
     if isinstance(action, np.ndarray) and action.shape == ():
         action = action[()]
     if isinstance(action, (bool, np.bool_)) or not isinstance(action, (int, np.integer)):
-        raise TypeError(
+        raise BadInputType(
             f"action of {agent!r} must be an int 0 (keep) or 1 (switch), got {action!r}"
         )
     if action not in (0, 1):
-        raise ValueError(f"action of {agent!r} must be 0 (keep) or 1 (switch), got {action!r}")
+        raise BadInput(f"action of {agent!r} must be 0 (keep) or 1 (switch), got {action!r}")
     return int(action)
 
 
@@ -163,7 +164,7 @@ class TrafficGridEnv(ParallelEnv):
     last explicit seed.
 
     **SUMO and libsumo**: all SUMO work runs in a simulation core with one call per step, via
-    :class:`ials_zoo.traffic.sim.SimHandle`. ``backend="auto"`` (default) runs it in this
+    :class:`ials_zoo.traffic.lease.SimHandle`. ``backend="auto"`` (default) runs it in this
     process when no other libsumo simulation is live here, else in a worker process;
     ``"inprocess"`` raises ``SimulationBusyError`` when another simulation is live;
     ``"worker"`` always uses a process. A killed worker raises ``WorkerDiedError`` and the
@@ -201,7 +202,7 @@ class TrafficGridEnv(ParallelEnv):
         **unknown,
     ):
         if unknown:
-            raise TypeError(
+            raise BadInputType(
                 f"unknown option(s) {sorted(unknown)} for {ENV_ID}; valid options: "
                 f"{', '.join(_OPTIONS)}"
             )
@@ -210,13 +211,13 @@ class TrafficGridEnv(ParallelEnv):
         self.warmup_steps = _check_int("warmup_steps", warmup_steps, 0)
         self.inflow_probability = network.check_probability(inflow_probability)
         if render_mode not in (None, *self.metadata["render_modes"]):
-            raise ValueError(
+            raise BadInput(
                 f"unknown render_mode {render_mode!r}; expected None or one of "
                 f"{self.metadata['render_modes']}"
             )
         self.render_mode = render_mode
         if not isinstance(scripted_learners, (bool, np.bool_)):
-            raise TypeError(f"scripted_learners must be a bool, got {scripted_learners!r}")
+            raise BadInputType(f"scripted_learners must be a bool, got {scripted_learners!r}")
         self.scripted_learners = bool(scripted_learners)
         all_agents = possible_agents(self.grid)
         if learners is None:
@@ -226,9 +227,9 @@ class TrafficGridEnv(ParallelEnv):
                 learners = [learners]
             idx = [agent_index(a, self.grid) for a in learners]
             if not idx:
-                raise ValueError("learners must name at least one intersection")
+                raise BadInput("learners must name at least one intersection")
             if len(set(idx)) != len(idx):
-                raise ValueError(f"duplicate learners in {learners!r}")
+                raise BadInput(f"duplicate learners in {learners!r}")
         self.learner_index = idx
         self.possible_agents = [all_agents[i] for i in idx]
         self.agents = []
@@ -268,7 +269,7 @@ class TrafficGridEnv(ParallelEnv):
 
     def _check_agent(self, agent):
         if agent not in self.observation_spaces:
-            raise ValueError(f"unknown agent {agent!r}; agents: {self.possible_agents}")
+            raise BadInput(f"unknown agent {agent!r}; agents: {self.possible_agents}")
         return agent
 
     def region_spec(self, agent) -> RegionSpec:
@@ -303,13 +304,13 @@ class TrafficGridEnv(ParallelEnv):
         if not self.agents:
             raise RuntimeError("step() called on a finished episode; call reset() first")
         if not isinstance(actions, dict):
-            raise TypeError(f"actions must be a dict agent -> action, got {type(actions)}")
+            raise BadInputType(f"actions must be a dict agent -> action, got {type(actions)}")
         extra = [a for a in actions if a not in self.observation_spaces]
         if extra:
-            raise ValueError(f"actions for unknown agent(s) {extra}; agents: {self.agents}")
+            raise BadInput(f"actions for unknown agent(s) {extra}; agents: {self.agents}")
         missing = [a for a in self.agents if a not in actions]
         if missing:
-            raise ValueError(f"missing actions for agent(s) {missing}")
+            raise BadInput(f"missing actions for agent(s) {missing}")
         acts = np.array([check_action(a, actions[a]) for a in self.agents], np.int8)
         occ, entries, reward, phases = self._sim.call("step", acts)
         self._t += 1

@@ -34,6 +34,7 @@ import sys
 import threading
 import weakref
 
+from ials_zoo.errors import BadInput
 from ials_zoo.processes import Worker, WorkerError
 
 BACKENDS = ("auto", "inprocess", "worker")
@@ -173,7 +174,7 @@ class SimHandle:
     def __init__(self, core: str, config: dict, backend: str = "auto", timeout: float = 120.0,
                  unresponsive_after: float = 5.0):
         if backend not in BACKENDS:
-            raise ValueError(f"unknown backend {backend!r}; expected one of {BACKENDS}")
+            raise BadInput(f"unknown backend {backend!r}; expected one of {BACKENDS}")
         self.core_name = core
         self.config = config
         self.timeout = float(timeout)

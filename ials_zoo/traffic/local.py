@@ -7,6 +7,7 @@ from gymnasium import spaces
 
 from ials_zoo.core.local import LocalSimulator, agent_list, check_n_envs
 from ials_zoo.core.streams import CopyStreams
+from ials_zoo.errors import BadInput, BadInputType
 from ials_zoo.traffic import network
 from ials_zoo.traffic.cores import observation
 from ials_zoo.traffic.env import OBS_SIZE, agent_index, region_spec
@@ -40,7 +41,7 @@ class TrafficLocalSimulator(LocalSimulator):
             statistics, the junction model and the region's parameters).
         max_cycles: episode length (the caller truncates).
         backend: ``"auto"`` / ``"inprocess"`` / ``"worker"`` (see
-            :mod:`ials_zoo.traffic.sim`).
+            :mod:`ials_zoo.traffic.lease`).
         turn_probabilities: optional override of the turning probabilities.
 
     Attributes:
@@ -61,7 +62,7 @@ class TrafficLocalSimulator(LocalSimulator):
         **unknown,
     ):
         if unknown:
-            raise TypeError(
+            raise BadInputType(
                 f"unknown option(s) {sorted(unknown)} for the traffic local simulator; valid: "
                 "agents, n_envs, grid, inflow_probability, max_cycles, backend, "
                 "turn_probabilities, internal_links"
@@ -74,11 +75,11 @@ class TrafficLocalSimulator(LocalSimulator):
                              for i in self.indices)
         self.agents = tuple(r.agent for r in self.regions)
         if len(set(self.agents)) != len(self.agents):
-            raise ValueError(f"agents repeat: {list(agents)}")
+            raise BadInput(f"agents repeat: {list(agents)}")
         if isinstance(max_cycles, bool) or not isinstance(max_cycles, (int, np.integer)):
-            raise TypeError(f"max_cycles must be an int, got {max_cycles!r}")
+            raise BadInputType(f"max_cycles must be an int, got {max_cycles!r}")
         if max_cycles < 1:
-            raise ValueError(f"max_cycles must be >= 1, got {max_cycles}")
+            raise BadInput(f"max_cycles must be >= 1, got {max_cycles}")
         self.max_cycles = int(max_cycles)
         n = self.n_copies
         self.files = network.build_local(n, internal_links)
@@ -93,7 +94,7 @@ class TrafficLocalSimulator(LocalSimulator):
                 probs = np.broadcast_to(probs, (len(self.agents), 4, 3))
             if (probs.shape != (len(self.agents), 4, 3) or (probs < 0).any()
                     or not np.allclose(probs.sum(-1), 1)):
-                raise ValueError(
+                raise BadInput(
                     "turn_probabilities must be a [4, 3] (or [agents, 4, 3]) array of rows "
                     f"(right, straight, left) summing to 1, got {turn_probabilities!r}"
                 )
@@ -144,20 +145,20 @@ class TrafficLocalSimulator(LocalSimulator):
         n = self.n_copies
         actions = np.asarray(actions)
         if actions.shape != (n,) or actions.dtype.kind not in "iu":
-            raise ValueError(
+            raise BadInput(
                 f"actions must be an int array of shape ({n},), got {actions!r} "
                 f"(dtype {actions.dtype})"
             )
         if n == 1:  # scalar compares beat any numpy call here
             if actions[0] != 0 and actions[0] != 1:
-                raise ValueError(f"actions must be 0 (keep) or 1 (switch), got {actions!r}")
+                raise BadInput(f"actions must be 0 (keep) or 1 (switch), got {actions!r}")
         elif (actions >> 1).any():
             # one shift instead of np.isin (a tenth of the step's Python time): only 0 and 1
             # (and no negative number) shift to 0
-            raise ValueError(f"actions must be 0 (keep) or 1 (switch), got {actions!r}")
+            raise BadInput(f"actions must be 0 (keep) or 1 (switch), got {actions!r}")
         influences = np.asarray(influences)
         if influences.shape != (n, 4) or influences.dtype.kind not in "iub":
-            raise ValueError(
+            raise BadInput(
                 f"influences must be an int array of shape ({n}, 4), got shape "
                 f"{influences.shape} dtype {influences.dtype}"
             )
@@ -165,7 +166,7 @@ class TrafficLocalSimulator(LocalSimulator):
         ks, lanes = np.nonzero(influences)
         if len(ks):
             if len(ks) != influences.sum():
-                raise ValueError(f"influence bits must be 0 or 1, got {influences!r}")
+                raise BadInput(f"influence bits must be 0 or 1, got {influences!r}")
             u = draws[ks, lanes]
             turns = (u[:, None] >= self._cum[ks, lanes]).sum(axis=1)
             inserts = list(zip(ks.tolist(), lanes.tolist(), turns.tolist()))

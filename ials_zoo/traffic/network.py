@@ -54,6 +54,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ials_zoo.errors import BadInput, BadInputType
+
 BUILDER_VERSION = 3
 EDGE_LENGTH = 100.0
 SPEED_LIMIT = 10.0
@@ -85,13 +87,13 @@ def cache_root() -> Path:
 def check_grid(grid) -> tuple[int, int]:
     """Validate a grid size: a pair of ints, each in ``[2, 10]``."""
     if isinstance(grid, (str, bytes)) or not hasattr(grid, "__len__") or len(grid) != 2:
-        raise ValueError(f"grid must be a pair (rows, cols), got {grid!r}")
+        raise BadInput(f"grid must be a pair (rows, cols), got {grid!r}")
     out = []
     for g in grid:
         if isinstance(g, bool) or not isinstance(g, (int, np.integer)):
-            raise TypeError(f"grid sizes must be ints, got {grid!r}")
+            raise BadInputType(f"grid sizes must be ints, got {grid!r}")
         if not MIN_GRID <= int(g) <= MAX_GRID:
-            raise ValueError(
+            raise BadInput(
                 f"grid sizes must be in [{MIN_GRID}, {MAX_GRID}], got {grid!r}"
             )
         out.append(int(g))
@@ -100,15 +102,15 @@ def check_grid(grid) -> tuple[int, int]:
 
 def check_bool(name: str, value) -> bool:
     if not isinstance(value, (bool, np.bool_)):
-        raise TypeError(f"{name} must be a bool, got {value!r}")
+        raise BadInputType(f"{name} must be a bool, got {value!r}")
     return bool(value)
 
 
 def check_probability(p) -> float:
     if isinstance(p, bool) or not isinstance(p, (int, float, np.floating, np.integer)):
-        raise TypeError(f"inflow_probability must be a number, got {p!r}")
+        raise BadInputType(f"inflow_probability must be a number, got {p!r}")
     if not 0.0 <= float(p) <= 1.0:
-        raise ValueError(f"inflow_probability must be in [0, 1], got {p!r}")
+        raise BadInput(f"inflow_probability must be in [0, 1], got {p!r}")
     return float(p)
 
 
@@ -286,9 +288,9 @@ def turn_probabilities(grid, index: int, inflow_probability: float = 0.1) -> np.
 def check_index(grid, index) -> int:
     rows, cols = check_grid(grid)
     if isinstance(index, bool) or not isinstance(index, (int, np.integer)):
-        raise TypeError(f"intersection index must be an int, got {index!r}")
+        raise BadInputType(f"intersection index must be an int, got {index!r}")
     if not 0 <= int(index) < rows * cols:
-        raise ValueError(
+        raise BadInput(
             f"intersection index {index} out of range for a {rows}x{cols} grid "
             f"(0..{rows * cols - 1})"
         )
@@ -513,9 +515,9 @@ def build_local(n_copies: int, internal_links: bool = True) -> NetworkFiles:
     (N, E, S, W) that takes turn ``t`` (right, straight, left).
     """
     if isinstance(n_copies, bool) or not isinstance(n_copies, (int, np.integer)):
-        raise TypeError(f"n_envs must be an int, got {n_copies!r}")
+        raise BadInputType(f"n_envs must be an int, got {n_copies!r}")
     if n_copies < 1:
-        raise ValueError(f"n_envs must be >= 1, got {n_copies}")
+        raise BadInput(f"n_envs must be >= 1, got {n_copies}")
     n_copies = int(n_copies)
     internal_links = check_bool("internal_links", internal_links)
 

@@ -9,6 +9,7 @@ from pettingzoo.utils import parallel_to_aec
 from pettingzoo.utils.conversions import parallel_to_aec_wrapper
 
 from ials_zoo.core.region import INFLUENCE_KEY, RegionSpec
+from ials_zoo.errors import BadInput, BadInputType
 from ials_zoo.utils import check_reset_options, check_seed
 from ials_zoo.warehouse import regions as R
 
@@ -109,13 +110,13 @@ class WarehouseEnv(ParallelEnv):
             item_probability, item_lifetime, max_cycles
         )
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(
+            raise BadInput(
                 f"unknown render_mode {render_mode!r}; expected None or one of "
                 f"{self.metadata['render_modes']}"
             )
         self.render_mode = render_mode
         if not isinstance(scripted_learners, (bool, np.bool_)):
-            raise TypeError(f"scripted_learners must be a bool, got {scripted_learners!r}")
+            raise BadInputType(f"scripted_learners must be a bool, got {scripted_learners!r}")
         self.scripted_learners = bool(scripted_learners)
 
         rows, cols = self.robots
@@ -125,12 +126,12 @@ class WarehouseEnv(ParallelEnv):
             learner_idx = list(range(n))
         else:
             if isinstance(learners, str) or not hasattr(learners, "__iter__"):
-                raise TypeError(f"learners must be None or a list of agent ids, got {learners!r}")
+                raise BadInputType(f"learners must be None or a list of agent ids, got {learners!r}")
             learner_idx = [R.agent_index(a, self.robots) for a in learners]
             if not learner_idx:
-                raise ValueError("learners must name at least one robot (None = all robots)")
+                raise BadInput("learners must name at least one robot (None = all robots)")
             if len(set(learner_idx)) != len(learner_idx):
-                raise ValueError(f"learners has duplicates: {list(learners)!r}")
+                raise BadInput(f"learners has duplicates: {list(learners)!r}")
             learner_idx = sorted(learner_idx)
         self._learner_idx = np.array(learner_idx, dtype=np.int64)
         self.possible_agents = [all_agents[i] for i in learner_idx]
@@ -201,13 +202,13 @@ class WarehouseEnv(ParallelEnv):
         try:
             return self.observation_spaces[agent]
         except KeyError:
-            raise ValueError(f"unknown agent {agent!r}; agents: {self.possible_agents}") from None
+            raise BadInput(f"unknown agent {agent!r}; agents: {self.possible_agents}") from None
 
     def action_space(self, agent):
         try:
             return self.action_spaces[agent]
         except KeyError:
-            raise ValueError(f"unknown agent {agent!r}; agents: {self.possible_agents}") from None
+            raise BadInput(f"unknown agent {agent!r}; agents: {self.possible_agents}") from None
 
     def region_spec(self, agent: str) -> RegionSpec:
         """The :class:`RegionSpec` of ``agent``'s region under this env's options."""
@@ -315,12 +316,12 @@ class WarehouseEnv(ParallelEnv):
 
     def _parse_actions(self, actions) -> np.ndarray | None:
         if not isinstance(actions, dict):
-            raise TypeError(f"actions must be a dict {{agent: action}}, got {type(actions).__name__}")
+            raise BadInputType(f"actions must be a dict {{agent: action}}, got {type(actions).__name__}")
         agents = self.agents
         if self.scripted_learners:
             unknown = [a for a in actions if a not in self.action_spaces]
             if unknown:
-                raise ValueError(f"actions for unknown agents {unknown}; agents: {agents}")
+                raise BadInput(f"actions for unknown agents {unknown}; agents: {agents}")
             return None
         try:
             values = [actions[a] for a in agents]
@@ -329,7 +330,7 @@ class WarehouseEnv(ParallelEnv):
         if values is None or len(actions) != len(agents):
             missing = [a for a in agents if a not in actions]
             unknown = [a for a in actions if a not in agents]
-            raise ValueError(
+            raise BadInput(
                 f"actions must have exactly one entry per live agent; missing: {missing}, "
                 f"unknown or finished agents: {unknown}"
             )
@@ -344,7 +345,7 @@ class WarehouseEnv(ParallelEnv):
         if arr.shape != (len(agents),) or arr.dtype.kind not in "iu":
             for a, v in zip(agents, values):
                 _check_action(a, v)
-            raise TypeError(f"bad actions {actions!r}; expected one int in 0..3 per agent")
+            raise BadInputType(f"bad actions {actions!r}; expected one int in 0..3 per agent")
         arr = arr.astype(np.int64, copy=False)
         if np.count_nonzero(arr & -4):  # any value outside 0..3 (negative ones included)
             for a, v in zip(agents, values):
@@ -365,12 +366,12 @@ class WarehouseEnv(ParallelEnv):
         i = R.agent_index(agent, self.robots)
         if position is not None:
             if position not in range(R.N_CELLS) or position in R.CORNERS:
-                raise ValueError(f"position must be a non-corner local position 0..24, got {position!r}")
+                raise BadInput(f"position must be a non-corner local position 0..24, got {position!r}")
             self._pos[i] = position
         if item_ages is not None:
             ages = np.asarray(item_ages)
             if ages.shape != (R.N_ITEMS,) or ages.dtype.kind not in "iu" or (ages < 0).any():
-                raise ValueError(f"item_ages must be 12 non-negative ints, got {item_ages!r}")
+                raise BadInput(f"item_ages must be 12 non-negative ints, got {item_ages!r}")
             self._ages[self._region_cells[i]] = ages
 
     def robot_positions(self) -> np.ndarray:
@@ -421,19 +422,19 @@ class WarehouseEnv(ParallelEnv):
 
 def _check_action(agent: str, value) -> None:
     if isinstance(value, (bool, np.bool_)):
-        raise TypeError(f"action for {agent!r} must be an int in 0..3, got bool {value!r}")
+        raise BadInputType(f"action for {agent!r} must be an int in 0..3, got bool {value!r}")
     if isinstance(value, np.ndarray):
         if value.shape != ():
-            raise TypeError(
+            raise BadInputType(
                 f"action for {agent!r} must be a scalar int in 0..3, got an array of shape {value.shape}"
             )
         value = value[()]
     if not isinstance(value, (int, np.integer)):
-        raise TypeError(
+        raise BadInputType(
             f"action for {agent!r} must be an int in 0..3, got {type(value).__name__} {value!r}"
         )
     if not 0 <= value <= 3:
-        raise ValueError(f"action for {agent!r} out of range: {value!r}; expected 0..3")
+        raise BadInput(f"action for {agent!r} out of range: {value!r}; expected 0..3")
 
 
 def raw_env(**options):

@@ -7,6 +7,7 @@ from gymnasium import spaces
 
 from ials_zoo.core.local import LocalSimulator, agent_list, check_n_envs
 from ials_zoo.core.streams import BLOCK, CopyStreams
+from ials_zoo.errors import BadInput, BadInputType
 from ials_zoo.warehouse import regions as R
 
 _MOVE_FLAT = R.MOVE.ravel()
@@ -214,7 +215,7 @@ class WarehouseLocalSimulator(LocalSimulator):
         if new_items is not None:
             appear = np.asarray(new_items)
             if appear.shape != (n, R.N_ITEMS) or appear.dtype != bool:
-                raise ValueError(
+                raise BadInput(
                     f"new_items must be a bool array of shape {(n, R.N_ITEMS)}, got "
                     f"{appear.dtype} {appear.shape}"
                 )
@@ -260,12 +261,12 @@ class WarehouseLocalSimulator(LocalSimulator):
             if len(shape) == 1 and arr.shape == shape + (1,):
                 arr = arr.reshape(shape)  # (n, 1) actions, as some vectorised policies give
             else:
-                raise ValueError(f"{name} must have shape {shape}, got {arr.shape}")
+                raise BadInput(f"{name} must have shape {shape}, got {arr.shape}")
         if arr.dtype.kind not in "iu":
-            raise TypeError(f"{name} must be ints in 0..{n_classes - 1}, got dtype {arr.dtype}")
+            raise BadInputType(f"{name} must be ints in 0..{n_classes - 1}, got dtype {arr.dtype}")
         arr = arr.astype(np.int64, copy=False)
         if np.count_nonzero(arr & -n_classes):  # n_classes is 4, a power of two: any value outside 0..3
-            raise ValueError(
+            raise BadInput(
                 f"{name} must be in 0..{n_classes - 1}, got values {arr.min()}..{arr.max()}"
             )
         return arr
@@ -284,9 +285,9 @@ class WarehouseLocalSimulator(LocalSimulator):
         pos = np.asarray(positions, dtype=np.int64).reshape(n)
         ages = np.asarray(item_ages, dtype=np.int64)
         if ages.shape != (n, R.N_ITEMS) or (ages < 0).any():
-            raise ValueError(f"item_ages must be non-negative ints of shape {(n, R.N_ITEMS)}")
+            raise BadInput(f"item_ages must be non-negative ints of shape {(n, R.N_ITEMS)}")
         if ((pos < 0) | (pos >= R.N_CELLS) | np.isin(pos, R.CORNERS)).any():
-            raise ValueError(f"positions must be non-corner local positions 0..24, got {pos}")
+            raise BadInput(f"positions must be non-corner local positions 0..24, got {pos}")
         if self._scalar:
             age = [int(a) for a in ages[0]]
             self._set_single(int(pos[0]), int((ages[0] > 0) @ _POW2), age)

@@ -47,6 +47,7 @@ from collections import deque
 import numpy as np
 
 from ials_zoo.core.region import RegionSpec
+from ials_zoo.errors import BadInput, BadInputType
 
 DOMAIN_ID = "warehouse_v0"
 SIZE = 5  # region side length
@@ -226,10 +227,10 @@ def check_robots(robots) -> tuple[int, int]:
     try:
         rows, cols = robots
     except (TypeError, ValueError):
-        raise ValueError(f"robots must be a pair (rows, cols), got {robots!r}") from None
+        raise BadInput(f"robots must be a pair (rows, cols), got {robots!r}") from None
     for v in (rows, cols):
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
-            raise ValueError(f"robots must be two positive ints (rows, cols), got {robots!r}")
+            raise BadInput(f"robots must be two positive ints (rows, cols), got {robots!r}")
     return int(rows), int(cols)
 
 
@@ -240,19 +241,19 @@ def check_options(
     if isinstance(item_probability, bool) or not isinstance(
         item_probability, (int, float, np.integer, np.floating)
     ):
-        raise TypeError(f"item_probability must be a number in [0, 1], got {item_probability!r}")
+        raise BadInputType(f"item_probability must be a number in [0, 1], got {item_probability!r}")
     if not 0.0 <= float(item_probability) <= 1.0:
-        raise ValueError(f"item_probability must be in [0, 1], got {item_probability!r}")
+        raise BadInput(f"item_probability must be in [0, 1], got {item_probability!r}")
     if item_lifetime is not None:
         if isinstance(item_lifetime, bool) or not isinstance(item_lifetime, (int, np.integer)):
-            raise TypeError(f"item_lifetime must be None or a positive int, got {item_lifetime!r}")
+            raise BadInputType(f"item_lifetime must be None or a positive int, got {item_lifetime!r}")
         if item_lifetime < 1:
-            raise ValueError(f"item_lifetime must be None or >= 1, got {item_lifetime!r}")
+            raise BadInput(f"item_lifetime must be None or >= 1, got {item_lifetime!r}")
         item_lifetime = int(item_lifetime)
     if isinstance(max_cycles, bool) or not isinstance(max_cycles, (int, np.integer)):
-        raise TypeError(f"max_cycles must be a positive int, got {max_cycles!r}")
+        raise BadInputType(f"max_cycles must be a positive int, got {max_cycles!r}")
     if max_cycles < 1:
-        raise ValueError(f"max_cycles must be >= 1, got {max_cycles!r}")
+        raise BadInput(f"max_cycles must be >= 1, got {max_cycles!r}")
     return float(item_probability), item_lifetime, int(max_cycles)
 
 
@@ -282,7 +283,7 @@ def agent_index(agent: str, robots=DEFAULT_ROBOTS) -> int:
         tail = agent[len("robot_"):]
         if tail.isdigit() and str(int(tail)) == tail and int(tail) < n:
             return int(tail)
-    raise ValueError(
+    raise BadInput(
         f"unknown agent {agent!r}; warehouse_v0 with robots={rows, cols} has robot_0..robot_{n - 1}"
     )
 
@@ -311,7 +312,7 @@ def region_spec(
     """
     unknown = sorted(set(gs_only) - set(GS_ONLY_OPTIONS))
     if unknown:
-        raise TypeError(f"unknown option(s) {unknown} for {DOMAIN_ID} region_spec")
+        raise BadInputType(f"unknown option(s) {unknown} for {DOMAIN_ID} region_spec")
     robots = check_robots(robots)
     agent_index(agent, robots)
     item_probability, item_lifetime, max_cycles = check_options(
