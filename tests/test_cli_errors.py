@@ -84,3 +84,18 @@ def test_a_bug_shows_its_traceback_while_bad_input_does_not(monkeypatch, capsys)
     monkeypatch.setattr(evaluate, "run", bad)
     assert main(["evaluate", "--env", "warehouse_v0", "--policy", "random"]) == 2
     assert capsys.readouterr().err.strip() == "ials-zoo evaluate: --policy: nothing there"
+
+
+def test_a_dead_or_stopped_worker_ends_a_command_in_one_line_with_exit_1(monkeypatch, capsys):
+    from ials_zoo.commands import evaluate
+    from ials_zoo.processes import WorkerError
+
+    def stopped(args):
+        raise WorkerError("DIALS worker 1 (pid 123, agents robot_18..robot_35) is stopped (SIGSTOP or a debugger: "
+                          "process state T)", kind="stopped")
+
+    monkeypatch.setattr(evaluate, "run", stopped)
+    assert main(["evaluate", "--env", "warehouse_v0", "--policy", "random"]) == 1
+    err = capsys.readouterr().err
+    assert err.strip() == ("ials-zoo evaluate: DIALS worker 1 (pid 123, agents robot_18..robot_35) is stopped "
+                           "(SIGSTOP or a debugger: process state T)") and "Traceback" not in err

@@ -194,6 +194,24 @@ def test_links_fifos_and_devices_on_the_board_are_named_and_skipped(tmp_path, bo
     assert "hunter2" not in readme and "writeup.md" in readme and "scripted" in readme
 
 
+def test_a_result_file_of_huge_numbers_or_deep_json_on_the_board_is_skipped_by_name(board, scripted):
+    """Placed straight into results/ (not submitted): ``training.wall_clock_seconds = 10**400``
+    and JSON nested 100,000 deep are named and skipped by show, render and validate; the
+    rest of the board is still shown."""
+    lb.submit(_write(board.parent, scripted), board)
+    results = board / "results"
+    huge = copy.deepcopy(scripted)
+    huge["training"] = dict(TRAINING, wall_clock_seconds="HUGE")
+    (results / "huge.json").write_text(json.dumps(huge).replace('"HUGE"', "1" + "0" * 400))
+    (results / "deep.json").write_text("[" * 100_000 + "]" * 100_000)
+    table = lb.show(board)
+    readme = lb.render(board).read_text()
+    assert "skipped huge.json" in table and "skipped deep.json" in table and "scripted" in table
+    assert "scripted" in readme
+    with pytest.raises(ResultError, match="does not fit a float"):
+        lb.load_result(results / "huge.json")
+
+
 def test_policy_and_aip_files_with_deep_or_wrong_headers_are_refused(tmp_path):
     import torch
 

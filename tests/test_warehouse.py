@@ -388,3 +388,21 @@ def test_region_spec_bad_agent():
         R.region_spec("robot_4", robots=(2, 2))
     with pytest.raises(ValueError, match="unknown agent"):
         parallel_env().observation_space("robot_99")
+
+
+def test_nearest_item_rule_walks_to_the_nearest_item_and_its_joint_score_loop_is_the_protocols():
+    from ials_zoo.evaluation import evaluate_joint
+    from ials_zoo.warehouse import regions as R
+    from ials_zoo.warehouse.rules import nearest_item, score_joint
+
+    obs = np.zeros(R.OBS_SIZE)
+    obs[R.CENTRE] = 1  # at (2, 2); items on the right side's (1, 4) and the above side's (0, 2)
+    obs[R.N_CELLS + 0] = obs[R.N_CELLS + 10] = 1
+    assert nearest_item(obs) == 0  # up: (0, 2) is 2 moves away, (1, 4) 3
+    obs[R.N_CELLS + 10] = 0
+    assert nearest_item(obs) in (0, 3)  # towards (1, 4): up or right
+    # with every robot scripted, the loop scores what the protocol's joint evaluation scores
+    mean, _, _ = score_joint(3, rule=None, robots=[2, 2])
+    assert mean == pytest.approx(evaluate_joint("warehouse_v0", "scripted", episodes=3, robots=[2, 2]).mean)
+    rule, _, _ = score_joint(3, robots=[2, 2])
+    assert rule > evaluate_joint("warehouse_v0", "random", episodes=3, robots=[2, 2]).mean
