@@ -119,7 +119,10 @@ class RayBackend:
                 # the local Ray we start (raylet, GCS, agents) dies with us, even after kill -9;
                 # a cluster we only connect to is left alone
                 reap_descendants_when_gone()
-            ray.init(address=address, **kwargs)
+            try:
+                ray.init(address=address, **kwargs)
+            except ConnectionError as exc:  # something answers there, but not a Ray we may join
+                raise BadInput(f"--ray-address {address!r}: Ray could not connect ({exc})") from None
         actor = ray.remote(num_cpus=1)(AgentShard)
         try:
             self.actors = [actor.remote(spec) for spec in specs]
