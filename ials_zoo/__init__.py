@@ -27,14 +27,14 @@ from ials_zoo.core.gym_ids import register_ials
 
 def make_ials(*args, **kwargs):
     """Build the influence-augmented local simulator of one agent (see ``ials_zoo.influence``)."""
-    from ials_zoo.influence.ials import make_ials as _make_ials
+    from ials_zoo.influence.ials import make_ials as _make_ials  # lazy: SB3/torch
 
     return _make_ials(*args, **kwargs)
 
 
 def make_ials_parallel_env(*args, **kwargs):
     """Build the multi-agent IALS, a PettingZoo ``ParallelEnv`` (see ``ials_zoo.influence.multi``)."""
-    from ials_zoo.influence.multi import make_ials_parallel_env as _make
+    from ials_zoo.influence.multi import make_ials_parallel_env as _make  # lazy: SB3/torch
 
     return _make(*args, **kwargs)
 

@@ -17,6 +17,10 @@ import importlib.util
 import os
 import sys
 
+from ials_zoo.core.domains import domain_ids, get_domain
+from ials_zoo.errors import BadInput
+from ials_zoo.processes import WorkerError
+
 SUBCOMMANDS = {
     # name: (module, one-line help)
     "bench": ("ials_zoo.commands.bench", "measure GS and IALS speed (steps/s, cost per agent-step)"),
@@ -38,8 +42,6 @@ _RUN_FAILURES = ("SimulationError", "WorkerDiedError", "WorkerUnresponsiveError"
 
 def _available() -> dict:
     """The subcommands: the generic ones, then each domain's own tools (``Domain.tools``)."""
-    from ials_zoo.core.domains import domain_ids, get_domain
-
     found = {}
     for name, (module, help_text) in SUBCOMMANDS.items():
         if importlib.util.find_spec(module) is not None:
@@ -104,8 +106,6 @@ def _sigterm_interrupts() -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from ials_zoo.errors import BadInput
-
     argv = sys.argv[1:] if argv is None else argv
     command = next((a for a in argv if not a.startswith("-")), None)
     try:
@@ -134,8 +134,6 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except RuntimeError as exc:
         # a worker that died or stopped, a SUMO error: named by the error itself, exit 1
-        from ials_zoo.processes import WorkerError
-
         if not isinstance(exc, WorkerError) and type(exc).__name__ not in _RUN_FAILURES or os.environ.get(
                 "IALS_ZOO_DEBUG"):
             raise

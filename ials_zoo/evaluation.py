@@ -56,7 +56,9 @@ from ials_zoo.policy import (
     load_policy_file,
     policy_from_sb3_zip,
 )
+from ials_zoo.single_agent import SingleAgentGS
 from ials_zoo.stats import CI_LEVEL, EPISODES_METHOD, bootstrap_interval
+from ials_zoo.utils import check_seed
 
 EVAL_SEED_BASE = 10_000
 """Episode ``i`` of an evaluation is reset with seed ``EVAL_SEED_BASE + i``."""
@@ -413,8 +415,6 @@ class EvaluationResult:
 
 
 def _check_seeds(seeds, episodes) -> list[int]:
-    from ials_zoo.utils import check_seed
-
     seeds = list(eval_seeds(episodes) if seeds is None else seeds)
     if not seeds:
         raise BadInput("seeds must not be empty")
@@ -434,8 +434,6 @@ def evaluate(env_id: str, agent: str, policy, episodes: int = PROTOCOL_EPISODES,
         frame_stack: the callable policy's frame stack (a model's own only).
         **options: GS options (passed to the domain's ``parallel_env``).
     """
-    from ials_zoo.single_agent import SingleAgentGS
-
     domain = get_domain(env_id)
     domain.check_agent(agent, **options)
     pol = load_policy(policy, env_id, agent, deterministic=deterministic, frame_stack=frame_stack)

@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from ials_zoo.errors import BadInput, BadInputType
-from ials_zoo.utils import loads_untrusted_json
+from ials_zoo.utils import atomic_path, loads_untrusted_json
 
 FORMAT = "ials_zoo.policy"
 FORMAT_VERSION = 1
@@ -194,8 +194,6 @@ _RESERVED = ("format", "format_version", "agents", "obs_size", "n_actions", "hid
 def save_policy(net: PolicyNetwork, path) -> Path:
     """Write ``net`` to ``path`` (a ``.safetensors`` file), atomically."""
     from safetensors.numpy import save
-
-    from ials_zoo.utils import atomic_path
 
     path = Path(path)
     header = json.dumps(net.header(), sort_keys=True, default=_json_default, allow_nan=False)

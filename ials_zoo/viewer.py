@@ -12,6 +12,7 @@ import os
 import numpy as np
 
 from ials_zoo.errors import BadInput
+from ials_zoo.utils import atomic_path
 
 _BAR = (250, 250, 250)
 _TEXT = (20, 20, 20)
@@ -53,8 +54,6 @@ def save_gif(frames, path: str | os.PathLike, fps: float = 5.0) -> None:
     """Write RGB ``frames`` (H x W x 3 uint8 arrays) to ``path`` as a looping GIF, each frame
     shown ``1 / fps`` seconds; atomic (nothing half-written is left at ``path``)."""
     from PIL import Image
-
-    from ials_zoo.utils import atomic_path
 
     frames = list(frames)
     if not frames:

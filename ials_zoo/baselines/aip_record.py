@@ -9,6 +9,7 @@ import json
 import os
 from pathlib import Path
 
+import ials_zoo
 from ials_zoo.evaluation import sha256_file
 from ials_zoo.influence.ials import pretrained_path
 from ials_zoo.influence.specs import GS, predictor_for
@@ -58,8 +59,6 @@ def predictor_record(venv, simulator: str, env_id: str, agent: str, made_now: bo
 def portable_path(path) -> str:
     """A file inside the installed package as ``ials_zoo/<path in the package>``; any other
     file as given."""
-    import ials_zoo
-
     package = Path(ials_zoo.__file__).resolve().parent
     try:
         return "ials_zoo/" + Path(path).resolve().relative_to(package).as_posix()

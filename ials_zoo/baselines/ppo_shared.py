@@ -37,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
+import ials_zoo
 from ials_zoo.baselines.arguments import PPOSettings, arg, parse_env_options, run_cli
 from ials_zoo.baselines.ppo_single import _hidden, check_ppo_args
 from ials_zoo.baselines.runs import RunFolder, training_logger
@@ -151,8 +152,6 @@ def main(args: Args | None = None) -> list[dict]:
     """Train, evaluate and save; returns one result dict per evaluated agent."""
     import torch
     from stable_baselines3.common.vec_env import VecFrameStack, VecMonitor
-
-    import ials_zoo
 
     args = args or Args()
 

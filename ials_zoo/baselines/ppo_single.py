@@ -54,6 +54,7 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
+import ials_zoo
 from ials_zoo.baselines.aip_record import predictor_record
 from ials_zoo.baselines.arguments import AblatedPPOSettings, arg, check_ppo_settings, parse_env_options, run_cli
 from ials_zoo.baselines.runs import RunFolder, training_logger
@@ -183,8 +184,6 @@ def main(args: Args | None = None) -> dict:
     """Train, evaluate and save; returns the result dict (also written to result.json)."""
     import torch
     from stable_baselines3.common.vec_env import VecFrameStack, VecMonitor
-
-    import ials_zoo
 
     args = args or Args()
     check_args(args)

@@ -29,6 +29,7 @@ import time
 
 import numpy as np
 
+import ials_zoo
 from ials_zoo.baselines import dials
 from ials_zoo.baselines.multiagent import PREVIOUS_PPO_SETTINGS, frame_stack_of, ppo_config
 from ials_zoo.baselines.throughput import NO_SIMULATOR, ppo_bound, ppo_throughput
@@ -36,6 +37,7 @@ from ials_zoo.commands import CommandError
 from ials_zoo.core.domains import domain_ids, get_domain
 from ials_zoo.influence.ials import make_ials, make_ials_vec_env
 from ials_zoo.influence.multi import make_ials_parallel_env, make_multi_agent_ials, resolve_predictor_set
+from ials_zoo.leaderboard import hardware_info
 from ials_zoo.learners.batched_ppo import BatchedPPO, PPOConfig
 from ials_zoo.utils import atomic_path, atomic_write_text
 
@@ -67,9 +69,6 @@ def machine_info() -> dict:
     """What the numbers were measured on: the leaderboard's ``hardware`` record
     (:func:`ials_zoo.leaderboard.hardware_info`) plus SUMO, torch's threads and the date."""
     import torch
-
-    import ials_zoo
-    from ials_zoo.leaderboard import hardware_info
 
     hardware = hardware_info()
     try:

@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 
 from gymnasium import spaces
 
+from ials_zoo.core.gym_ids import register_ials
 from ials_zoo.core.local import LocalSimulator
 from ials_zoo.core.region import RegionSpec
 from ials_zoo.errors import BadInput, BadInputType
@@ -294,8 +295,6 @@ def register_domain(domain: Domain, replace: bool = False) -> Domain:
         if taken and not replace:
             raise BadInput(f"a domain {domain.env_id!r} is already registered; pass replace=True")
         _registered[domain.env_id] = domain
-    from ials_zoo.core.gym_ids import register_ials
-
     register_ials(domain.env_id)
     return domain
 

@@ -19,8 +19,19 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import torch
+from stable_baselines3 import PPO
+from stable_baselines3.common.utils import LinearSchedule
+from stable_baselines3.common.vec_env import VecFrameStack, VecMonitor
 
+from ials_zoo.core.domains import get_domain
+from ials_zoo.core.streams import agent_key
 from ials_zoo.errors import BadInput
+from ials_zoo.influence.ials import make_ials_vec_env
+from ials_zoo.influence.multi import make_multi_agent_ials
+from ials_zoo.learners.batched_ppo import BatchedPPO, PPOConfig
+from ials_zoo.learners.rollout import IALSVecEnv, RolloutTrainer
+from ials_zoo.policy import policy_from_sb3_model, stack_policies
 
 LEARNERS = ("batched", "sb3")
 
@@ -46,11 +57,6 @@ class AgentShard:
     """The agents of one worker (module docstring)."""
 
     def __init__(self, spec: ShardSpec):
-        import torch
-
-        from ials_zoo.core.domains import get_domain
-        from ials_zoo.learners.batched_ppo import PPOConfig
-
         torch.set_num_threads(spec.threads)
         self.spec = spec
         self.domain = get_domain(spec.env_id)
@@ -68,10 +74,6 @@ class AgentShard:
 
     # -- the batched learner on the shard's multi-agent IALS
     def _init_batched(self, spec):
-        from ials_zoo.influence.multi import make_multi_agent_ials
-        from ials_zoo.learners.batched_ppo import BatchedPPO
-        from ials_zoo.learners.rollout import IALSVecEnv, RolloutTrainer
-
         core = make_multi_agent_ials(spec.env_id, self.agents, spec.n_envs, spec.predictors, seed=spec.seed,
                                      **spec.options)
         self.env = IALSVecEnv(core)
@@ -81,13 +83,6 @@ class AgentShard:
 
     # -- one SB3 PPO per agent (the reference learner)
     def _init_sb3(self, spec):
-        from stable_baselines3 import PPO
-        from stable_baselines3.common.utils import LinearSchedule
-        from stable_baselines3.common.vec_env import VecFrameStack, VecMonitor
-
-        from ials_zoo.core.streams import agent_key
-        from ials_zoo.influence.ials import make_ials_vec_env
-
         cfg = self.cfg
         self.models = {}
         for a in self.agents:
@@ -180,8 +175,6 @@ class AgentShard:
         """Every agent's actor weights, stacked: ``[(W [A, in, out], b [A, out]), ...]``."""
         if self.spec.learner == "batched":
             return self.learner.actor_layers()
-        from ials_zoo.policy import policy_from_sb3_model, stack_policies
-
         nets = [policy_from_sb3_model(self.models[a], a, self.spec.frame_stack) for a in self.agents]
         return stack_policies(nets).layers
 

@@ -20,18 +20,14 @@ from ials_zoo.influence.dataset import InfluenceDataset, collect
 from ials_zoo.influence.files import load_predictor, save_predictor
 from ials_zoo.influence.metrics import evaluate_cross_entropy
 from ials_zoo.influence.networks import GRUPredictor, MLPPredictor, untrained_predictor
+from ials_zoo.influence.train import train_predictor
 
 
 def __getattr__(name):
-    # Lazy: ials.py imports gymnasium/SB3, train.py imports torch.
     if name in ("IALSEnv", "IALSVecEnv", "make_ials", "make_ials_vec_env"):
-        from ials_zoo.influence import ials
+        from ials_zoo.influence import ials  # lazy: SB3/torch
 
         return getattr(ials, name)
-    if name == "train_predictor":
-        from ials_zoo.influence.train import train_predictor
-
-        return train_predictor
     raise AttributeError(f"module 'ials_zoo.influence' has no attribute {name!r}")
 
 

@@ -33,9 +33,12 @@ from pathlib import Path
 
 import numpy as np
 
+from ials_zoo._version import __version__
+from ials_zoo.core.domains import get_domain
 from ials_zoo.core.region import DSET_KINDS, INFLUENCE_KEY, RegionSpec, dset_key
 from ials_zoo.errors import BadInput, BadInputType
-from ials_zoo.utils import check_seed
+from ials_zoo.processes import shutdown_pool, spawn_pool
+from ials_zoo.utils import atomic_path, check_seed
 
 FORMAT = "ials_zoo.influence_dataset"
 FORMAT_VERSION = 1
@@ -109,8 +112,6 @@ class InfluenceDataset:
     # -- files -----------------------------------------------------------------------------
     def save(self, path) -> Path:
         """Write the data set to ``path`` (``.npz``), atomically."""
-        from ials_zoo.utils import atomic_path
-
         meta = dict(self.metadata)
         meta.update(
             {
@@ -267,8 +268,6 @@ def collect_all(
     Returns:
         ``{agent: InfluenceDataset}``.
     """
-    from ials_zoo.core.domains import get_domain
-
     steps = int(steps)
     if steps < 1:
         raise BadInput(f"steps must be >= 1, got {steps}")
@@ -332,8 +331,6 @@ def _collect_in_process(domain, env_id: str, agents: list, steps: int, policy, s
 
 def _dataset(region, dsets: dict, influences: list, meta: dict) -> InfluenceDataset:
     """One agent's episodes as a data set, with the provenance ``meta`` (plus version, time)."""
-    from ials_zoo._version import __version__
-
     meta = dict(meta, package_version=__version__, created=time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()))
     return InfluenceDataset(region, {k: np.stack(v) for k, v in dsets.items()}, np.stack(influences), meta)
 
@@ -380,8 +377,6 @@ def _collect_share(kwargs: dict) -> dict[str, InfluenceDataset]:
 
 def _collect_in_processes(env_id, agents, steps, policy, seed, gs_options, progress, workers):
     import pickle
-
-    from ials_zoo.processes import shutdown_pool, spawn_pool
 
     try:
         pickle.dumps(policy)

@@ -48,6 +48,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ials_zoo.core.domains import get_domain
+from ials_zoo.evaluation import FrameStack, load_model
+from ials_zoo.influence.dataset import collect_all
+from ials_zoo.influence.train import train_predictors
 
 METRICS = ("active", "persistence", "arrivals", "run_length", "gap", "return")
 
@@ -73,8 +76,6 @@ def run(env, agents: Sequence[str], watched: Sequence[str], policy, episodes: in
     """Run ``episodes`` of a ParallelEnv (GS or multi-agent IALS) with a joint ``policy``
     (``"random"``, ``"constant"`` or a :class:`~ials_zoo.evaluation.NetworkPolicy`) and record
     the ``watched`` agents' influence and returns."""
-    from ials_zoo.evaluation import FrameStack
-
     out = Trajectories({a: [] for a in watched}, {a: [] for a in watched})
     frames = FrameStack(getattr(policy, "frame_stack", 1))
     rng = np.random.default_rng(seed)
@@ -170,8 +171,6 @@ class _PolicyActor:
     """A joint policy as :func:`~ials_zoo.influence.dataset.collect_all` drives it."""
 
     def __init__(self, policy, agents, seed: int):
-        from ials_zoo.evaluation import FrameStack
-
         self.policy, self.agents, self.seed, self.episode = policy, list(agents), int(seed), 0
         self.frames = FrameStack(getattr(policy, "frame_stack", 1))
         self.name, self.x = "joint policy", None
@@ -191,9 +190,6 @@ def on_policy_aips(env_id: str, agents, policy, steps: int, seed: int, autoregre
                    lr: float | None = None, epochs: int | None = None) -> dict:
     """``{agent: AIP}`` trained on ``steps`` GS steps of the joint ``policy`` (every agent
     acting), with the domain's DIALS AIP settings (``lr``, ``epochs``: others)."""
-    from ials_zoo.influence.dataset import collect_all
-    from ials_zoo.influence.train import train_predictors
-
     d = get_domain(env_id).dials
     if policy == "random":
         actor = None
@@ -222,8 +218,7 @@ def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: i
     ``{policy name: {agent: {metric: compare(...)}}}``. ``predictor``: an AIP set for every
     policy, or ``on-policy[-autoregressive]`` (module docstring) with ``collect_steps`` GS
     steps per policy (default: the domain's DIALS collection)."""
-    from ials_zoo.evaluation import load_model
-    from ials_zoo.influence.multi import make_ials_parallel_env
+    from ials_zoo.influence.multi import make_ials_parallel_env  # lazy: SB3/torch
 
     domain = get_domain(env_id)
     agents = domain.agents(**options)

@@ -19,12 +19,13 @@ from pathlib import Path
 
 import numpy as np
 
+from ials_zoo._version import __version__
 from ials_zoo.core.region import RegionSpec
 from ials_zoo.errors import BadInput, BadInputType
 from ials_zoo.influence.base import InfluencePredictor
 from ials_zoo.influence.constant import FixedPredictor, MarginalPredictor, UniformPredictor
 from ials_zoo.influence.networks import ARCHS, GRUPredictor, MLPPredictor
-from ials_zoo.utils import loads_untrusted_json
+from ials_zoo.utils import atomic_path, loads_untrusted_json
 
 FORMAT = "ials_zoo.influence_predictor"
 SET_FORMAT = "ials_zoo.influence_predictor_set"
@@ -37,8 +38,6 @@ _CLASSES = {
 
 
 def _package_version() -> str:
-    from ials_zoo._version import __version__
-
     return __version__
 
 
@@ -76,8 +75,6 @@ def save_predictor(predictor: InfluencePredictor, path) -> Path:
     """Save ``predictor`` to one file (atomic), see the module docstring for the format."""
     import torch
 
-    from ials_zoo.utils import atomic_path
-
     payload = _payload(predictor)
     path = Path(path)
     with atomic_path(path) as tmp:
@@ -92,8 +89,6 @@ def save_predictor_set(predictors, path, metadata: dict | None = None) -> Path:
          "metadata_json": "<json>", "members": [<one predictor payload per agent>]}
     """
     import torch
-
-    from ials_zoo.utils import atomic_path
 
     predictors = list(predictors)
     payload = {"format": SET_FORMAT, "format_version": FORMAT_VERSION,

@@ -30,13 +30,16 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
+from ials_zoo.core.domains import get_domain
 from ials_zoo.core.region import check_dset_kind
 from ials_zoo.errors import BadInput, BadInputType
 from ials_zoo.influence.base import InfluencePredictor
 from ials_zoo.influence.constant import FixedPredictor, MarginalPredictor, UniformPredictor
+from ials_zoo.influence.dataset import collect
 from ials_zoo.influence.files import load_predictor, save_predictor
 from ials_zoo.influence.networks import untrained_predictor
 from ials_zoo.influence.specs import parse_predictor
+from ials_zoo.influence.train import format_report, train_predictor
 from ials_zoo.utils import check_seed
 
 PRETRAINED_DIR = Path(__file__).resolve().parent / "pretrained"
@@ -322,8 +325,6 @@ def trained_predictor(
     A shipped/cached AIP is used only if it was trained for exactly this region setting
     (``RegionSpec`` incl. its params), d-set kind and architecture (default: the domain's).
     """
-    from ials_zoo.core.domains import get_domain
-
     domain = get_domain(env_id)
     options = dict(options or {})
     region = domain.region_spec(agent, **options)
@@ -339,8 +340,6 @@ def trained_predictor(
             f"options {options}); train one with `ials-zoo train-aip --env {env_id} --agent {agent}` "
             "and pass its file, or ask for predictor='train' to have it collected and trained now (minutes)"
         )
-    from ials_zoo.influence.dataset import collect
-    from ials_zoo.influence.train import format_report, train_predictor
 
     print(
         f"ials_zoo: no trained AIP for {env_id}/{agent} ({dset_kind!r} d-set); collecting "
@@ -363,8 +362,6 @@ def resolve_predictor(
 ) -> InfluencePredictor:
     """Turn a predictor (object, path or spec, see :mod:`ials_zoo.influence.specs`) into a
     predictor for ``agent``."""
-    from ials_zoo.core.domains import get_domain
-
     domain = get_domain(env_id)
     options = dict(options or {})
     if isinstance(predictor, InfluencePredictor):
@@ -430,8 +427,6 @@ def make_ials(
         **options: domain options, passed to the local simulator (and to the GS when an AIP
             has to be trained on demand), e.g. ``item_lifetime=8``.
     """
-    from ials_zoo.core.domains import get_domain
-
     if render_mode is not None:
         raise BadInput(f"IALS envs do not render; got render_mode={render_mode!r}")
     domain = get_domain(env_id)
@@ -449,8 +444,6 @@ def gymnasium_entry_point(env_id: str, agent: str | None = None, **kwargs) -> IA
     """Entry point of ``gymnasium.make("ials_zoo/IALS-<env_id>", agent=..., ...)``: the
     arguments of :func:`make_ials`; ``agent`` defaults to the domain's first paper agent."""
     if agent is None:
-        from ials_zoo.core.domains import get_domain
-
         agent = get_domain(env_id).default_agents[0]
     return make_ials(env_id, agent, **kwargs)
 
@@ -469,8 +462,6 @@ def make_ials_vec_env(
     Arguments as :func:`make_ials`. The predictor object is used by this VecEnv alone (its
     recurrent state holds the ``n_envs`` histories): do not share it with another env.
     """
-    from ials_zoo.core.domains import get_domain
-
     if isinstance(n_envs, bool) or not isinstance(n_envs, (int, np.integer)) or n_envs < 1:
         raise BadInput(f"n_envs must be a positive int, got {n_envs!r}")
     domain = get_domain(env_id)

@@ -34,11 +34,16 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
+from ials_zoo.core.domains import get_domain
 from ials_zoo.core.region import INFLUENCE_KEY, check_dset_kind
 from ials_zoo.errors import BadInput, BadInputType
+from ials_zoo.influence import dataset
 from ials_zoo.influence.base import InfluencePredictor
+from ials_zoo.influence.files import load_predictor_set, save_predictor_set
 from ials_zoo.influence.ials import PRETRAINED_DIR, cache_dir, resolve_predictor
+from ials_zoo.influence.specs import parse_predictor
 from ials_zoo.influence.stacked import StackedPredictor
+from ials_zoo.influence.train import train_predictors
 from ials_zoo.utils import check_reset_options, check_seed
 
 SET_SUFFIX = "__all.pt"
@@ -60,9 +65,6 @@ def trained_predictor_set(env_id: str, agents=None, dset_kind: str = "dset", opt
     """``{agent: AIP}`` of every agent: shipped, else cached, else trained (module docstring).
     A shipped or cached set is used only if it was trained for exactly these regions (their
     ``RegionSpec`` incl. params) and d-set kind."""
-    from ials_zoo.core.domains import get_domain
-    from ials_zoo.influence.files import load_predictor_set, save_predictor_set
-
     domain = get_domain(env_id)
     options = dict(options or {})
     agents = domain.check_agents(agents, **options)
@@ -77,15 +79,13 @@ def trained_predictor_set(env_id: str, agents=None, dset_kind: str = "dset", opt
         raise FileNotFoundError(f"no trained AIPs for the agents of {env_id} (options {options}); train them with "
                                 f"`ials-zoo train-aip --env {env_id} --agent all --out FILE.pt` and pass the file, "
                                 "or ask for predictor='train' to have them collected and trained now (minutes)")
-    from ials_zoo.influence.dataset import collect_all
-    from ials_zoo.influence.train import train_predictors
 
     d = domain.dials
     steps = steps or 50_000
     print(f"ials_zoo: no trained AIPs for every agent of {env_id}; collecting {steps} GS steps (all agents "
           f"random) and training {len(domain.agents(**options))} {arch} AIPs (cached in {cache_dir()})")
     everyone = domain.agents(**options)
-    data = collect_all(env_id, everyone, steps=steps, gs_options=options, progress=progress)
+    data = dataset.collect_all(env_id, everyone, steps=steps, gs_options=options, progress=progress)
     preds, _ = train_predictors(data, arch, hidden=d.aip_hidden, lr=d.aip_lr, epochs=d.aip_epochs, batch_size=d.aip_batch,
                                 dset_kind=dset_kind, progress=progress)
     save_predictor_set(preds.values(), _set_cache_path(env_id, [regions.get(a) or domain.region_spec(a, **options)
@@ -97,9 +97,6 @@ def trained_predictor_set(env_id: str, agents=None, dset_kind: str = "dset", opt
 def resolve_predictor_set(predictor, env_id: str, agents, dset_kind: str | None = None, seed: int | None = None,
                           options: dict | None = None) -> list[InfluencePredictor]:
     """One predictor per agent (in ``agents`` order) from a spec (see the module docstring)."""
-    from ials_zoo.influence.files import load_predictor_set
-    from ials_zoo.influence.specs import parse_predictor
-
     options = dict(options or {})
     kind = check_dset_kind(dset_kind or "dset")
     if isinstance(predictor, StackedPredictor):
@@ -273,8 +270,6 @@ class IALSParallelEnv(ParallelEnv):
 def make_multi_agent_ials(env_id: str, agents=None, n_envs: int = 1, predictor="trained", dset_kind: str | None = None,
                           seed: int | None = None, **options) -> MultiAgentIALS:
     """:class:`MultiAgentIALS` of ``agents`` (default: every agent) with ``n_envs`` copies each."""
-    from ials_zoo.core.domains import get_domain
-
     domain = get_domain(env_id)
     if isinstance(agents, str):
         raise BadInputType(f"agents must be a list of agent ids (or None for all), got the string {agents!r}; "
@@ -306,8 +301,6 @@ def make_ials_parallel_env(env_id: str, agents=None, predictor="trained", dset_k
         seed: seeds the first ``reset`` (and ``"untrained"`` weights).
         **options: domain options, as for the GS.
     """
-    from ials_zoo.core.domains import get_domain
-
     domain = get_domain(env_id)
     for gs_only in ("learners", "scripted_learners", "render_mode"):
         if gs_only in options:

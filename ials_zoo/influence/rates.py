@@ -13,7 +13,7 @@ def influence_rates(env_id: str, agent: str, predictor, episodes: int = 3, seed:
     """Mean of ``info["influence"]`` (in traffic, where each source is a 0/1 entry bit: vehicles
     entering per lane and step; in the warehouse it is a mean class index, not a rate) and
     of the observation bits over ``episodes`` IALS episodes of a uniform random policy."""
-    from ials_zoo.influence.ials import make_ials
+    from ials_zoo.influence.ials import make_ials  # lazy: SB3/torch
 
     if episodes < 1:
         raise BadInput(f"episodes must be >= 1, got {episodes}")

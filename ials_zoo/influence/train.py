@@ -22,6 +22,9 @@ import time
 
 import numpy as np
 
+from ials_zoo.core.domains import get_domain
+from ials_zoo.core.region import check_dset_kind
+from ials_zoo.core.streams import agent_key
 from ials_zoo.errors import BadInput
 from ials_zoo.influence.base import previous_influences
 from ials_zoo.influence.predictors import (
@@ -40,7 +43,7 @@ DEFAULTS = {
 
 
 def _torch_modules():
-    from ials_zoo.influence.torch_nets import TorchGRU, TorchMLP
+    from ials_zoo.influence.torch_nets import TorchGRU, TorchMLP  # lazy: torch
 
     return {"mlp": TorchMLP, "gru": TorchGRU}
 
@@ -156,8 +159,6 @@ def network_inputs(dataset, dset_kind: str, autoregressive: bool) -> np.ndarray:
 def _train(dataset, arch, dset_kind, epochs, seed, progress, lr, hidden, batch_size, test_fraction, autoregressive):
     import torch
 
-    from ials_zoo.core.region import check_dset_kind
-
     if arch not in ARCHS:
         raise BadInput(f"unknown AIP architecture {arch!r}; expected one of {sorted(ARCHS)}")
     check_dset_kind(dset_kind)
@@ -244,8 +245,6 @@ def _cross_entropies(predictors: dict, dataset, train_idx, test_idx) -> dict:
 def untrained_probs(region):
     """The class probabilities of the domain's ``uniform`` AIP (``Domain.untrained_probs``),
     or ``None`` (uniform over classes) for a domain that sets none or is not registered."""
-    from ials_zoo.core.domains import get_domain
-
     try:
         return get_domain(region.domain).untrained_probs
     except ValueError:
@@ -280,7 +279,7 @@ def format_report(report: dict) -> str:
 
 
 def _stacked_modules():
-    from ials_zoo.influence.torch_nets import StackedGRU, StackedMLP
+    from ials_zoo.influence.torch_nets import StackedGRU, StackedMLP  # lazy: torch
 
     return {"mlp": StackedMLP, "gru": StackedGRU}
 
@@ -289,8 +288,6 @@ def _initial_arrays(agent: str, old, arch: str, D: int, H: int, n_logits: int, d
                     seed: int) -> dict:
     """The starting weights of ``agent``'s network: ``old``'s (a warm start, which must have the
     same shape and kind), else ``init_arrays`` seeded from ``seed`` and the agent's name."""
-    from ials_zoo.core.streams import agent_key
-
     if old is None:
         return init_arrays(arch, D, H, n_logits, seed=(seed * 1_000_003 + agent_key(agent)) % 2**32)
     if old.name != arch or old.hidden != H or old.dset_kind != dset_kind or old.autoregressive != bool(autoregressive):
@@ -345,8 +342,6 @@ def train_predictors(datasets: dict, arch: str, hidden: int | None = None, lr: f
     cross-entropy and the training seconds.
     """
     import torch
-
-    from ials_zoo.core.streams import agent_key
 
     if arch not in ARCHS:
         raise BadInput(f"unknown AIP architecture {arch!r}; expected one of {sorted(ARCHS)}")

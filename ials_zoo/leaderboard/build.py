@@ -22,7 +22,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
+import ials_zoo
+from ials_zoo.core.domains import get_domain
 from ials_zoo.errors import BadInput
+from ials_zoo.evaluation import PROTOCOL_EPISODES, REFERENCE_POLICIES, eval_seeds, evaluate, evaluate_joint, load_policy
 from ials_zoo.stats import EPISODES_METHOD, SEEDS_METHOD, t_interval
 
 SCHEMA_VERSION = 2
@@ -103,9 +106,6 @@ def per_agent_scores(scores: Sequence[dict]) -> dict:
 def protocol_of(track: str, env_id: str, agents, seeds, options) -> str:
     """``official`` when a result follows the benchmark's protocol -- the protocol's seeds and
     episode count, no GS options, and on the multi-agent track every agent -- else ``variant``."""
-    from ials_zoo.core.domains import get_domain
-    from ials_zoo.evaluation import eval_seeds
-
     if list(seeds) != eval_seeds() or options:
         return VARIANT
     if track == MULTI and list(agents) != get_domain(env_id).agents():
@@ -121,8 +121,6 @@ def make_result(evaluations: Sequence, *, algorithm: str, training: dict | None 
     training seed (all of one domain, agents and evaluation seeds). An evaluation of one agent
     (``ev.agent`` set) makes a single-agent result, a joint one (``ev.agent`` None) a
     multi-agent result."""
-    import ials_zoo
-
     if not evaluations:
         raise BadInput("make_result needs at least one evaluation")
     first = evaluations[0]
@@ -188,8 +186,6 @@ def reference_result(env_id: str, agent: str | None, policy: str, episodes: int 
                      submitter: str = "", notes: str = "", **options) -> dict:
     """Evaluate a reference policy (``"random"`` or ``"scripted"``) and build its result:
     for one agent (``agent``), or for every agent at once (``agent=None``, multi-agent)."""
-    from ials_zoo.evaluation import PROTOCOL_EPISODES, REFERENCE_POLICIES, evaluate, evaluate_joint
-
     if policy not in REFERENCE_POLICIES:
         raise BadInput(f"reference policy must be one of {REFERENCE_POLICIES}, got {policy!r}")
     episodes = PROTOCOL_EPISODES if episodes is None else episodes
@@ -204,9 +200,6 @@ def result_for(env_id, agent, policy, episodes, deterministic=False, frame_stack
                submitter="", notes="", progress=False, options: dict | None = None, joint: bool = False) -> dict:
     """Evaluate ``policy`` and build its leaderboard result (training record from a model's
     metadata; none for reference policies and callables)."""
-    from ials_zoo.core.domains import get_domain
-    from ials_zoo.evaluation import evaluate, evaluate_joint, load_policy
-
     pol = load_policy(policy, env_id, agent, deterministic=deterministic, frame_stack=frame_stack)
     meta = pol.metadata if pol.kind == "model" else {}
     env_id = env_id or meta.get("env_id")

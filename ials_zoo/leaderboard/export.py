@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from ials_zoo.errors import BadInput
 from ials_zoo.leaderboard.store import load_entries
+from ials_zoo.stats import iqm_interval, probability_of_improvement
 
 
 def algorithm_label(data: dict) -> str:
@@ -63,8 +64,6 @@ def compare_entries(first: dict, second: dict) -> str:
     """Two entries of one domain and agents, the way the field compares them: each one's IQM
     over its training seeds with a bootstrap interval, and the probability of improvement
     P(a seed of the first scores above a seed of the second), with its interval."""
-    from ials_zoo.stats import iqm_interval, probability_of_improvement
-
     for field in ("env_id", "agents"):
         if first[field] != second[field]:
             raise BadInput(f"the entries differ in {field}: {first[field]!r} vs {second[field]!r}")

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 
+from ials_zoo.evaluation import evaluate, evaluate_joint
 from ials_zoo.leaderboard.build import MULTI
 from ials_zoo.leaderboard.validate import REL_TOL
 
@@ -17,8 +18,6 @@ def _equal(a: float, b: float) -> bool:
 def remeasure_result(data: dict, files: list[str] | None, progress: bool = False) -> list[dict]:
     """Evaluate every seed's policy (``files``, or the reference policy) again with the entry's
     protocol; one report per seed (see :func:`verify`)."""
-    from ials_zoo.evaluation import evaluate, evaluate_joint
-
     kind = data["policy"]["kind"]
     ev = data["evaluation"]
     reports = []

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ials_zoo.core.domains import get_domain
 from ials_zoo.errors import BadInput
 from ials_zoo.leaderboard.build import MULTI, OFFICIAL, SINGLE
 from ials_zoo.leaderboard.store import ARCHIVE_SUBDIR, board_path, load_entries
@@ -54,8 +55,6 @@ def _row(d: dict) -> list[str]:
 def sort_key(sort: str):
     """Best first by the score, or by a physical metric (its domain says which way is better;
     entries without it last)."""
-    from ials_zoo.core.domains import get_domain
-
     if sort == "score":
         return lambda d: (0, -d["score"]["mean"])
 
@@ -99,8 +98,6 @@ def _text_table(rows: list[dict], sort: str = "score") -> list[str]:
 
 def metric_names(entries) -> dict:
     """``{metric: "lower" | "higher"}`` of every domain on the board."""
-    from ials_zoo.core.domains import get_domain
-
     names: dict = {}
     for env_id in sorted({d["env_id"] for _, d in entries}):
         names.update(get_domain(env_id).metrics)

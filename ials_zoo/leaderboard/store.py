@@ -29,7 +29,10 @@ import shutil
 from pathlib import Path
 
 from ials_zoo.errors import BadInput
+from ials_zoo.evaluation import load_model, sha256_file
+from ials_zoo.leaderboard.remeasure import remeasure_result
 from ials_zoo.leaderboard.validate import ResultError, load_result, validate_result
+from ials_zoo.policy import PolicyFileError, save_policy
 from ials_zoo.utils import atomic_path, remove_stale_temporaries
 
 RESULTS_SUBDIR = "results"
@@ -130,9 +133,6 @@ def _check_policies(data: dict, path: Path, board: Path) -> tuple[list, list]:
     networks)``: ``(source, board target)`` pairs and the loaded networks. A policy that does
     not load as a policy of the entry's domain and agents is refused; an SB3 zip is converted
     to a policy file (the board keeps weights + JSON only)."""
-    from ials_zoo.evaluation import load_model, sha256_file
-    from ials_zoo.policy import PolicyFileError, save_policy
-
     copies, networks = [], []
     for i, s in enumerate(data["scores"]):
         found = resolve_policy_file(s["policy_file"], path, board)
@@ -188,8 +188,6 @@ def submit(path, directory=None, remeasure: bool = True) -> Path:
     policy of the entry, for training claims its policy files contradict, and (``remeasure``)
     for scores that the GS does not reproduce exactly; the board is left untouched in every
     failure (atomic writes, never an overwrite, one submission at a time)."""
-    from ials_zoo.leaderboard.remeasure import remeasure_result
-
     path = Path(path)
     board = board_path(directory)
     results = board / RESULTS_SUBDIR

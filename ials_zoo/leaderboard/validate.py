@@ -28,10 +28,20 @@ from pathlib import Path
 
 import numpy as np
 
+from ials_zoo.core.domains import domain_ids, get_domain
 from ials_zoo.errors import BadInput
-from ials_zoo.leaderboard.build import MULTI, SCHEMA_VERSION, SINGLE, overall_score, protocol_of, split_env_id
+from ials_zoo.leaderboard.build import (
+    MULTI,
+    SCHEMA_VERSION,
+    SINGLE,
+    overall_metrics,
+    overall_score,
+    per_agent_scores,
+    protocol_of,
+    split_env_id,
+)
 from ials_zoo.stats import bootstrap_interval
-from ials_zoo.utils import loads_untrusted_json, read_regular_file
+from ials_zoo.utils import atomic_write_text, loads_untrusted_json, read_regular_file
 
 REL_TOL = 1e-9
 ABS_TOL = 1e-12
@@ -121,8 +131,6 @@ def validate_result(data) -> dict:
 
 def _check_domain(data: dict):
     """The domain, its version, its GS options and its agents exist; return the domain."""
-    from ials_zoo.core.domains import domain_ids, get_domain
-
     env_id = data["env_id"]
     if env_id not in domain_ids():
         raise ResultError("env_id", f"unknown domain {env_id!r}; known: {', '.join(domain_ids())}")
@@ -215,8 +223,6 @@ def _check_overall_score(data: dict) -> None:
     if data["score"]["ci_over"] != want_score["ci_over"]:
         raise ResultError("score.ci_over", f"{data['score']['ci_over']!r}, expected {want_score['ci_over']!r}")
     if track == MULTI:
-        from ials_zoo.leaderboard.build import per_agent_scores
-
         want_agents = per_agent_scores(data["scores"])
         if list(data["per_agent_scores"]) != list(want_agents) or not all(
                 _close(data["per_agent_scores"][a], v) for a, v in want_agents.items()):
@@ -242,8 +248,6 @@ def _check_training(data: dict, kind: str) -> None:
 def _check_metrics(data: dict, known: dict) -> None:
     """Physical metrics: only the domain's names, an interval around each mean, and the
     top level recomputed from the seeds (as the score)."""
-    from ials_zoo.leaderboard.build import overall_metrics
-
     places = [(f"scores.{i}.metrics", s.get("metrics")) for i, s in enumerate(data["scores"])]
     for where, metrics in places + [("metrics", data.get("metrics"))]:
         for name, value in (metrics or {}).items():
@@ -287,8 +291,6 @@ def load_result(path: str | os.PathLike, follow_links: bool = True) -> dict:
 
 def write_result(path: str | os.PathLike, data: dict) -> Path:
     """Validate and write a result atomically (any path; not a leaderboard submission)."""
-    from ials_zoo.utils import atomic_write_text
-
     validate_result(data)
     atomic_write_text(path, json.dumps(data, indent=2, allow_nan=False) + "\n")
     return Path(path)

@@ -9,8 +9,9 @@ from __future__ import annotations
 from pathlib import Path
 
 from ials_zoo.errors import BadInput
+from ials_zoo.evaluation import load_model, sha256_file
 from ials_zoo.leaderboard.remeasure import remeasure_result
-from ials_zoo.leaderboard.store import board_path, resolve_policy_file
+from ials_zoo.leaderboard.store import board_path, resolve_policy_file, training_provenance
 from ials_zoo.leaderboard.validate import ResultError, load_result
 
 
@@ -22,9 +23,6 @@ def verify(path, policies=None, progress: bool = False, directory=None) -> list[
 
     ``policies``: the policy file of each seed, when the recorded ones are not found (next to
     the result, as given, or in the board)."""
-    from ials_zoo.evaluation import load_model, sha256_file
-    from ials_zoo.leaderboard.store import training_provenance
-
     path = Path(path)
     data = load_result(path)
     kind = data["policy"]["kind"]

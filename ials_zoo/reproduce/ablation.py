@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from ials_zoo.baselines.ippo import Args
+from ials_zoo.baselines.ippo import main as train_ippo
 from ials_zoo.baselines.multiagent import DETERMINISTIC_RESULT, PREVIOUS_PPO_SETTINGS
 from ials_zoo.core.domains import get_domain
 from ials_zoo.errors import BadInput
@@ -94,8 +95,6 @@ def _slug(cell: str) -> str:
 
 def run_cell(env_id: str, cell: str, seed: int, budget: int, episodes: int, out: Path) -> dict:
     """Train and score one (cell, seed); returns its record (also ``record.json``)."""
-    from ials_zoo.baselines.ippo import main
-
     folder = out / env_id / _slug(cell) / f"s{seed}"
     record_path = folder / "record.json"
     if record_path.is_file():
@@ -104,7 +103,7 @@ def run_cell(env_id: str, cell: str, seed: int, budget: int, episodes: int, out:
     args = Args(env_id=env_id, seed=seed, total_timesteps=budget, eval_every=max(budget // 4, 1),
                 eval_episodes=episodes, final_eval_episodes=episodes, out_dir=str(folder / "run"),
                 overwrite=True, progress=False, **settings)
-    result = main(args)
+    result = train_ippo(args)
     det_path = folder / "run" / DETERMINISTIC_RESULT
     if det_path.is_file():
         det_mean = json.loads(det_path.read_text())["score"]["mean"]

@@ -11,7 +11,10 @@ import sys
 import time
 from pathlib import Path
 
+import torch
+
 from ials_zoo.baselines.ppo_single import Args
+from ials_zoo.baselines.ppo_single import main as train_ppo_single
 from ials_zoo.baselines.runs import run_state
 from ials_zoo.errors import BadInput
 from ials_zoo.processes import die_with_parent
@@ -21,9 +24,6 @@ from ials_zoo.reproduce.plan import Job
 
 def run_job(job) -> None:
     """Run ``job`` (a :class:`~ials_zoo.reproduce.plan.Job`) in this process."""
-    import torch
-
-
     torch.set_num_threads(1)
     p = dict(job.params)
     if job.kind == "aip":
@@ -31,17 +31,13 @@ def run_job(job) -> None:
                     seed=p.get("seed", 0), options=p.get("options"), arch=p.get("arch"),
                     workers=p.get("workers", 1))
     elif job.kind == "ppo":
-        from pathlib import Path
-
-        from ials_zoo.baselines.ppo_single import main
-
         # a job killed earlier continues from its last checkpoint; one killed before its first
         # checkpoint starts again
         state = run_state(p["out_dir"])
         if state is not None:
             resumable = (Path(p["out_dir"]) / "checkpoint.pt").is_file() and state != "finished"
             p["resume" if resumable else "overwrite"] = True
-        main(Args(**p))
+        train_ppo_single(Args(**p))
     elif job.kind == "multiagent":
         _run_multiagent(p)
     elif job.kind == "joint-reference":

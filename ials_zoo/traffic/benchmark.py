@@ -30,6 +30,7 @@ import numpy as np
 
 from ials_zoo.errors import BadInput
 from ials_zoo.traffic.env import TrafficGridEnv
+from ials_zoo.traffic.lease import SimulationBusyError, import_libsumo
 from ials_zoo.traffic.local import TrafficLocalSimulator
 
 
@@ -43,8 +44,6 @@ def _gs(learners, episodes, backend, seed=0, raw=False):
         for ep in range(episodes):
             env.reset(seed=seed + ep)
             if raw:
-                from ials_zoo.traffic.lease import import_libsumo
-
                 libsumo = import_libsumo()
 
                 for _ in range(env.max_cycles):
@@ -80,8 +79,6 @@ def _ls(n, episodes, seed=0):
 
 def breakdown(sizes=(1, 8, 64), steps: int = 300, seed: int = 0, verbose: bool = True) -> dict:
     """CPU time of the parts of the LS step, per size: ``{n: {part: ms per step}}``."""
-    from ials_zoo.traffic.lease import SimulationBusyError
-
     out = {}
     keys = ("lights+add", "SUMO step", "reads", "rest", "total")
     if verbose:

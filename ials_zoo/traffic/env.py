@@ -13,6 +13,7 @@ from ials_zoo.traffic import network
 from ials_zoo.traffic.cores import PHASE_NAMES, observation
 from ials_zoo.traffic.lease import SimHandle
 from ials_zoo.traffic.network import APPROACHES, N_CELLS
+from ials_zoo.traffic.render import render_grid
 from ials_zoo.utils import check_reset_options, check_seed
 
 SUMO_SEED_MAX = 2**31 - 2
@@ -369,7 +370,6 @@ class TrafficGridEnv(ParallelEnv):
         if self.render_mode == "human":
             print(self._render_ansi(), flush=True)
             return None
-        from ials_zoo.traffic.render import render_grid
 
         return render_grid(self.grid, self._sim.call("render_data"), learners=self.learner_index)
 

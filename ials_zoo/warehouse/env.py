@@ -12,6 +12,7 @@ from ials_zoo.core.region import INFLUENCE_KEY, RegionSpec
 from ials_zoo.errors import BadInput, BadInputType
 from ials_zoo.utils import check_reset_options, check_seed
 from ials_zoo.warehouse import regions as R
+from ials_zoo.warehouse.render import render_ansi, render_rgb
 
 # Flat copies of the region tables: 1-d fancy indexing is cheaper than 2-d in the hot loop.
 _MOVE_FLAT = R.MOVE.ravel()
@@ -407,7 +408,6 @@ class WarehouseEnv(ParallelEnv):
 
             gymnasium.logger.warn("render() called without a render_mode; returning None")
             return None
-        from ials_zoo.warehouse.render import render_ansi, render_rgb
 
         if self.render_mode == "ansi":
             return render_ansi(self)
