@@ -17,7 +17,8 @@ import importlib.util
 import os
 import sys
 
-from ials_zoo.core.domains import domain_ids, get_domain
+from ials_zoo.core.domains import domain_ids
+from ials_zoo.core.extras import tools_of
 from ials_zoo.errors import BadInput
 from ials_zoo.processes import WorkerError
 
@@ -41,13 +42,13 @@ _RUN_FAILURES = ("SimulationError", "WorkerDiedError", "WorkerUnresponsiveError"
 
 
 def _available() -> dict:
-    """The subcommands: the generic ones, then each domain's own tools (``Domain.tools``)."""
+    """The subcommands: the generic ones, then each domain's own tools (``tools_of(domain)``)."""
     found = {}
     for name, (module, help_text) in SUBCOMMANDS.items():
         if importlib.util.find_spec(module) is not None:
             found[name] = (module, help_text)
     for env_id in domain_ids():
-        for name, (module, help_text) in get_domain(env_id).tools.items():
+        for name, (module, help_text) in tools_of(env_id).items():
             found.setdefault(name, (module, f"{help_text} ({env_id})"))
     return found
 

@@ -249,3 +249,28 @@ def test_the_multi_agent_ials_is_a_pettingzoo_parallel_env(domain):
         INFLUENCE_KEY: (domain.region_spec(pair[0]).n_sources,), "dset": (domain.region_spec(pair[0]).dset_size("dset"),),
         "dset_full": (domain.region_spec(pair[0]).dset_size("full"),)}
     env.close()
+
+
+def test_subsystem_settings_live_in_extras_with_defaults_and_typos_are_refused():
+    """A domain gives the core contract; each subsystem's settings are optional extras (the
+    toy gives only "study"), read through ials_zoo.core.extras with defaults."""
+    import dataclasses
+
+    from ials_zoo.core.domains import Domain
+    from ials_zoo.core.extras import (
+        BenchSettings,
+        DIALSSettings,
+        ViewerSettings,
+        bench_of,
+        dials_of,
+        tools_of,
+        viewer_of,
+    )
+    from ials_zoo.errors import BadInput
+
+    toy = get_domain(TOY)
+    assert dials_of(toy) == DIALSSettings() and viewer_of(TOY) == ViewerSettings()
+    assert bench_of(toy) == BenchSettings() and tools_of(toy) == {}
+    with pytest.raises(BadInput, match="unknown extras \\['studdy'\\]"):
+        dataclasses.replace(toy, extras={"studdy": None})
+    assert not {"study", "dials", "legend", "tools", "scaling", "episode_summary"} & {f.name for f in dataclasses.fields(Domain)}

@@ -70,6 +70,7 @@ from ials_zoo.baselines.multiagent import (
     whole_updates,
 )
 from ials_zoo.core.domains import domain_ids, get_domain
+from ials_zoo.core.extras import dials_of, study_of
 from ials_zoo.dials.backends import BACKENDS, InProcessBackend, check_ray_address, make_backend
 from ials_zoo.dials.shard import LEARNERS, ShardSpec, split_agents
 from ials_zoo.errors import BadInput
@@ -91,7 +92,7 @@ def _per_domain(describe) -> str:
 
 
 def _refresh_text(domain) -> str:
-    refresh = domain.dials.refresh
+    refresh = dials_of(domain).refresh
     return "once" if refresh == 0 else "never" if refresh is None else f"every {refresh:,}"
 
 
@@ -103,15 +104,15 @@ class Args(MultiAgentRunArgs):
                        f"or 'default' (the domain's: {_per_domain(_refresh_text)})")
     aip: str = arg("trained", "initial AIPs: trained | untrained | uniform | fixed:P | shipped | FILE.pt")
     collect_steps: int | None = arg(None, lambda: "GS steps per data collection (default: the domain's: "
-                                    f"{_per_domain(lambda d: f'{d.dials.collect_steps:,}')})")
+                                    f"{_per_domain(lambda d: f'{dials_of(d).collect_steps:,}')})")
     aip_epochs: int | None = arg(None, "epochs per AIP (re)training (default: the domain's)")
     aip_lr: float | None = arg(None, "learning rate of the AIP (re)training (default: the domain's for the kind "
                                "of AIP, memoryless or autoregressive)")
     aip_autoregressive: bool | None = arg(None, lambda: "AIPs that also read the influence they sampled at the "
                                           "previous step, P(u_t | d_<=t, u_<t) (default: the domain's: " + _per_domain(
-                                              lambda d: "yes" if d.dials.aip_autoregressive else "no") + ")")
+                                              lambda d: "yes" if dials_of(d).aip_autoregressive else "no") + ")")
     n_envs: int | None = arg(None, lambda: f"IALS copies per agent (default: the domain's: "
-                             f"{_per_domain(lambda d: str(d.dials.copies))})")
+                             f"{_per_domain(lambda d: str(dials_of(d).copies))})")
     learner: str = arg("batched", "batched (one torch program) | sb3 (one SB3 PPO per agent)")
     workers: int | None = arg(None, "worker processes (default: one per core; 0: this process)")
     backend: str = arg("process", "process | ray")
@@ -146,7 +147,7 @@ def check_args(args: Args):
     agents = domain.check_agents(None if args.agents == "all" else args.agents, **options)
     check_seed(args.seed, "seed")
     check_multi_ppo(args)
-    refresh = parse_refresh(args.refresh, domain.dials.refresh)
+    refresh = parse_refresh(args.refresh, dials_of(domain).refresh)
     if args.aip == "shipped":
         if not shipped_set_path(args.env_id).is_file():
             raise BadInput(f"--aip shipped: no AIPs ship for {args.env_id}")
@@ -165,7 +166,7 @@ def check_args(args: Args):
         v = getattr(args, name)
         if v is not None and v < 1:
             raise BadInput(f"{name} must be >= 1, got {v}")
-    copies = int(args.n_envs or domain.dials.copies)
+    copies = int(args.n_envs or dials_of(domain).copies)
     ppo_config(args, copies)
     if args.workers is not None and args.workers < 0:
         raise BadInput(f"workers must be >= 0, got {args.workers}")
@@ -182,7 +183,7 @@ def check_args(args: Args):
 
 def autoregressive_of(args, domain) -> bool:
     """Whether the AIPs DIALS trains read ``u_{t-1}``: ``--aip-autoregressive``, else the domain's."""
-    return bool(domain.dials.aip_autoregressive if args.aip_autoregressive is None else args.aip_autoregressive)
+    return bool(dials_of(domain).aip_autoregressive if args.aip_autoregressive is None else args.aip_autoregressive)
 
 
 def default_workers(n_agents: int) -> int:
@@ -209,7 +210,7 @@ def refresh_aips(env_id, agents, options, net, seed, steps, domain, epochs, old,
     retrain every AIP (warm start from ``old`` when it holds networks of the same shape);
     ``autoregressive``: AIPs that also read ``u_{t-1}``."""
 
-    d = domain.dials
+    d = dials_of(domain)
     policy = None if net is None else JointActor(net, seed)
     t0 = time.perf_counter()
     data = collect_all(env_id, agents, steps=steps, policy=policy, seed=seed, gs_options=options, progress=progress,
@@ -240,8 +241,8 @@ class ShardsLearner:
         self.refresh = refresh
         self.copies, self.workers, self.ppo, self.frame_stack, self.updates = copies, workers, ppo, frame_stack, updates
         self.training, self.simulator = training, training["simulator"]
-        self.collect_steps = int(args.collect_steps or domain.dials.collect_steps)
-        self.epochs = int(args.aip_epochs or domain.dials.aip_epochs)
+        self.collect_steps = int(args.collect_steps or dials_of(domain).collect_steps)
+        self.epochs = int(args.aip_epochs or dials_of(domain).aip_epochs)
         self.autoregressive = autoregressive_of(args, domain)
         self.chunks = split_agents(agents, workers)
         self.charged_seconds, self.refreshes, self.aip_split = 0.0, 0, {"collect": 0.0, "train": 0.0}
@@ -295,7 +296,7 @@ class ShardsLearner:
         due = self._next_refresh()
         if due is None or due > steps:
             return
-        args, d, n = self.args, self.domain.dials, self.refreshes
+        args, d, n = self.args, dials_of(self.domain), self.refreshes
         net = policy() if steps > 0 else None
         note(f"AIP round {n}: GS collection + training")
         print(f"dials: AIP round {n} at {steps:,} steps per agent: {self.collect_steps:,} GS steps of "
@@ -339,7 +340,7 @@ def main(args: Args | None = None) -> dict:
     domain, agents, options, refresh, copies = check_args(args)
     torch.set_num_threads(1)
     per_update = args.samples_per_update
-    total = whole_updates(int(args.total_timesteps or domain.study.multi_agent_budget), per_update)
+    total = whole_updates(int(args.total_timesteps or study_of(domain).multi_agent_budget), per_update)
     eval_every = int(args.eval_every or max(per_update, total // 10))
     workers = default_workers(len(agents)) if args.workers is None else min(args.workers, len(agents))
     frame_stack = frame_stack_of(args, domain)
@@ -350,10 +351,10 @@ def main(args: Args | None = None) -> dict:
                 "wall_clock_seconds": 0.0, "aip_seconds": 0.0, "workers": max(workers, 1), "backend": args.backend,
                 "hyperparameters": dict(settings_of(args), agents=agents, refresh_steps=refresh,
                                         total_timesteps=total, eval_every=eval_every,
-                                        collect_steps=int(args.collect_steps or domain.dials.collect_steps),
-                                        aip_epochs=int(args.aip_epochs or domain.dials.aip_epochs),
+                                        collect_steps=int(args.collect_steps or dials_of(domain).collect_steps),
+                                        aip_epochs=int(args.aip_epochs or dials_of(domain).aip_epochs),
                                         aip_autoregressive=autoregressive_of(args, domain),
-                                        aip_lr=float(args.aip_lr or domain.dials.lr_for(autoregressive_of(args, domain))),
+                                        aip_lr=float(args.aip_lr or dials_of(domain).lr_for(autoregressive_of(args, domain))),
                                         ppo=ppo,
                                         learner=args.learner)}
     plan = RunPlan("dials", args.env_id, agents, options, args.seed, total, per_update, eval_every, args.eval_episodes,

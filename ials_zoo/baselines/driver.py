@@ -33,6 +33,7 @@ from tqdm.auto import tqdm
 import ials_zoo
 from ials_zoo.baselines.multiagent import TrainingLog, final_results, joint_policy, policy_file, write_curve
 from ials_zoo.baselines.runs import Clock, RunFolder, load_training_state, save_training_state
+from ials_zoo.core.extras import study_of
 from ials_zoo.errors import BadInput
 from ials_zoo.evaluation import evaluate_joint
 from ials_zoo.leaderboard import now_iso
@@ -103,7 +104,7 @@ def run(plan: RunPlan, learner: MultiAgentLearner, description: str, domain) -> 
     ``description`` opens the run's first line (the driver adds the budget and the folder)."""
     out = plan.out
     folder = RunFolder(out, resume=plan.resume, overwrite=plan.overwrite, settings=plan.settings)
-    rate = domain.study.multi_agent_steps_per_second.get("gs" if learner.simulator == "gs" else "ials", 10_000.0)
+    rate = study_of(domain).multi_agent_steps_per_second.get("gs" if learner.simulator == "gs" else "ials", 10_000.0)
     estimate = plan.total * len(plan.agents) / max(rate, 1.0)
     print(f"{description}\n  {plan.total:,} steps per agent; about {format_seconds(estimate)} of training at the "
           f"study's speed ({rate:,.0f} agent-steps/s on 2 cores; evaluations extra); writing {out}/"

@@ -38,6 +38,7 @@ from ials_zoo.baselines.multiagent import (
     whole_updates,
 )
 from ials_zoo.core.domains import domain_ids, get_domain
+from ials_zoo.core.extras import study_of
 from ials_zoo.errors import BadInput
 from ials_zoo.learners.batched_ppo import BatchedPPO, PPOConfig
 from ials_zoo.learners.gs_vec import GSVecEnv
@@ -133,7 +134,7 @@ def main(args: Args | None = None) -> dict:
     torch.set_num_threads(1)
     ppo = ppo_config(args, args.n_envs)
     per_update = args.samples_per_update
-    total = whole_updates(int(args.total_timesteps or domain.study.multi_agent_budget), per_update)
+    total = whole_updates(int(args.total_timesteps or study_of(domain).multi_agent_budget), per_update)
     eval_every = int(args.eval_every or max(per_update, total // 10))
     frame_stack = frame_stack_of(args, domain)
     out = Path(args.out_dir or f"runs/{args.env_id}__ippo__s{args.seed}")

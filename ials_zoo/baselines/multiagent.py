@@ -14,6 +14,7 @@ import numpy as np
 
 from ials_zoo.baselines.arguments import AblatedPPOSettings, arg, check_ppo_settings
 from ials_zoo.baselines.ppo_single import _hidden
+from ials_zoo.core.extras import dials_of
 from ials_zoo.errors import BadInput
 from ials_zoo.evaluation import evaluate_joint, load_model
 from ials_zoo.influence.files import save_predictor_set
@@ -98,7 +99,7 @@ def whole_updates(total: int, per_update: int) -> int:
 def frame_stack_of(args, domain) -> int:
     """The observations a policy reads: ``--frame-stack``, else the domain's multi-agent
     choice (:attr:`DIALSSettings.frame_stack`), else the domain's own."""
-    return int(args.frame_stack or domain.dials.frame_stack or domain.frame_stack)
+    return int(args.frame_stack or dials_of(domain).frame_stack or domain.frame_stack)
 
 
 def ppo_config(args, copies: int) -> dict:

@@ -19,7 +19,7 @@ std of the discounted return (SB3's ``VecNormalize``, observations untouched), M
 0.95 and gradient clipping at 0.5 stay the authors'. The warehouse policy reads one
 observation (``DIALSSettings.frame_stack``; memoryless policies learned faster than 8-frame
 ones there). GS evaluation every 100k steps. The budget defaults to the domain's study budget
-(``Domain.study.budget``: 2M steps in the warehouse as in the paper; 300k in traffic); the run
+(``study_of(domain).budget``: 2M steps in the warehouse as in the paper; 300k in traffic); the run
 prints its expected duration before it starts.
 
 Outputs in ``--out-dir`` (default ``runs/<env>__<agent>__<simulator>__s<seed>``; a used folder
@@ -60,6 +60,7 @@ from ials_zoo.baselines.arguments import AblatedPPOSettings, arg, check_ppo_sett
 from ials_zoo.baselines.runs import RunFolder, training_logger
 from ials_zoo.baselines.sb3_run import Evaluator, TrainingRun, as_float_box, estimate_seconds, make_ppo, scale_rewards
 from ials_zoo.core.domains import domain_ids, get_domain
+from ials_zoo.core.extras import dials_of, study_of
 from ials_zoo.errors import BadInput
 from ials_zoo.influence.ials import make_ials_vec_env, trained_predictor
 from ials_zoo.influence.specs import parse_predictor, predictor_for, simulator_label
@@ -192,8 +193,8 @@ def main(args: Args | None = None) -> dict:
     options = parse_env_options(args.env_options)
     agent = dom.check_agent(args.agent or dom.default_agents[0], **options)
     if args.total_timesteps is None:
-        args.total_timesteps = dom.study.budget
-    frame_stack = int(args.frame_stack or dom.dials.frame_stack or dom.frame_stack)
+        args.total_timesteps = study_of(dom).budget
+    frame_stack = int(args.frame_stack or dials_of(dom).frame_stack or dom.frame_stack)
     out = Path(args.out_dir) if args.out_dir else default_out_dir(args, agent)
     settings = {k: v for k, v in dataclasses.asdict(args).items()
                 if k not in ("resume", "overwrite", "progress", "out_dir", "submitter", "notes")}

@@ -11,7 +11,7 @@ import time
 import numpy as np
 
 from ials_zoo.baselines.runs import Clock, load_training_state, save_training_state
-from ials_zoo.core.domains import get_domain
+from ials_zoo.core.extras import study_of
 from ials_zoo.evaluation import NetworkPolicy, _evaluate_worker, evaluate, load_model
 from ials_zoo.influence.specs import GS
 from ials_zoo.policy import PolicyNetwork, policy_from_sb3_model, save_policy
@@ -127,9 +127,9 @@ def make_ppo(venv, args, hidden: list[int]):
 
 
 def estimate_seconds(env_id: str, simulator: str, steps: int) -> float:
-    """Rough training time from the domain's measured PPO throughput (``Domain.study``)."""
+    """Rough training time from the domain's measured PPO throughput (``study_of(domain)``)."""
 
-    rates = get_domain(env_id).study.ppo_steps_per_second
+    rates = study_of(env_id).ppo_steps_per_second
     rate = rates.get("gs" if simulator == GS else "ials", 1000.0)
     return steps / max(rate, 1.0)
 

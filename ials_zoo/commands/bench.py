@@ -35,6 +35,7 @@ from ials_zoo.baselines.multiagent import PREVIOUS_PPO_SETTINGS, frame_stack_of,
 from ials_zoo.baselines.throughput import NO_SIMULATOR, ppo_bound, ppo_throughput
 from ials_zoo.commands import CommandError
 from ials_zoo.core.domains import domain_ids, get_domain
+from ials_zoo.core.extras import bench_of, dials_of
 from ials_zoo.influence.ials import make_ials, make_ials_vec_env
 from ials_zoo.influence.multi import make_ials_parallel_env, make_multi_agent_ials, resolve_predictor_set
 from ials_zoo.leaderboard import hardware_info
@@ -236,7 +237,7 @@ def bench_domain(env_id: str, steps: int | None, batch: int, predictor, seed: in
     agents = domain.agents()
     # 10 episodes per measurement: shorter ones swung several-fold on a shared machine
     steps = steps or 10 * domain.episode_length
-    copies = domain.dials.copies
+    copies = dials_of(domain).copies
     print(f"[{env_id}] preparing the AIPs of {len(agents)} agents ({predictor}) ...", flush=True)
     aips = dict(zip(agents, resolve_predictor_set(predictor, env_id, agents, seed=seed)))
     runs: dict[str, list] = {k: [] for k in ("gs_one", "ials_one", "ials_batched", "gs_all", "ials_parallel",
@@ -326,9 +327,9 @@ def bench_scaling(env_id: str, steps: int | None, seed: int) -> list[dict]:
     the default ``ials-zoo bench`` table.
     """
     domain = get_domain(env_id)
-    if domain.scaling is None:
+    if bench_of(domain).scaling is None:
         return []
-    key, sizes = domain.scaling
+    key, sizes = bench_of(domain).scaling
     rows = []
     for size in sizes:
         options = {key: size}

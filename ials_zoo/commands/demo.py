@@ -15,6 +15,7 @@ import numpy as np
 
 from ials_zoo.commands import CommandError
 from ials_zoo.core.domains import default_domain, domain_ids, get_domain
+from ials_zoo.core.extras import viewer_of
 from ials_zoo.utils import check_output_file
 from ials_zoo.viewer import annotate, save_gif
 
@@ -58,7 +59,7 @@ def run(args) -> int:
         env.reset(seed=args.seed)
         space = env.action_space(agent)
         space.seed(int(rng.integers(2**31)))
-        legend = domain.legend
+        legend = viewer_of(domain).legend
         if args.gif:
 
             frames.append(annotate(env.render(), f"{domain.env_id}  step 0/{steps}", legend))
@@ -76,8 +77,8 @@ def run(args) -> int:
                 render_time += time.perf_counter() - t1
         elapsed = time.perf_counter() - t0 - render_time
         summary = {f"return of {agent} (random)": f"{total:.3f}"}
-        if domain.episode_summary is not None:
-            summary.update(domain.episode_summary(env))
+        if viewer_of(domain).episode_summary is not None:
+            summary.update(viewer_of(domain).episode_summary(env))
         summary["GS steps/s"] = f"{t / max(elapsed, 1e-9):,.0f}"
     finally:
         env.close()

@@ -19,7 +19,7 @@ run has the machine to itself). Each run is a subprocess writing into its own fo
 continued across invocations. Afterwards the finished training runs are submitted to the
 leaderboard and ``<leaderboard>/reproduction.md`` + curve PNGs are re-made.
 
-Default budget: each domain's ``Domain.study.budget`` (2,000,000 PPO steps per warehouse run,
+Default budget: each domain's ``study_of(domain).budget`` (2,000,000 PPO steps per warehouse run,
 the paper's; 300,000 per traffic run, paper: 2M, because the SUMO GS trains ~5x slower and its
 curves are flat from ~100k steps) and 500,000 per memory-experiment run; see ``--budget``.
 """
@@ -27,7 +27,8 @@ curves are flat from ~100k steps) and 500,000 per memory-experiment run; see ``-
 from __future__ import annotations
 
 from ials_zoo.commands import CommandError
-from ials_zoo.core.domains import domain_ids, get_domain
+from ials_zoo.core.domains import domain_ids
+from ials_zoo.core.extras import study_of
 from ials_zoo.errors import BadInput
 from ials_zoo.reproduce import build_plan, describe_plan, settings
 from ials_zoo.reproduce.plan import (
@@ -65,7 +66,7 @@ def configure(parser):
                              f"default {DEFAULT_MEMORY_BUDGET}, or the warehouse's budget when --budget is given)")
     parser.add_argument("--dials-budget", default=None,
                         help="steps per agent of each multi-agent run: N, and/or DOMAIN=N pairs (default: "
-                             + ", ".join(f"{d}={get_domain(d).study.multi_agent_budget}" for d in domain_ids()) + ")")
+                             + ", ".join(f"{d}={study_of(d).multi_agent_budget}" for d in domain_ids()) + ")")
     parser.add_argument("--dials-variants", default=",".join(DIALS_VARIANTS),
                         help=f"multi-agent runs of the dials experiment, some of {','.join(DIALS_VARIANTS)}")
     parser.add_argument("--dials-workers", type=int, default=c.dials_workers,

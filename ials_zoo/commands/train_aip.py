@@ -25,6 +25,7 @@ import math
 from ials_zoo.commands import CommandError
 from ials_zoo.commands.collect import add_collect_arguments, check_collect_arguments
 from ials_zoo.core.domains import get_domain
+from ials_zoo.core.extras import dials_of
 from ials_zoo.influence.dataset import InfluenceDataset, collect, collect_all
 from ials_zoo.influence.files import save_predictor, save_predictor_set
 from ials_zoo.influence.train import format_report, train_predictor, train_predictors
@@ -108,7 +109,7 @@ def _train_set(args, progress: bool) -> int:
     options = check_collect_arguments(args)
     domain = get_domain(args.env)
     agents = domain.check_agents(None if args.agent == "all" else args.agent, **options)
-    d = domain.dials
+    d = dials_of(domain)
     arch = args.arch or d.aip_arch
     data = collect_all(args.env, agents, steps=args.steps, seed=args.seed, gs_options=options, progress=progress,
                        workers=args.workers)

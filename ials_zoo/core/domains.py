@@ -34,70 +34,8 @@ from ials_zoo.core.region import RegionSpec
 from ials_zoo.errors import BadInput, BadInputType
 
 ENTRY_POINT_GROUP = "ials_zoo.domains"
-
-
-@dataclass(frozen=True)
-class StudySettings:
-    """How ``ials-zoo reproduce`` runs a domain (defaults; the command line overrides them).
-
-    Attributes:
-        budget: PPO environment steps per single-agent training run.
-        ppo_steps_per_second: rough ``ppo_single`` throughput on the ``"gs"`` and on an
-            ``"ials"`` simulator, only used to start the longest runs first.
-        memory_variant: GS options of the domain's memory variant (paper §5.4), or None when
-            the domain has none; the memory experiment runs on domains that have one.
-        lifetime_probes: ``(gs_probe, ls_probe)``: ``gs_probe(env, agent)`` and
-            ``ls_probe(local_simulator)`` return the ages of the items in a region (0: no
-            item), for the memory experiment's item-lifetime histograms; None without items.
-        multi_agent_budget: PPO steps *per agent* of a multi-agent (DIALS / IPPO) run.
-        multi_agent_steps_per_second: agent-steps per second of training of a multi-agent
-            run with every agent learning, on the GS (IPPO) and on IALS (DIALS, AIP time
-            included), as measured by the study on 2 cores; only for the duration estimate
-            a run prints first.
-    """
-
-    budget: int = 500_000
-    ppo_steps_per_second: dict = field(default_factory=lambda: {"gs": 1000.0, "ials": 5000.0})
-    memory_variant: dict | None = None
-    lifetime_probes: tuple | None = None
-    multi_agent_budget: int = 200_000
-    multi_agent_steps_per_second: dict = field(default_factory=lambda: {"gs": 10_000.0, "ials": 10_000.0})
-
-
-@dataclass(frozen=True)
-class DIALSSettings:
-    """The multi-agent (DIALS) settings of a domain (SPEC §6).
-
-    Attributes:
-        aip_arch, aip_hidden, aip_lr, aip_epochs: the AIPs retrained by DIALS.
-        aip_batch: minibatch of the AIP training (episodes for a GRU, samples for an MLP).
-        copies: IALS copies per agent (the default ``--n-envs``; the PPO rollout per copy is
-            the samples per update divided by this).
-        collect_steps: GS steps per data collection (all regions at once).
-        refresh: default steps per agent between AIP refreshes (0 = train once, at the start).
-        frame_stack: observations a multi-agent (IPPO, DIALS) policy reads by default (None:
-            the domain's ``frame_stack``); chosen from the PPO ablation.
-        aip_autoregressive: DIALS's AIPs also read their previous influence ``u_{t-1}``
-            (:mod:`ials_zoo.influence.base`) by default.
-        aip_autoregressive_lr: the learning rate of autoregressive AIPs (at ``aip_lr`` for
-            ``aip_epochs`` the dependence on ``u_{t-1}`` is barely learned from one collection).
-    """
-
-    aip_arch: str = "mlp"
-    aip_hidden: int = 64
-    aip_lr: float = 1e-3
-    aip_epochs: int = 10
-    aip_batch: int = 256
-    copies: int = 8
-    collect_steps: int = 10_000
-    refresh: int = 0
-    frame_stack: int | None = None
-    aip_autoregressive: bool = False
-    aip_autoregressive_lr: float = 1e-2
-
-    def lr_for(self, autoregressive: bool) -> float:
-        """The AIP learning rate of a memoryless or an autoregressive AIP."""
-        return self.aip_autoregressive_lr if autoregressive else self.aip_lr
+# the subsystems that keep per-domain settings in Domain.extras (ials_zoo.core.extras)
+EXTRA_KINDS = ("study", "dials", "viewer", "bench", "tools")
 
 
 @dataclass(frozen=True)
@@ -131,23 +69,16 @@ class Domain:
             ``fixed:P`` puts probability ``1 - P`` on it).
         untrained_probs: per source, the class probabilities of the ``"uniform"`` AIP
             (SPEC §3), or None for uniform over classes.
-        scaling: ``(option, sizes)`` for ``ials-zoo bench --scaling`` (the system grown
-            through one GS option), or None.
-        legend: ``(label, (r, g, b))`` pairs explaining the colours of the GS's
-            ``rgb_array`` frames (shown on demo GIFs).
-        episode_summary: ``episode_summary(env) -> dict[str, str]``: a few figures of the
-            episode just run on ``env`` (a GS), for ``ials-zoo demo``.
         replay_agreement: the share of observation entries on which the LS, fed the GS's own
             actions and influence sources from the same start, must agree with the GS
             (1.0 only where the LS is exact without the GS's other random draws).
-        study: :class:`StudySettings` of ``ials-zoo reproduce``.
-        dials: :class:`DIALSSettings` of multi-agent training.
-        tools: extra ``ials-zoo`` subcommands of this domain: ``{name: (module, help)}``,
-            each module with ``configure(parser)`` and ``run(args)``.
         metrics: the physical metrics of an episode, ``{name: "lower" | "higher"}`` (which
             way is better); the GS then has ``enable_metrics()`` (record from the next
             reset on) and ``episode_metrics() -> {name: float}`` for the episode just run.
         description: one line for listings.
+        extras: what one subsystem alone reads, keyed by it (:mod:`ials_zoo.core.extras`:
+            ``"study"``, ``"dials"``, ``"viewer"``, ``"bench"``, ``"tools"``); a domain
+            without them gets each subsystem's defaults.
     """
 
     env_id: str
@@ -166,21 +97,19 @@ class Domain:
     one_simulation_per_process: bool = False
     null_influence: int = 0
     untrained_probs: tuple | None = None
-    scaling: tuple | None = None
-    legend: tuple = ()
-    episode_summary: Callable | None = None
     replay_agreement: float = 0.9
-    study: StudySettings = field(default_factory=StudySettings)
-    dials: DIALSSettings = field(default_factory=DIALSSettings)
-    tools: dict = field(default_factory=dict)
     metrics: dict = field(default_factory=dict)
     description: str = ""
+    extras: dict = field(default_factory=dict)
 
     def __post_init__(self):
         if self.default_predictor not in ("gru", "mlp"):
             raise BadInput(f"{self.env_id}: default_predictor must be 'gru' or 'mlp'")
         if not self.default_agents:
             raise BadInput(f"{self.env_id}: default_agents must name at least one agent")
+        unknown = sorted(set(self.extras) - set(EXTRA_KINDS))
+        if unknown:
+            raise BadInput(f"{self.env_id}: unknown extras {unknown}; expected some of {list(EXTRA_KINDS)}")
         bad = {k: v for k, v in self.metrics.items() if v not in ("lower", "higher")}
         if bad:
             raise BadInput(f"{self.env_id}: metrics must map names to 'lower' or 'higher' (better), got {bad}")
@@ -320,10 +249,8 @@ def domain_of_agent(agent: str, **options) -> str:
 
 
 __all__ = [
-    "DIALSSettings",
     "Domain",
     "ENTRY_POINT_GROUP",
-    "StudySettings",
     "default_domain",
     "domain_ids",
     "domain_of_agent",

@@ -48,6 +48,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ials_zoo.core.domains import get_domain
+from ials_zoo.core.extras import dials_of
 from ials_zoo.evaluation import FrameStack, load_model
 from ials_zoo.influence.dataset import collect_all
 from ials_zoo.influence.train import train_predictors
@@ -190,7 +191,7 @@ def on_policy_aips(env_id: str, agents, policy, steps: int, seed: int, autoregre
                    lr: float | None = None, epochs: int | None = None) -> dict:
     """``{agent: AIP}`` trained on ``steps`` GS steps of the joint ``policy`` (every agent
     acting), with the domain's DIALS AIP settings (``lr``, ``epochs``: others)."""
-    d = get_domain(env_id).dials
+    d = dials_of(env_id)
     if policy == "random":
         actor = None
     elif policy == "constant":
@@ -225,7 +226,7 @@ def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: i
     watched = list(watched or default_watched(domain, agents))
     report: dict = {"env_id": env_id, "episodes": episodes, "tolerance": tolerance, "watched": watched,
                     "predictor": str(predictor), "aip_lr": aip_lr, "aip_epochs": aip_epochs, "policies": {}}
-    steps = int(collect_steps or domain.dials.collect_steps)
+    steps = int(collect_steps or dials_of(domain).collect_steps)
     for spec in policies:
         name = str(spec)
         policy = spec if spec in ("random", "constant", "scripted") else load_model(spec)

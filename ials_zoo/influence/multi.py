@@ -35,6 +35,7 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
 from ials_zoo.core.domains import get_domain
+from ials_zoo.core.extras import dials_of
 from ials_zoo.core.region import INFLUENCE_KEY, check_dset_kind
 from ials_zoo.errors import BadInput, BadInputType
 from ials_zoo.influence import dataset
@@ -69,7 +70,7 @@ def trained_predictor_set(env_id: str, agents=None, dset_kind: str = "dset", opt
     options = dict(options or {})
     agents = domain.check_agents(agents, **options)
     regions = {a: domain.region_spec(a, **options) for a in agents}
-    arch = domain.dials.aip_arch
+    arch = dials_of(domain).aip_arch
     for path in (shipped_set_path(env_id), _set_cache_path(env_id, list(regions.values()), arch, dset_kind)):
         if path.is_file():
             found = load_predictor_set(path, env_id=env_id)
@@ -80,7 +81,7 @@ def trained_predictor_set(env_id: str, agents=None, dset_kind: str = "dset", opt
                                 f"`ials-zoo train-aip --env {env_id} --agent all --out FILE.pt` and pass the file, "
                                 "or ask for predictor='train' to have them collected and trained now (minutes)")
 
-    d = domain.dials
+    d = dials_of(domain)
     steps = steps or 50_000
     print(f"ials_zoo: no trained AIPs for every agent of {env_id}; collecting {steps} GS steps (all agents "
           f"random) and training {len(domain.agents(**options))} {arch} AIPs (cached in {cache_dir()})")

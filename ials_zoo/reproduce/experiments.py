@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from ials_zoo.core.domains import get_domain
+from ials_zoo.core.extras import study_of
 from ials_zoo.errors import BadInput
 from ials_zoo.influence.constant import MarginalPredictor, UniformPredictor
 from ials_zoo.influence.dataset import collect
@@ -109,14 +110,14 @@ def record_item_ages(env_id: str, agent: str, simulator: str = "gs", episodes: i
                      seed: int = 0, policy=None, **options) -> list[np.ndarray]:
     """Item ages ``[T+1, K]`` of ``agent``'s region per episode, in the GS
     (``simulator="gs"``) or an IALS (``simulator`` = a predictor spec for ``make_ials``), for a
-    domain with ``Domain.study.lifetime_probes`` (the warehouse). ``policy``: ``obs -> action``
+    domain with ``study_of(domain).lifetime_probes`` (the warehouse). ``policy``: ``obs -> action``
     (default uniform random)."""
 
     domain = get_domain(env_id)
-    if domain.study.lifetime_probes is None:
+    if study_of(domain).lifetime_probes is None:
         raise BadInput(f"{env_id} has no items whose lifetimes could be measured "
-                         "(Domain.study.lifetime_probes is not set)")
-    gs_probe, ls_probe = domain.study.lifetime_probes
+                         "(its StudySettings.lifetime_probes is not set)")
+    gs_probe, ls_probe = study_of(domain).lifetime_probes
     rng = np.random.default_rng(seed)
     act = policy or (lambda obs: int(rng.integers(domain.n_actions)))
     out = []

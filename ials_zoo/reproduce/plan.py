@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ials_zoo.core.domains import domain_ids, domain_of_agent, get_domain
+from ials_zoo.core.extras import dials_of, study_of
 from ials_zoo.errors import BadInput
 from ials_zoo.utils import atomic_write_text
 
@@ -47,18 +48,18 @@ DEFAULT_SIMULATORS = ("gs", "ials", "untrained-ials", "fixed:0.1")
 KNOWN_SIMULATORS = DEFAULT_SIMULATORS + ("marginal",)
 # The memory experiment (12 runs) compares simulators with each other, not with the GS's
 # wall-clock: 500k steps per run (``Config.memory_budget``). Each domain's own default budget
-# is ``Domain.study.budget`` (what the published study used).
+# is ``study_of(domain).budget`` (what the published study used).
 DEFAULT_MEMORY_BUDGET = 500_000
 
 
 def default_budgets() -> dict:
-    """PPO steps per single-agent run of each domain (``Domain.study.budget``)."""
-    return {d: get_domain(d).study.budget for d in domain_ids()}
+    """PPO steps per single-agent run of each domain (``study_of(domain).budget``)."""
+    return {d: study_of(d).budget for d in domain_ids()}
 
 
 def memory_domains() -> tuple:
-    """The domains with a memory variant (paper §5.4): ``Domain.study.memory_variant``."""
-    return tuple(d for d in domain_ids() if get_domain(d).study.memory_variant)
+    """The domains with a memory variant (paper §5.4): ``study_of(domain).memory_variant``."""
+    return tuple(d for d in domain_ids() if study_of(d).memory_variant)
 
 
 @dataclass
@@ -87,7 +88,7 @@ class Config:
     dset_offpolicy_steps: int = 10_000
     lifetime_episodes: int = 20
     dials_variants: tuple = DIALS_VARIANTS
-    dials_budgets: dict = field(default_factory=dict)  # steps per agent; default Domain.study.multi_agent_budget
+    dials_budgets: dict = field(default_factory=dict)  # steps per agent; default study_of(domain).multi_agent_budget
     dials_workers: int = 2  # worker processes of each DIALS run (the cores here)
     dials_eval_points: int = 4  # GS evaluations along each multi-agent curve (each scores every agent)
 
@@ -152,7 +153,7 @@ class Config:
 
     def dials_budget_for(self, env_id: str) -> int:
         """Steps per agent of each multi-agent run in ``env_id``."""
-        return int(dict(self.dials_budgets).get(env_id, get_domain(env_id).study.multi_agent_budget))
+        return int(dict(self.dials_budgets).get(env_id, study_of(env_id).multi_agent_budget))
 
     def memory_budget_steps(self, env_id: str) -> int:
         """PPO steps per run of the memory experiment in ``env_id``."""
@@ -216,7 +217,7 @@ class Job:
         p = self.params
         if self.kind == "ppo":
             sim = "gs" if p["simulator"] == "gs" else "ials"
-            rate = get_domain(p["env_id"]).study.ppo_steps_per_second.get(sim, 1000.0)
+            rate = study_of(p["env_id"]).ppo_steps_per_second.get(sim, 1000.0)
             return (1, -p["total_timesteps"] / rate)
         if self.kind == "multiagent":
             # seed by seed: a study cut short still compares every variant on the same seeds
@@ -288,12 +289,12 @@ def plan_training(cfg: Config) -> list[Job]:
 
 
 def plan_memory(cfg: Config) -> list[Job]:
-    """Paper §5.4, on every domain with a memory variant (``Domain.study.memory_variant``,
+    """Paper §5.4, on every domain with a memory variant (``study_of(domain).memory_variant``,
     the warehouse's ``item_lifetime=8``): M-IALS (GRU AIP) vs NM-IALS (MLP AIP) x agents with
     (the domain's frame stack) and without (1) memory, plus the item-lifetime histograms."""
     jobs = []
     for env_id in [d for d in cfg.domains if d in memory_domains()]:
-        options = dict(get_domain(env_id).study.memory_variant)
+        options = dict(study_of(env_id).memory_variant)
         stack = get_domain(env_id).frame_stack
         for agent in cfg.agents_of(env_id):
             base = Path(cfg.out) / "memory" / f"{env_id}__{agent}"
@@ -359,7 +360,7 @@ def _multiagent_params(cfg: Config, env_id: str, variant: str, seed: int, out: P
         if variant in ("dials", "dials-once", "dials-autoregressive"):
             params["aip_autoregressive"] = variant == "dials-autoregressive"
         if variant == "dials-autoregressive":  # the job records the learning rate its AIPs train at
-            params["aip_lr"] = get_domain(env_id).dials.lr_for(True)
+            params["aip_lr"] = dials_of(env_id).lr_for(True)
     return params
 
 

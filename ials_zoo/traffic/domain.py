@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 from gymnasium import spaces
 
-from ials_zoo.core.domains import DIALSSettings, Domain, StudySettings
+from ials_zoo.core.domains import Domain
+from ials_zoo.core.extras import BenchSettings, DIALSSettings, StudySettings, ViewerSettings
 from ials_zoo.traffic.env import ENV_ID, OBS_SIZE, parallel_env, possible_agents, region_spec
 from ials_zoo.traffic.local import local_simulator
 from ials_zoo.traffic.render import LEGEND
@@ -18,6 +19,22 @@ def episode_summary(env) -> dict[str, str]:
             "insertion backlog": str(stats["pending"]),
             "teleports": str(stats["teleports"])}
 
+
+# the SUMO GS trains PPO ~5x slower than the warehouse and its curves are flat from ~100k
+# steps: 300k steps per single-agent run
+STUDY = StudySettings(budget=300_000, ppo_steps_per_second={"gs": 1000.0, "ials": 5000.0},
+                     memory_variant=None, multi_agent_budget=102_400,
+                     # the DIALS study, 102,400 steps x 25 lights: IPPO 211 s, DIALS 220 s
+                     multi_agent_steps_per_second={"gs": 12_000.0, "ials": 11_500.0})
+# SPEC §6: feed-forward AIPs of 128 hidden units. lr 1e-3 instead of the authors' 1e-4: 10
+# epochs reach a mean test cross-entropy of 0.194 in 3.3 s for all 25 AIPs, where lr 1e-4
+# reaches 0.219 in 30 epochs (11.6 s) and 0.198 in 60 (10,000 steps of data). 2 copies per
+# agent (rollouts of 64 instead of 16): SUMO's cost per car grows with the cars in one
+# simulation (a worker's 13 lights x 8 copies cost 2.7x per copy-step what 13 x 2 do).
+DIALS = DIALSSettings(aip_arch="mlp", aip_hidden=128, aip_lr=1e-3, aip_epochs=10, aip_batch=256, copies=2,
+                     collect_steps=10_000, refresh=250_000)
+TOOLS = {"calibrate": ("ials_zoo.traffic.calibrate", "demand calibration under actuated lights"),
+         "sumo-bench": ("ials_zoo.traffic.benchmark", "raw SUMO vs GS vs LS steps/s, LS step breakdown")}
 
 DOMAIN = Domain(
     env_id=ENV_ID,
@@ -38,25 +55,14 @@ DOMAIN = Domain(
     null_influence=0,
     # untrained AIP: each lane gets a car w.p. 0.1 per step, the GS inflow rate (SPEC §3)
     untrained_probs=((0.9, 0.1),) * 4,
-    scaling=("grid", ((3, 3), (5, 5), (7, 7), (10, 10))),
-    legend=LEGEND,
-    episode_summary=episode_summary,
     metrics={"delay": "lower", "waiting_time": "lower", "throughput": "higher", "queue": "lower"},
     # measured: 0.93-0.96 (entry speeds differ; downstream spill-back is not modelled)
     replay_agreement=0.9,
-    # the SUMO GS trains PPO ~5x slower than the warehouse and its curves are flat from
-    # ~100k steps: 300k steps per single-agent run
-    study=StudySettings(budget=300_000, ppo_steps_per_second={"gs": 1000.0, "ials": 5000.0},
-                        memory_variant=None, multi_agent_budget=102_400,
-                        # the DIALS study, 102,400 steps x 25 lights: IPPO 211 s, DIALS 220 s
-                        multi_agent_steps_per_second={"gs": 12_000.0, "ials": 11_500.0}),
-    # SPEC §6: feed-forward AIPs of 128 hidden units. lr 1e-3 instead of the authors' 1e-4: 10
-    # epochs reach a mean test cross-entropy of 0.194 in 3.3 s for all 25 AIPs, where lr 1e-4
-    # reaches 0.219 in 30 epochs (11.6 s) and 0.198 in 60 (10,000 steps of data). 2 copies per
-    # agent (rollouts of 64 instead of 16): SUMO's cost per car grows with the cars in one
-    # simulation (a worker's 13 lights x 8 copies cost 2.7x per copy-step what 13 x 2 do).
-    dials=DIALSSettings(aip_arch="mlp", aip_hidden=128, aip_lr=1e-3, aip_epochs=10, aip_batch=256, copies=2,
-                        collect_steps=10_000, refresh=250_000),
-    tools={"calibrate": ("ials_zoo.traffic.calibrate", "demand calibration under actuated lights"),
-           "sumo-bench": ("ials_zoo.traffic.benchmark", "raw SUMO vs GS vs LS steps/s, LS step breakdown")},
+    extras={
+        "study": STUDY,
+        "dials": DIALS,
+        "viewer": ViewerSettings(legend=LEGEND, episode_summary=episode_summary),
+        "bench": BenchSettings(scaling=("grid", ((3, 3), (5, 5), (7, 7), (10, 10)))),
+        "tools": TOOLS,
+    },
 )

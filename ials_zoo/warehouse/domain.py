@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 from gymnasium import spaces
 
-from ials_zoo.core.domains import DIALSSettings, Domain, StudySettings
+from ials_zoo.core.domains import Domain
+from ials_zoo.core.extras import BenchSettings, DIALSSettings, StudySettings, ViewerSettings
 from ials_zoo.warehouse import regions as R
 from ials_zoo.warehouse import render
 from ials_zoo.warehouse.env import parallel_env
@@ -34,6 +35,24 @@ def ls_item_ages(ls) -> np.ndarray:
     return ls.get_state()[1][0]
 
 
+STUDY = StudySettings(budget=2_000_000, ppo_steps_per_second={"gs": 4900.0, "ials": 6300.0},
+                     memory_variant={"item_lifetime": 8}, lifetime_probes=(gs_item_ages, ls_item_ages),
+                     multi_agent_budget=204_800,
+                     # the DIALS study, 256k steps x 36 robots: IPPO 297 s, DIALS 239-331 s
+                     multi_agent_steps_per_second={"gs": 31_000.0, "ials": 32_000.0})
+# SPEC §6: the warehouse AIP is a GRU (hidden 64, lr 1e-3) trained once, at the start, and
+# rollouts are 8 steps (16 copies x 8 = 128 samples per update). 10 epochs of 8-episode
+# minibatches: mean test cross-entropy 0.486 in 34 s for all 36 AIPs (20 epochs: 0.470 in
+# 70 s; 40 epochs of 16: 0.476; untrained 1.09), measured on 10,000 steps.
+# frame stack 1 for the multi-agent policies: the ablation's largest warehouse gain (4.4 ->
+# 6.2 at 51,200 steps per agent; 296 inputs are mostly repeats), and the nearest-item rule on
+# one observation scores 0.86 of the scripted robots (ials_zoo/warehouse/rules.py)
+# DIALS's AIPs read their own last draw (autoregressive, lr 1e-2): a neighbour that lingers
+# stays one arrival (docs/fidelity.md), and DIALS scored 13.3 against 12.4 with memoryless
+# AIPs (10 and 5 seeds, 256,000 steps per agent; leaderboard/writeup.md)
+DIALS = DIALSSettings(aip_arch="gru", aip_hidden=64, aip_lr=1e-3, aip_epochs=10, aip_batch=8, copies=16,
+                     collect_steps=10_000, refresh=0, frame_stack=1, aip_autoregressive=True)
+
 DOMAIN = Domain(
     env_id=R.DOMAIN_ID,
     description="36 robots collect items from the shelves of a warehouse floor (numpy)",
@@ -51,29 +70,15 @@ DOMAIN = Domain(
     gs_options=("item_probability", "max_cycles", "item_lifetime", "robots"),
     null_influence=R.NONE,
     untrained_probs=((0.25, 0.25, 0.25, 0.25),) * R.N_SOURCES,
-    scaling=("robots", ((4, 4), (6, 6), (10, 10))),
-    legend=render.LEGEND,
-    episode_summary=episode_summary,
     metrics={"items_per_robot": "higher", "age_at_collection": "lower", "items_waiting": "lower"},
     # Fed the GS's own actions and u_t from the same start, the LS differs only where items
     # appear at other times (its own draws); the exact replay, with the GS's draws, is
     # tests/test_warehouse_local.py.
     replay_agreement=0.85,
-    study=StudySettings(budget=2_000_000, ppo_steps_per_second={"gs": 4900.0, "ials": 6300.0},
-                        memory_variant={"item_lifetime": 8}, lifetime_probes=(gs_item_ages, ls_item_ages),
-                        multi_agent_budget=204_800,
-                        # the DIALS study, 256k steps x 36 robots: IPPO 297 s, DIALS 239-331 s
-                        multi_agent_steps_per_second={"gs": 31_000.0, "ials": 32_000.0}),
-    # SPEC §6: the warehouse AIP is a GRU (hidden 64, lr 1e-3) trained once, at the start, and
-    # rollouts are 8 steps (16 copies x 8 = 128 samples per update). 10 epochs of 8-episode
-    # minibatches: mean test cross-entropy 0.486 in 34 s for all 36 AIPs (20 epochs: 0.470 in
-    # 70 s; 40 epochs of 16: 0.476; untrained 1.09), measured on 10,000 steps.
-    # frame stack 1 for the multi-agent policies: the ablation's largest warehouse gain (4.4 ->
-    # 6.2 at 51,200 steps per agent; 296 inputs are mostly repeats), and a nearest-item rule on
-    # one observation already scores 0.90 of the scripted robots
-    # DIALS's AIPs read their own last draw (autoregressive, lr 1e-2): a neighbour that lingers
-    # stays one arrival (docs/fidelity.md), and DIALS scored 13.3 against 12.4 with memoryless
-    # AIPs (5 seeds each, 256,000 steps per agent; leaderboard/writeup.md)
-    dials=DIALSSettings(aip_arch="gru", aip_hidden=64, aip_lr=1e-3, aip_epochs=10, aip_batch=8, copies=16,
-                        collect_steps=10_000, refresh=0, frame_stack=1, aip_autoregressive=True),
+    extras={
+        "study": STUDY,
+        "dials": DIALS,
+        "viewer": ViewerSettings(legend=render.LEGEND, episode_summary=episode_summary),
+        "bench": BenchSettings(scaling=("robots", ((4, 4), (6, 6), (10, 10)))),
+    },
 )

@@ -1,0 +1,152 @@
+"""What one subsystem alone needs of a domain: the settings it reads from ``Domain.extras``.
+
+The :class:`~ials_zoo.core.domains.Domain` contract is what every part of the zoo needs (the
+environments, spaces, agents, regions and local simulator). What only one subsystem reads is
+kept in ``Domain.extras``, under the subsystem's key, and read through its accessor here; a
+domain that gives none gets the subsystem's defaults (the toy domain of the tests gives only
+the core):
+
+* ``"study"``: :class:`StudySettings` (``ials-zoo reproduce``, the duration estimates);
+* ``"dials"``: :class:`DIALSSettings` (multi-agent training, IALS sets, fidelity);
+* ``"viewer"``: :class:`ViewerSettings` (``ials-zoo demo``: the GIF legend, an episode's summary);
+* ``"bench"``: :class:`BenchSettings` (``ials-zoo bench --scaling``);
+* ``"tools"``: extra ``ials-zoo`` subcommands, ``{name: (module, help)}``, each module with
+  ``configure(parser)`` and ``run(args)``.
+
+The accessors take a :class:`Domain` or a domain id.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from ials_zoo.core.domains import Domain, get_domain
+
+
+@dataclass(frozen=True)
+class StudySettings:
+    """How ``ials-zoo reproduce`` runs a domain (defaults; the command line overrides them).
+
+    Attributes:
+        budget: PPO environment steps per single-agent training run.
+        ppo_steps_per_second: rough ``ppo_single`` throughput on the ``"gs"`` and on an
+            ``"ials"`` simulator, only used to start the longest runs first.
+        memory_variant: GS options of the domain's memory variant (paper §5.4), or None when
+            the domain has none; the memory experiment runs on domains that have one.
+        lifetime_probes: ``(gs_probe, ls_probe)``: ``gs_probe(env, agent)`` and
+            ``ls_probe(local_simulator)`` return the ages of the items in a region (0: no
+            item), for the memory experiment's item-lifetime histograms; None without items.
+        multi_agent_budget: PPO steps *per agent* of a multi-agent (DIALS / IPPO) run.
+        multi_agent_steps_per_second: agent-steps per second of training of a multi-agent
+            run with every agent learning, on the GS (IPPO) and on IALS (DIALS, AIP time
+            included), as measured by the study on 2 cores; only for the duration estimate
+            a run prints first.
+    """
+
+    budget: int = 500_000
+    ppo_steps_per_second: dict = field(default_factory=lambda: {"gs": 1000.0, "ials": 5000.0})
+    memory_variant: dict | None = None
+    lifetime_probes: tuple | None = None
+    multi_agent_budget: int = 200_000
+    multi_agent_steps_per_second: dict = field(default_factory=lambda: {"gs": 10_000.0, "ials": 10_000.0})
+
+
+@dataclass(frozen=True)
+class DIALSSettings:
+    """The multi-agent (DIALS) settings of a domain (SPEC §6).
+
+    Attributes:
+        aip_arch, aip_hidden, aip_lr, aip_epochs: the AIPs retrained by DIALS.
+        aip_batch: minibatch of the AIP training (episodes for a GRU, samples for an MLP).
+        copies: IALS copies per agent (the default ``--n-envs``; the PPO rollout per copy is
+            the samples per update divided by this).
+        collect_steps: GS steps per data collection (all regions at once).
+        refresh: default steps per agent between AIP refreshes (0 = train once, at the start).
+        frame_stack: observations a multi-agent (IPPO, DIALS) policy reads by default (None:
+            the domain's ``frame_stack``); chosen from the PPO ablation.
+        aip_autoregressive: DIALS's AIPs also read their previous influence ``u_{t-1}``
+            (:mod:`ials_zoo.influence.base`) by default.
+        aip_autoregressive_lr: the learning rate of autoregressive AIPs (at ``aip_lr`` for
+            ``aip_epochs`` the dependence on ``u_{t-1}`` is barely learned from one collection).
+    """
+
+    aip_arch: str = "mlp"
+    aip_hidden: int = 64
+    aip_lr: float = 1e-3
+    aip_epochs: int = 10
+    aip_batch: int = 256
+    copies: int = 8
+    collect_steps: int = 10_000
+    refresh: int = 0
+    frame_stack: int | None = None
+    aip_autoregressive: bool = False
+    aip_autoregressive_lr: float = 1e-2
+
+    def lr_for(self, autoregressive: bool) -> float:
+        """The AIP learning rate of a memoryless or an autoregressive AIP."""
+        return self.aip_autoregressive_lr if autoregressive else self.aip_lr
+
+
+@dataclass(frozen=True)
+class ViewerSettings:
+    """How ``ials-zoo demo`` shows a domain.
+
+    Attributes:
+        legend: ``(label, (r, g, b))`` pairs explaining the colours of the GS's ``rgb_array``
+            frames (shown on demo GIFs).
+        episode_summary: ``episode_summary(env) -> dict[str, str]``: a few figures of the
+            episode just run on ``env`` (a GS), or None.
+    """
+
+    legend: tuple = ()
+    episode_summary: Callable | None = None
+
+
+@dataclass(frozen=True)
+class BenchSettings:
+    """How ``ials-zoo bench`` measures a domain.
+
+    Attributes:
+        scaling: ``(option, sizes)`` for ``--scaling`` (the system grown through one GS
+            option), or None.
+    """
+
+    scaling: tuple | None = None
+
+
+def _extra(domain, kind: str, default):
+    domain = domain if isinstance(domain, Domain) else get_domain(domain)
+    return domain.extras.get(kind, default)
+
+
+def study_of(domain) -> StudySettings:
+    """The domain's :class:`StudySettings` (defaults when it gives none)."""
+    return _extra(domain, "study", _DEFAULT_STUDY)
+
+
+def dials_of(domain) -> DIALSSettings:
+    """The domain's :class:`DIALSSettings` (defaults when it gives none)."""
+    return _extra(domain, "dials", _DEFAULT_DIALS)
+
+
+def viewer_of(domain) -> ViewerSettings:
+    """The domain's :class:`ViewerSettings` (no legend, no summary when it gives none)."""
+    return _extra(domain, "viewer", _DEFAULT_VIEWER)
+
+
+def bench_of(domain) -> BenchSettings:
+    """The domain's :class:`BenchSettings` (no scaling when it gives none)."""
+    return _extra(domain, "bench", _DEFAULT_BENCH)
+
+
+def tools_of(domain) -> dict:
+    """The domain's extra ``ials-zoo`` subcommands (none when it gives none)."""
+    return dict(_extra(domain, "tools", {}))
+
+
+_DEFAULT_STUDY, _DEFAULT_DIALS = StudySettings(), DIALSSettings()
+_DEFAULT_VIEWER, _DEFAULT_BENCH = ViewerSettings(), BenchSettings()
+
+__all__ = ["BenchSettings", "DIALSSettings", "StudySettings", "ViewerSettings", "bench_of", "dials_of", "study_of",
+           "tools_of", "viewer_of"]
