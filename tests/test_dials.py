@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from same_run import assert_same_run, policy_weights
 
 ENV = "warehouse_v0"
 OPTIONS = {"robots": [2, 2]}
@@ -170,29 +171,12 @@ def _dials(tmp_path, name, **kw):
     return dials.main(args), tmp_path / name
 
 
-def _weights(folder: Path) -> dict:
-    from safetensors.numpy import load_file
-
-    return load_file(folder / "policy.safetensors")
-
-
-def _assert_same_run(a, b):
-    """Bitwise the same weights, curve and score."""
-    (ra, fa), (rb, fb) = a, b
-    wa, wb = _weights(fa), _weights(fb)
-    assert wa.keys() == wb.keys()
-    for k in wa:
-        np.testing.assert_array_equal(wa[k], wb[k], err_msg=k)
-    assert [p["mean"] for p in ra["learning_curves"][0]["points"]] == [p["mean"] for p in rb["learning_curves"][0]["points"]]
-    assert ra["score"] == rb["score"]
-
-
 def test_dials_gives_the_same_result_with_any_number_of_workers(tmp_path):
     in_process = _dials(tmp_path, "w0", workers=0)
     one = _dials(tmp_path, "w1", workers=1)
     two = _dials(tmp_path, "w2", workers=2)
-    _assert_same_run(in_process, one)
-    _assert_same_run(in_process, two)
+    assert_same_run(in_process, one)
+    assert_same_run(in_process, two)
     result, folder = two
     # it trained: the policies moved away from their initial weights, the AIPs were trained once
     assert result["track"] == "multi-agent" and result["trained_agents"] == AGENTS
@@ -207,13 +191,13 @@ def test_traffic_dials_gives_the_same_result_with_one_and_two_workers(tmp_path):
     """Two lights, one AIP training; each worker's SUMO holds its agents' local simulators."""
     kw = dict(env_id="traffic_grid_v0", agents="tls_12,tls_13", env_options="", collect_steps=300)
     one, two = _dials(tmp_path, "t1", workers=1, **kw), _dials(tmp_path, "t2", workers=2, **kw)
-    _assert_same_run(one, two)
+    assert_same_run(one, two)
     assert one[0]["training"]["aip"]["refreshes"] == 1
 
 
 def test_dials_on_ray_matches_the_process_backend(tmp_path):
     pytest.importorskip("ray")
-    _assert_same_run(_dials(tmp_path, "proc", workers=2), _dials(tmp_path, "ray", workers=2, backend="ray"))
+    assert_same_run(_dials(tmp_path, "proc", workers=2), _dials(tmp_path, "ray", workers=2, backend="ray"))
 
 
 def test_periodic_refresh_retrains_every_n_steps_and_sb3_learner_runs(tmp_path):
@@ -231,7 +215,7 @@ def test_dials_trains_refreshes_and_samples_autoregressive_aips_alike_on_any_wor
 
     in_process = _dials(tmp_path, "ar0", refresh="128", aip_autoregressive=True, workers=0)
     two = _dials(tmp_path, "ar2", refresh="128", aip_autoregressive=True, workers=2)
-    _assert_same_run(in_process, two)
+    assert_same_run(in_process, two)
     result, folder = two
     assert result["training"]["hyperparameters"]["aip_autoregressive"] is True
     assert result["training"]["aip"]["refreshes"] == 2 and result["training"]["aip"]["last"]["warm_start"]
@@ -261,7 +245,7 @@ def test_ippo_on_the_gs_is_the_same_with_or_without_worker_processes(tmp_path):
         return ippo.main(args), tmp_path / name
 
     local, workers = run("p0", 0), run("p2", 2)
-    _assert_same_run(local, workers)
+    assert_same_run(local, workers)
     assert local[0]["training"]["simulator"] == "gs" and local[0]["track"] == "multi-agent"
 
 
@@ -397,8 +381,8 @@ def test_killing_a_dials_run_leaves_no_worker_and_resume_finishes_it(tmp_path):
     whole = tmp_path / "whole"
     assert subprocess.run([c if c != str(out) else str(whole) for c in cmd], cwd=root, capture_output=True,
                           timeout=300).returncode == 0
-    for key, value in _weights(whole).items():
-        np.testing.assert_array_equal(_weights(out)[key], value, err_msg=key)
+    for key, value in policy_weights(whole).items():
+        np.testing.assert_array_equal(policy_weights(out)[key], value, err_msg=key)
     assert json.loads((whole / "result.json").read_text())["score"] == result["score"]
 
 

@@ -9,6 +9,7 @@ import json
 
 import numpy as np
 import pytest
+from same_run import assert_same_run
 
 ENV = "warehouse_v0"
 OPTIONS = {"robots": [2, 2]}
@@ -42,25 +43,6 @@ def _crash_after_checkpoints(monkeypatch, n: int):
     monkeypatch.setattr(driver, "_curve_point", point)
 
 
-def _weights(folder):
-    from safetensors.numpy import load_file
-
-    return load_file(folder / "policy.safetensors")
-
-
-def _assert_same_run(a, b):
-    (ra, fa), (rb, fb) = a, b
-    wa, wb = _weights(fa), _weights(fb)
-    assert wa.keys() == wb.keys()
-    for k in wa:
-        np.testing.assert_array_equal(wa[k], wb[k], err_msg=k)
-    assert [p["mean"] for p in ra["learning_curves"][0]["points"]] == \
-        [p["mean"] for p in rb["learning_curves"][0]["points"]]
-    for key in ("returns", "per_agent_returns"):  # (the policy files differ in their wall-clocks)
-        assert [s[key] for s in ra["scores"]] == [s[key] for s in rb["scores"]]
-    assert ra["score"] == rb["score"]
-
-
 def _stopped_and_resumed(monkeypatch, module, out, kwargs, checkpoints=2):
     _crash_after_checkpoints(monkeypatch, checkpoints)
     with pytest.raises(Crash):
@@ -80,7 +62,7 @@ def test_a_resumed_dials_run_ends_bitwise_as_the_uninterrupted_one(tmp_path, mon
     kwargs = dict(DIALS, workers=workers, backend=backend)
     whole = dials.main(dials.Args(**kwargs, out_dir=str(tmp_path / "whole"))), tmp_path / "whole"
     resumed = _stopped_and_resumed(monkeypatch, dials, tmp_path / "resumed", kwargs)
-    _assert_same_run(whole, resumed)
+    assert_same_run(whole, resumed)
     assert resumed[0]["training"]["aip"]["refreshes"] == whole[0]["training"]["aip"]["refreshes"] == 3
 
 
@@ -89,7 +71,7 @@ def test_a_resumed_ippo_run_ends_bitwise_as_the_uninterrupted_one(tmp_path, monk
 
     whole = ippo.main(ippo.Args(**IPPO, out_dir=str(tmp_path / "whole"))), tmp_path / "whole"
     resumed = _stopped_and_resumed(monkeypatch, ippo, tmp_path / "resumed", IPPO)
-    _assert_same_run(whole, resumed)
+    assert_same_run(whole, resumed)
 
 
 @pytest.mark.parametrize("module_name", ["ippo", "dials"])
@@ -104,7 +86,7 @@ def test_a_resumed_traffic_run_ends_bitwise_as_the_uninterrupted_one(tmp_path, m
     if module_name == "dials":
         kwargs.update(refresh="384", collect_steps=300, aip_epochs=1, workers=2)
     whole = module.main(module.Args(**kwargs, out_dir=str(tmp_path / "whole"))), tmp_path / "whole"
-    _assert_same_run(whole, _stopped_and_resumed(monkeypatch, module, tmp_path / "resumed", kwargs))
+    assert_same_run(whole, _stopped_and_resumed(monkeypatch, module, tmp_path / "resumed", kwargs))
 
 
 def test_a_resume_that_started_from_the_initial_weights_would_be_caught(tmp_path, monkeypatch):
@@ -126,7 +108,7 @@ def test_a_resume_that_started_from_the_initial_weights_would_be_caught(tmp_path
     monkeypatch.setattr(BatchedPPO, "load_state_dict", forgetful)
     resumed = ippo.main(ippo.Args(**IPPO, out_dir=str(tmp_path / "resumed"), resume=True)), tmp_path / "resumed"
     with pytest.raises(AssertionError):
-        _assert_same_run(whole, resumed)
+        assert_same_run(whole, resumed)
 
 
 def test_the_trainer_replays_a_saved_episode_to_the_same_state():
