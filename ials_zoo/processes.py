@@ -28,11 +28,15 @@ import ctypes
 import multiprocessing
 import os
 import pickle
+import select
 import signal
+import struct
 import sys
 import threading
 import time
 import traceback
+
+from ials_zoo.errors import BadInput
 
 _PR_SET_PDEATHSIG = 1
 _M_TRIM_THRESHOLD, _M_MMAP_MAX = -1, -4  # glibc <malloc.h>
@@ -137,6 +141,7 @@ def _dumps(obj) -> bytes:
 
 
 _loads = pickle.loads
+_EXIT = _dumps(("exit", None, None))
 WORKER_MODULE = "ials_zoo._worker"
 
 
@@ -149,33 +154,57 @@ def _heartbeat(fd: int) -> None:
         time.sleep(HEARTBEAT_SECONDS)
 
 
+_CONTEXT_PROVIDERS: list = []
+
+
+def add_worker_context(provider) -> None:
+    """Register ``provider() -> (install, payload) | None``: what every new :class:`Worker`
+    must set up before it builds its object (``install(payload)`` runs in the worker, e.g.
+    the domains registered at run time). ``install`` must be a module-level function."""
+    if provider not in _CONTEXT_PROVIDERS:
+        _CONTEXT_PROVIDERS.append(provider)
+
+
+def _error(exc: BaseException) -> tuple:
+    return "err", (type(exc).__name__, str(exc), traceback.format_exc())
+
+
 def serve(read_fd: int, write_fd: int, beat_fd: int) -> None:
-    """A :class:`Worker`'s process (``python -m ials_zoo._worker R W B``): build the object
-    the first message names, then answer calls until told to exit (or the pipe closes). An
-    exception goes back as ``(type name, message, traceback)`` and the loop goes on."""
+    """A :class:`Worker`'s process (``python -m ials_zoo._worker R W B``): take the parent's
+    ``sys.path``, set up its contexts, build the object the init message names, then answer
+    calls until told to exit (or the pipe closes). An exception goes back as ``(type name,
+    message, traceback)`` and the loop goes on; with no object built, every call is refused."""
     from multiprocessing.connection import Connection
 
     die_with_parent(ignore_sigint=True)
     threading.Thread(target=_heartbeat, args=(beat_fd,), daemon=True).start()
     conn_r, conn_w = Connection(read_fd, writable=False), Connection(write_fd, readable=False)
-    obj = None
+    obj, built = None, False
     try:
         while True:
             try:
-                kind, method, args = _loads(conn_r.recv_bytes())
+                data = conn_r.recv_bytes()
             except (EOFError, OSError):
                 break
-            if kind == "exit":
-                break
             try:
+                kind, method, args = _loads(data)  # may import the factory's module: its errors go back
+                if kind == "exit":
+                    break
+                if kind == "path":
+                    sys.path[:] = list(method)
+                    continue
                 if kind == "init":
-                    obj = method(*args)
+                    for install, payload in args[1]:
+                        install(payload)
+                    obj, built = method(*args[0]), True
                     result = None
+                elif not built:
+                    raise RuntimeError("this worker's object was never built (its construction failed)")
                 else:
                     result = getattr(obj, method)(*args)
                 conn_w.send_bytes(_dumps(("ok", result)))
             except Exception as exc:
-                conn_w.send_bytes(_dumps(("err", (type(exc).__name__, str(exc), traceback.format_exc()))))
+                conn_w.send_bytes(_dumps(_error(exc)))
     finally:
         close = getattr(obj, "close", None)
         if callable(close):
@@ -183,17 +212,27 @@ def serve(read_fd: int, write_fd: int, beat_fd: int) -> None:
                 close()
 
 
+# what a worker raises for bad input comes back as bad input (ials_zoo.errors' family)
+_BAD_INPUT_NAMES = ("BadInput", "BadInputType", "CommandError", "ResultError", "PolicyFileError")
+
+
+class WorkerBadInput(WorkerError, BadInput):
+    """Bad input found inside a worker (its message names it): printed like any bad input."""
+
+
 class Worker:
     """``factory(*args)`` built in a fresh interpreter (``python -m ials_zoo._worker``: nothing
-    of this process is inherited, no ``__main__`` guard needed, its console output dropped)
+    of this process is inherited but ``sys.path`` and the registered contexts
+    (:func:`add_worker_context`), no ``__main__`` guard needed, its console output dropped)
     that dies with this process, and called by method name over two dedicated pipes.
 
-    Nothing waits forever on it. A :class:`WorkerError` naming the worker comes when it dies
-    (``kind="died"``), is stopped by ``SIGSTOP`` or a debugger (``"stopped"``), sends no
-    heartbeat for ``unresponsive_after`` seconds (``"unresponsive"``), takes longer than a
-    call's ``timeout`` (``"timeout"``) -- after which the worker is killed -- or raises
-    (``"failed"``; ``remote`` holds the exception's type name, message and traceback; the
-    worker lives on).
+    Nothing waits forever on it, sending included. A :class:`WorkerError` naming the worker
+    comes when it dies (``kind="died"``), is stopped by ``SIGSTOP`` or a debugger
+    (``"stopped"``), sends no heartbeat for ``unresponsive_after`` seconds
+    (``"unresponsive"``), takes longer than a call's ``timeout`` (``"timeout"``) -- after
+    which the worker is killed -- or raises (``"failed"``; ``remote`` holds the exception's
+    type name, message and traceback; the worker lives on; bad input comes back as
+    :class:`WorkerBadInput`).
 
     ``call(method, *args)`` is one round trip; :meth:`send` then :meth:`receive` let several
     workers work at once (:func:`call_all`). ``name`` and ``detail`` make the messages,
@@ -214,11 +253,12 @@ class Worker:
         env = dict(os.environ)
         env.setdefault("OMP_NUM_THREADS", "1")
         try:
-            with sigint_ignored_at_birth():
-                self.process = subprocess.Popen(
-                    [sys.executable, "-m", WORKER_MODULE, str(r_child), str(w_child), str(beat_w)],
-                    pass_fds=(r_child, w_child, beat_w), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                    env=env, close_fds=True)
+            # its own session: a Ctrl-C at the terminal is this process's to handle (it closes
+            # its workers), and this process never ignores one while a worker starts
+            self.process = subprocess.Popen(
+                [sys.executable, "-m", WORKER_MODULE, str(r_child), str(w_child), str(beat_w)],
+                pass_fds=(r_child, w_child, beat_w), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                env=env, close_fds=True, start_new_session=True)
         except BaseException:
             for fd in (w_parent, r_parent, beat_r):
                 os.close(fd)
@@ -226,10 +266,13 @@ class Worker:
         finally:
             for fd in (r_child, w_child, beat_w):
                 os.close(fd)
-        os.set_blocking(beat_r, False)
-        self._beat_fd = beat_r
-        self._conn_w, self._conn_r = Connection(w_parent, readable=False), Connection(r_parent, writable=False)
-        self._send(("init", factory, tuple(args)))
+        for fd in (beat_r, w_parent):
+            os.set_blocking(fd, False)
+        self._beat_fd, self._write_fd = beat_r, w_parent
+        self._conn_r = Connection(r_parent, writable=False)
+        contexts = [c for c in (provider() for provider in _CONTEXT_PROVIDERS) if c is not None]
+        self._send(("path", list(sys.path), None))
+        self._send(("init", factory, (tuple(args), contexts)))
 
     def started(self, timeout: float | None = 300.0) -> None:
         """Wait until the object is built (its constructor's error, if any, comes here)."""
@@ -242,13 +285,45 @@ class Worker:
     def _what(self) -> str:
         return f"{self.name} (pid {self.pid}{', ' + self.detail if self.detail else ''})"
 
-    def _send(self, message) -> None:
+    def _send(self, message, timeout: float | None = None) -> None:
+        """Write one message as ``multiprocessing.connection`` frames it, a chunk at a time,
+        watching the worker between chunks (a stopped worker never drains a full pipe)."""
         if self._closed:
             raise WorkerError(f"{self._what()} is closed", kind="died")
+        data = _dumps(message)
+        n = len(data)
+        header = struct.pack("!i", n) if n <= 0x7FFFFFFF else struct.pack("!i", -1) + struct.pack("!Q", n)
+        view = memoryview(header + data)
+        start = last = time.monotonic()
         try:
-            self._conn_w.send_bytes(_dumps(message))
-        except (OSError, BrokenPipeError) as exc:
+            while view:
+                _, writable, _ = select.select([], [self._write_fd], [], 0.1)
+                if writable:
+                    view = view[os.write(self._write_fd, view[:1 << 16]):]
+                    continue
+                last = self._check(start, last, timeout, answered=False)
+        except (BrokenPipeError, OSError) as exc:
             self._fail("died", f"{self._what()} closed its pipe ({exc})")
+        except WorkerError:
+            raise
+        except BaseException:
+            self.close(kill=True)  # a message half-written: the pipe is out of step
+            raise
+
+    def _check(self, start: float, last: float, timeout: float | None, answered: bool) -> float:
+        """Raise the WorkerError that applies now; returns the time of the last heartbeat."""
+        now = time.monotonic()
+        if self._heard():
+            last = now
+        if self.process.poll() is not None and not answered:
+            self._fail("died", f"{self._what()} died (exit code {self.process.returncode})")
+        if process_state(self.pid) in ("T", "t"):
+            self._fail("stopped", f"{self._what()} is stopped (SIGSTOP or a debugger: process state T)")
+        if now - last > self.unresponsive_after:
+            self._fail("unresponsive", f"{self._what()} stopped answering (no heartbeat for {now - last:.0f} s)")
+        if timeout is not None and now - start > timeout:
+            self._fail("timeout", f"{self._what()} did not answer within {timeout:.0f} s")
+        return last
 
     def send(self, method: str, *args) -> None:
         self._send(("call", method, args))
@@ -270,20 +345,7 @@ class Worker:
         start = last = time.monotonic()
         try:
             while not self._conn_r.poll(0.1):
-                now = time.monotonic()
-                if self._heard():
-                    last = now
-                if self.process.poll() is not None:
-                    if self._conn_r.poll(0):  # it answered, then exited
-                        break
-                    self._fail("died", f"{self._what()} died (exit code {self.process.returncode})")
-                if process_state(self.pid) in ("T", "t"):
-                    self._fail("stopped", f"{self._what()} is stopped (SIGSTOP or a debugger: process state T)")
-                if now - last > self.unresponsive_after:
-                    self._fail("unresponsive", f"{self._what()} stopped answering (no heartbeat for "
-                                               f"{now - last:.0f} s)")
-                if timeout is not None and now - start > timeout:
-                    self._fail("timeout", f"{self._what()} did not answer within {timeout:.0f} s")
+                last = self._check(start, last, timeout, answered=self._conn_r.poll(0))
             status, payload = _loads(self._conn_r.recv_bytes())
         except (EOFError, OSError) as exc:
             self._fail("died", f"{self._what()} died (exit code {self.process.poll()}; {exc})")
@@ -295,6 +357,8 @@ class Worker:
             raise
         if status == "err":
             type_name, message, trace = payload
+            if type_name in _BAD_INPUT_NAMES:
+                raise WorkerBadInput(message, kind="failed", remote=(type_name, message, trace))
             raise WorkerError(f"{self._what()} failed: {type_name}: {message}\n{trace}", kind="failed",
                               remote=(type_name, message, trace))
         return payload
@@ -314,18 +378,18 @@ class Worker:
         self._closed = True
         if not kill and self.process.poll() is None:
             with contextlib.suppress(OSError, BrokenPipeError):
-                self._conn_w.send_bytes(_dumps(("exit", None, None)))
+                os.write(self._write_fd, struct.pack("!i", len(_EXIT)) + _EXIT)  # small: never blocks
             with contextlib.suppress(Exception):
                 self.process.wait(timeout=10)
         if self.process.poll() is None:
             self.process.kill()
         with contextlib.suppress(Exception):
             self.process.wait(timeout=5)
-        for conn in (self._conn_r, self._conn_w):
-            with contextlib.suppress(OSError):
-                conn.close()
         with contextlib.suppress(OSError):
-            os.close(self._beat_fd)
+            self._conn_r.close()
+        for fd in (self._write_fd, self._beat_fd):
+            with contextlib.suppress(OSError):
+                os.close(fd)
 
     def __del__(self):
         with contextlib.suppress(Exception):
@@ -435,5 +499,5 @@ _REAPER = None
 _REAPER_PIPE: list[int] = []
 
 
-__all__ = ["Worker", "WorkerError", "call_all", "die_with_parent", "keep_freed_memory", "process_state", "reap_descendants_when_gone",
+__all__ = ["Worker", "WorkerBadInput", "WorkerError", "add_worker_context", "call_all", "die_with_parent", "keep_freed_memory", "process_state", "reap_descendants_when_gone",
            "shutdown_pool", "sigint_ignored_at_birth", "spawn_pool", "start_all"]

@@ -274,3 +274,22 @@ def test_subsystem_settings_live_in_extras_with_defaults_and_typos_are_refused()
     with pytest.raises(BadInput, match="unknown extras \\['studdy'\\]"):
         dataclasses.replace(toy, extras={"studdy": None})
     assert not {"study", "dials", "legend", "tools", "scaling", "episode_summary"} & {f.name for f in dataclasses.fields(Domain)}
+
+
+def test_a_domain_registered_at_run_time_reaches_worker_processes():
+    """A worker (processes.Worker: a fresh interpreter) gets the run-time registered domains
+    and sys.path: IPPO's GS copies of the toy domain step in a worker as in this process."""
+    from ials_zoo.learners.gs_vec import GSVecEnv
+
+    agents = get_domain(TOY).agents()
+    here, there = GSVecEnv(TOY, agents, n_envs=1, processes=0, seed=3), GSVecEnv(TOY, agents, n_envs=1, processes=1, seed=3)
+    try:
+        np.testing.assert_array_equal(here.reset(seed=5), there.reset(seed=5))
+        actions = np.zeros((len(agents), 1), dtype=np.int64)
+        for _ in range(5):
+            a, b = here.step(actions), there.step(actions)
+            np.testing.assert_array_equal(a[0], b[0])
+            np.testing.assert_array_equal(a[1], b[1])
+    finally:
+        here.close()
+        there.close()

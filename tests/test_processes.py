@@ -238,3 +238,30 @@ def test_a_dead_or_stopped_worker_is_named_within_seconds(how):
     with pytest.raises(WorkerError, match="died" if how == "kill" else "is stopped"):
         worker.call("random")
     assert time.monotonic() - t0 < 10 and _gone_within({worker.pid}, 5)
+
+
+def test_sending_to_a_stopped_worker_never_blocks_and_bad_input_inside_stays_bad_input():
+    import random
+
+    from ials_zoo.errors import BadInput
+    from ials_zoo.processes import Worker, WorkerError
+
+    worker = Worker(random.Random, (0,), name="test worker")
+    worker.started()
+    os.kill(worker.pid, signal.SIGSTOP)
+    t0 = time.monotonic()
+    with pytest.raises(WorkerError, match="is stopped"):
+        worker.send("seed", "x" * 5_000_000)  # far more than a pipe holds
+    assert time.monotonic() - t0 < 10 and _gone_within({worker.pid}, 5)
+    import functools
+
+    from ials_zoo.warehouse.env import WarehouseEnv
+
+    bad = Worker(functools.partial(WarehouseEnv, colour="red"), name="env worker")
+    try:
+        with pytest.raises(BadInput, match="unknown option\\(s\\) \\['colour'\\]"):
+            bad.started()  # bad input found inside a worker is still bad input (one line, exit 2)
+        with pytest.raises(WorkerError, match="never built"):
+            bad.call("reset")
+    finally:
+        bad.close()

@@ -21,17 +21,20 @@ from __future__ import annotations
 import importlib
 import importlib.metadata
 import os
+import pickle
 import pkgutil
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+import cloudpickle
 from gymnasium import spaces
 
 from ials_zoo.core.gym_ids import register_ials
 from ials_zoo.core.local import LocalSimulator
 from ials_zoo.core.region import RegionSpec
 from ials_zoo.errors import BadInput, BadInputType
+from ials_zoo.processes import add_worker_context
 
 ENTRY_POINT_GROUP = "ials_zoo.domains"
 # the subsystems that keep per-domain settings in Domain.extras (ials_zoo.core.extras)
@@ -226,6 +229,24 @@ def register_domain(domain: Domain, replace: bool = False) -> Domain:
         _registered[domain.env_id] = domain
     register_ials(domain.env_id)
     return domain
+
+
+def _install_domains(payload: bytes) -> None:
+    """In a worker process: register the domains its parent registered at run time."""
+    for domain in pickle.loads(payload):  # from our own parent, over our own pipe
+        register_domain(domain, replace=True)
+
+
+def _worker_context():
+    # a worker (ials_zoo.processes.Worker) starts a fresh interpreter: the domains registered
+    # here at run time go with it (their functions must live in modules it can import)
+    with _lock:
+        domains = list(_registered.values())
+    # by value (cloudpickle, a gymnasium dependency): a domain's functions may be lambdas
+    return (_install_domains, cloudpickle.dumps(domains)) if domains else None
+
+
+add_worker_context(_worker_context)
 
 
 def unregister_domain(env_id: str) -> None:

@@ -199,13 +199,19 @@ class SimHandle:
         self._worker = Worker(_WorkerCore, (self.core_name, self.config), name="SUMO worker",
                               unresponsive_after=self.unresponsive_after)
         _live_workers.add(self)
-        self._ask(self._worker.started, self.timeout)
+        try:
+            self._ask(self._worker.started, self.timeout)
+        except BaseException:  # a SUMO error or Ctrl-C while starting: no half-started worker stays
+            self._kill()
+            raise
 
     def _ask(self, method, *args, **kwargs):
         """``method(*args, **kwargs)`` of the worker, its errors as this module's."""
         try:
             return method(*args, **kwargs)
         except WorkerError as exc:
+            if isinstance(exc, BadInput):
+                raise BadInput(str(exc)) from None
             if exc.kind == "failed":
                 name, message, trace = exc.remote
                 if name == "SimulationError":

@@ -105,7 +105,13 @@ class WarehouseEnv(ParallelEnv):
         robots=R.DEFAULT_ROBOTS,
         render_mode: str | None = None,
         scripted_learners: bool = False,
+        **unknown,
     ):
+        if unknown:
+            raise BadInputType(
+                f"unknown option(s) {sorted(unknown)} for {R.DOMAIN_ID}; valid options: learners, item_probability, "
+                "max_cycles, item_lifetime, robots, render_mode, scripted_learners"
+            )
         self.robots = R.check_robots(robots)
         self.item_probability, self.item_lifetime, self.max_cycles = R.check_options(
             item_probability, item_lifetime, max_cycles
