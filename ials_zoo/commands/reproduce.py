@@ -26,7 +26,6 @@ curves are flat from ~100k steps) and 500,000 per memory-experiment run; see ``-
 
 from __future__ import annotations
 
-from ials_zoo.commands import CommandError
 from ials_zoo.core.domains import domain_ids
 from ials_zoo.core.extras import study_of
 from ials_zoo.errors import BadInput
@@ -144,20 +143,14 @@ def config_from_args(args):
 
 def run(args) -> int:
 
-    try:
-        cfg = config_from_args(args)
-    except ValueError as exc:
-        raise CommandError(str(exc)) from None
+    cfg = config_from_args(args)  # bad settings raise BadInput: one line, exit 2
     jobs = build_plan(cfg)
     if args.dry_run:
         print(describe_plan(jobs))
         return 0
     status = {"failed": [], "blocked": []}
     if not args.report_only:
-        try:
-            status = run_jobs(jobs, n_jobs=cfg.jobs, progress=not args.no_progress, lock_dir=cfg.out)
-        except (ValueError, RuntimeError) as exc:
-            raise CommandError(str(exc)) from None
+        status = run_jobs(jobs, n_jobs=cfg.jobs, progress=not args.no_progress, lock_dir=cfg.out)
         print(f"jobs: {len(status['done'])} run, {len(status['skipped'])} already done, "
               f"{len(status['failed'])} failed, {len(status['blocked'])} blocked")
         for jid in status["failed"]:

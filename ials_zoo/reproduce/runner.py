@@ -75,7 +75,7 @@ def study_lock(folder: Path):
             fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             f.seek(0)
-            raise RuntimeError(f"another ials-zoo reproduce is running in {folder} "
+            raise BadInput(f"another ials-zoo reproduce is running in {folder} "
                                f"(lock {path}, held by pid {f.read().strip() or '?'})") from None
         f.seek(0)
         f.truncate()
