@@ -24,6 +24,9 @@ from ials_zoo.errors import BadInput
 from ials_zoo.reproduce.plan import Job
 
 
+class StudyInUseError(RuntimeError, BadInput):
+    """Another ``ials-zoo reproduce`` holds the study folder (a situation, named in one line)."""
+
 def _signal_group(proc: subprocess.Popen, sig) -> None:
     try:
         os.killpg(proc.pid, sig)  # the job's own process group (start_new_session=True)
@@ -75,7 +78,7 @@ def study_lock(folder: Path):
             fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             f.seek(0)
-            raise BadInput(f"another ials-zoo reproduce is running in {folder} "
+            raise StudyInUseError(f"another ials-zoo reproduce is running in {folder} "
                                f"(lock {path}, held by pid {f.read().strip() or '?'})") from None
         f.seek(0)
         f.truncate()
