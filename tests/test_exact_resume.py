@@ -1,9 +1,11 @@
 """A run stopped after a checkpoint and resumed ends bitwise equal to the run that was never
-stopped: the same weights, learning curve and score, for IPPO and for DIALS on every backend.
+stopped: the same weights, learning curve, score and training log, for IPPO and for DIALS on
+every backend.
 
-The stop is a crash right after a checkpoint was written, in the middle of the GS and IALS
-episodes (the budgets are not multiples of an episode); the kill -9 variant is in
-``test_dials.py``. Runs use the 2x2 warehouse, tiny networks and budgets."""
+The stop is a crash at the GS evaluation after a checkpoint, so the run trained past its last
+checkpoint (an AIP refresh included) in the middle of the GS and IALS episodes (the budgets
+are not multiples of an episode); the kill -9 variant is in ``test_dials.py``. Runs use the
+2x2 warehouse, tiny networks and budgets."""
 
 import json
 
@@ -17,8 +19,9 @@ AGENTS = ["robot_0", "robot_1", "robot_2", "robot_3"]
 COMMON = dict(env_id=ENV, agents=",".join(AGENTS), env_options=json.dumps(OPTIONS), n_envs=2,
               samples_per_update=128, batch_size=64, n_epochs=2, hidden="16", eval_episodes=1,
               final_eval_episodes=2, progress=False)
-# DIALS: AIPs retrained at 0 and 384 steps per agent, checkpoints every 256: the stop at 256
-# replays an IALS episode 28 steps in and then meets a refresh; 1024 = 10.24 GS episodes.
+# DIALS: AIPs retrained at 0, 384 and 768 steps per agent, checkpoints every 256: the crash at
+# 512 resumes from 256, replays an IALS episode 28 steps in and redoes the refresh at 384;
+# 1024 = 10.24 GS episodes.
 DIALS = dict(COMMON, total_timesteps=1024, eval_every=256, refresh="384", collect_steps=200, aip_epochs=1)
 IPPO = dict(COMMON, total_timesteps=768, eval_every=256)
 
@@ -28,19 +31,27 @@ class Crash(RuntimeError):
 
 
 def _crash_after_checkpoints(monkeypatch, n: int):
-    """The next run crashes right after its ``n``-th checkpoint (a curve point)."""
+    """The next run crashes at its ``n + 1``-th GS evaluation, before that checkpoint: after
+    its ``n``-th checkpoint it trained on (and logged) more, which the resume must redo."""
     from ials_zoo.baselines import driver
 
     real, seen = driver._curve_point, []
 
     def point(*args, **kwargs):
-        out = real(*args, **kwargs)
-        seen.append(out)
         if len(seen) == n:
             raise Crash(f"stopped after checkpoint {n}")
-        return out
+        seen.append(real(*args, **kwargs))
+        return seen[-1]
 
     monkeypatch.setattr(driver, "_curve_point", point)
+
+
+def _progress_rows(folder):
+    """progress.csv without its wall-clock column (the one thing a resumed run may differ in)."""
+    import csv
+
+    with open(folder / "progress.csv", newline="") as f:
+        return [row[:1] + row[2:] for row in csv.reader(f)]
 
 
 def _stopped_and_resumed(monkeypatch, module, out, kwargs, checkpoints=2):
@@ -63,6 +74,7 @@ def test_a_resumed_dials_run_ends_bitwise_as_the_uninterrupted_one(tmp_path, mon
     whole = dials.main(dials.Args(**kwargs, out_dir=str(tmp_path / "whole"))), tmp_path / "whole"
     resumed = _stopped_and_resumed(monkeypatch, dials, tmp_path / "resumed", kwargs)
     assert_same_run(whole, resumed)
+    assert _progress_rows(whole[1]) == _progress_rows(resumed[1])  # no stretch logged twice
     assert resumed[0]["training"]["aip"]["refreshes"] == whole[0]["training"]["aip"]["refreshes"] == 3
 
 
@@ -72,6 +84,7 @@ def test_a_resumed_ippo_run_ends_bitwise_as_the_uninterrupted_one(tmp_path, monk
     whole = ippo.main(ippo.Args(**IPPO, out_dir=str(tmp_path / "whole"))), tmp_path / "whole"
     resumed = _stopped_and_resumed(monkeypatch, ippo, tmp_path / "resumed", IPPO)
     assert_same_run(whole, resumed)
+    assert _progress_rows(whole[1]) == _progress_rows(resumed[1])
 
 
 @pytest.mark.parametrize("module_name", ["ippo", "dials"])

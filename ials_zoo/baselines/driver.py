@@ -120,6 +120,7 @@ def run(plan: RunPlan, learner: MultiAgentLearner, description: str, domain) -> 
             state, info = load_training_state(out)
             learner.load(state, info)
             steps, curve = int(info["steps"]), info["curve"]
+            log.truncate(steps)
             clock = Clock(offset=float(info["clock"]))
         else:
             learner.load(None, None)

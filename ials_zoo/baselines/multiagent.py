@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import io
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -163,6 +164,15 @@ class TrainingLog:
     def add(self, row: dict) -> None:
         with open(self.path, "a", newline="") as f:
             csv.writer(f).writerow(["" if row.get(c) is None else row[c] for c in self.COLUMNS])
+
+    def truncate(self, steps: int) -> None:
+        """Drop the rows past ``steps`` per agent (a resumed run trains them again from its
+        checkpoint; without this they would be logged twice)."""
+        with open(self.path, newline="") as f:
+            rows = list(csv.reader(f))
+        text = io.StringIO()
+        csv.writer(text).writerows(rows[:1] + [r for r in rows[1:] if r and int(float(r[0])) <= steps])
+        atomic_write_text(self.path, text.getvalue())
 
 
 def merge_shard_stats(stats: list[dict], agents_per_shard: list[int]) -> dict:
