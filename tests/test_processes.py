@@ -47,10 +47,17 @@ def _alive(pids) -> set[int]:
     return alive
 
 
+def _default_sigint():
+    # as a terminal starts a command: a suite run in the background (`cmd &` in a script)
+    # inherits an ignored SIGINT, which the command would inherit in turn
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _start(args, tmp_path):
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     return subprocess.Popen([sys.executable, "-m", "ials_zoo.cli", *args], cwd=tmp_path, env=env,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True,
+                            preexec_fn=_default_sigint)
 
 
 def _wait_for_children(proc, n, timeout=90):
@@ -191,9 +198,10 @@ def test_training_in_this_process_keeps_ctrl_c():
     """Only worker processes hand Ctrl-C to their parent; the training process keeps it."""
     from ials_zoo.single_agent import make_gs_vec_env
 
+    before = signal.getsignal(signal.SIGINT)  # Python's handler, or SIG_IGN when run in the background
     venv = make_gs_vec_env("warehouse_v0", "robot_20", n_envs=2)  # DummyVecEnv: in this process
     venv.close()
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    assert signal.getsignal(signal.SIGINT) is before
 
 
 # -- processes.Worker: the one worker protocol -------------------------------------------------
