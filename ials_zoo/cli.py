@@ -19,8 +19,7 @@ import sys
 
 from ials_zoo.core.domains import domain_ids
 from ials_zoo.core.extras import tools_of
-from ials_zoo.errors import BadInput
-from ials_zoo.processes import WorkerError
+from ials_zoo.errors import BadInput, is_run_failure
 
 SUBCOMMANDS = {
     # name: (module, one-line help)
@@ -35,10 +34,6 @@ SUBCOMMANDS = {
     "rates": ("ials_zoo.commands.rates", "how much influence an IALS injects, per predictor"),
     "fidelity": ("ials_zoo.commands.fidelity", "does the multi-agent IALS reproduce the GS's influence over time?"),
 }
-
-
-_RUN_FAILURES = ("SimulationError", "WorkerDiedError", "WorkerUnresponsiveError")
-"""Run-time failures of the SUMO lease (by name: importing it here would import libsumo)."""
 
 
 def _available() -> dict:
@@ -135,8 +130,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except RuntimeError as exc:
         # a worker that died or stopped, a SUMO error: named by the error itself, exit 1
-        if not isinstance(exc, WorkerError) and type(exc).__name__ not in _RUN_FAILURES or os.environ.get(
-                "IALS_ZOO_DEBUG"):
+        if not is_run_failure(exc) or os.environ.get("IALS_ZOO_DEBUG"):
             raise
         print(f"ials-zoo {args.command}: {exc}", file=sys.stderr)
         return 1

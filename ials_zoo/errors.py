@@ -17,4 +17,16 @@ class BadInputType(BadInput, TypeError):
     """Bad input of the wrong type, named by the message."""
 
 
-__all__ = ["BadInput", "BadInputType"]
+# Run-time failures that name themselves (a SUMO simulation's error, a worker that died or
+# stopped): printed in one line with exit status 1. By name: importing the SUMO lease here
+# would import libsumo.
+RUN_FAILURES = ("SimulationError", "SimulationBusyError", "WorkerDiedError", "WorkerUnresponsiveError",
+                "WorkerError")
+
+
+def is_run_failure(exc: BaseException) -> bool:
+    """Whether ``exc`` is one of :data:`RUN_FAILURES` (or a subclass of one)."""
+    return any(c.__name__ in RUN_FAILURES for c in type(exc).__mro__)
+
+
+__all__ = ["RUN_FAILURES", "BadInput", "BadInputType", "is_run_failure"]

@@ -99,3 +99,20 @@ def test_a_dead_or_stopped_worker_ends_a_command_in_one_line_with_exit_1(monkeyp
     err = capsys.readouterr().err
     assert err.strip() == ("ials-zoo evaluate: DIALS worker 1 (pid 123, agents robot_18..robot_35) is stopped "
                            "(SIGSTOP or a debugger: process state T)") and "Traceback" not in err
+
+
+def test_a_sumo_error_ends_a_baseline_run_in_one_line_on_both_entry_points(monkeypatch, capsys):
+    """``ials-zoo train`` and ``python -m baselines.<name>`` (run_cli) report a run failure
+    alike: one line, exit 1."""
+    import sys
+
+    from ials_zoo.baselines import arguments, ippo
+    from ials_zoo.traffic.lease import SimulationError
+
+    def fails(args=None):
+        raise SimulationError("SUMO error (TraCIException): the network broke")
+
+    monkeypatch.setattr(ippo, "main", fails)
+    monkeypatch.setattr(sys, "argv", ["ippo", "--env", "warehouse_v0"])
+    assert arguments.run_cli(ippo) == 1
+    assert capsys.readouterr().err.strip() == "ippo: SUMO error (TraCIException): the network broke"

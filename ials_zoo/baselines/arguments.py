@@ -8,8 +8,7 @@ import argparse
 import dataclasses
 import typing
 
-from ials_zoo.errors import BadInput
-from ials_zoo.processes import WorkerError
+from ials_zoo.errors import BadInput, is_run_failure
 from ials_zoo.utils import parse_json_object
 
 # --------------------------------------------------------------------------------------------
@@ -70,9 +69,8 @@ def run_cli(module) -> int:
     except (BadInput, FileNotFoundError) as exc:  # any other ValueError is a bug: traceback
         print(f"{name}: {exc}", file=sys.stderr)
         return 2
-    except RuntimeError as exc:  # a worker died or stopped: named by the error, no traceback
-
-        if not isinstance(exc, WorkerError):
+    except RuntimeError as exc:  # a worker died or stopped, a SUMO error: named by the error itself
+        if not is_run_failure(exc):
             raise
         print(f"{name}: {exc}", file=sys.stderr)
         return 1
