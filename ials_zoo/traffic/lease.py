@@ -124,6 +124,18 @@ def wrap_sumo_error(exc: BaseException) -> BaseException:
     return exc
 
 
+def call_core(core, method: str, args: tuple):
+    """``core.method(*args)`` with SUMO's errors as :class:`SimulationError` (in this process
+    or in a worker: the same errors either way)."""
+    try:
+        return getattr(core, method)(*args)
+    except Exception as e:
+        w = wrap_sumo_error(e)
+        if w is e:
+            raise
+        raise w from e
+
+
 def _core_class(name: str):
     return getattr(importlib.import_module(CORES_MODULE), name)
 
@@ -148,13 +160,7 @@ class _WorkerCore:
         self.core = _core_class(core)(**config)
 
     def call(self, method: str, args: tuple):
-        try:
-            return getattr(self.core, method)(*args)
-        except Exception as e:
-            w = wrap_sumo_error(e)
-            if w is e:
-                raise
-            raise w from e
+        return call_core(self.core, method, args)
 
     def close(self):
         self.core.close()
@@ -245,13 +251,7 @@ class SimHandle:
         if self.closed:
             raise SimulationError("this simulation handle is closed")
         if self.mode == "inprocess":
-            try:
-                return getattr(self._local_core(), method)(*args)
-            except Exception as e:
-                w = wrap_sumo_error(e)
-                if w is e:
-                    raise
-                raise w from e
+            return call_core(self._local_core(), method, args)
         if self._worker is None:
             if method not in ("reset",):
                 raise WorkerDiedError(
