@@ -12,6 +12,12 @@ stacked on a leading agent axis::
               n_actions, hidden, activation, frame_stack, shared, env_id, and free provenance
               (algorithm, training record, learning curve, package version, ...).
 
+A *recurrent* policy reads its frames through a GRU first (SPEC §6's warehouse policy,
+"recurrent over the last 8 observations"): the GRU runs over the ``frame_stack`` observations,
+oldest first, from a zero state, and the layers read its last state. Its tensors are
+``gru.weight_ih [A, obs, 3H]``, ``gru.weight_hh [A, H, 3H]``, ``gru.bias_ih [A, 3H]`` and
+``gru.bias_hh [A, 3H]`` (torch's gate order r, z, n) and the header's ``recurrent_hidden`` is H.
+
 A *shared* policy (parameter sharing) stores one set of weights (``A = 1``) used by every
 listed agent.
 
@@ -72,10 +78,12 @@ class PolicyNetwork:
         frame_stack: observations the policy reads.
         metadata: JSON-able provenance (env_id, algorithm, training record, ...).
         shared: one set of weights (leading axis 1) for every agent.
+        recurrent: ``(W_ih, W_hh, b_ih, b_hh)`` of a GRU that reads the frames before the
+            layers (module docstring), or None.
     """
 
     def __init__(self, agents, obs_size: int, n_actions: int, layers, activation: str = "tanh",
-                 frame_stack: int = 1, metadata: dict | None = None, shared: bool = False):
+                 frame_stack: int = 1, metadata: dict | None = None, shared: bool = False, recurrent=None):
         self.agents = tuple(agents)
         if not self.agents or len(set(self.agents)) != len(self.agents):
             raise PolicyFileError(f"a policy needs distinct agents, got {list(self.agents)}")
@@ -94,6 +102,9 @@ class PolicyNetwork:
         self.layers = []
         width = self.obs_size * self.frame_stack
         A = 1 if self.shared else len(self.agents)
+        self.recurrent = None if recurrent is None else self._check_gru(recurrent, A)
+        if self.recurrent is not None:
+            width = self.recurrent_hidden
         for i, (w, b) in enumerate(layers):
             for part, x in (("weight", w), ("bias", b)):
                 if np.asarray(x).dtype.kind != "f":
@@ -110,6 +121,31 @@ class PolicyNetwork:
             raise PolicyFileError(f"the last layer has {width} outputs, not n_actions={self.n_actions}")
         # float64 copies for inference (see the module docstring)
         self._layers64 = [(w.astype(np.float64), b.astype(np.float64)[:, None, :]) for w, b in self.layers]
+        self._gru64 = None if self.recurrent is None else [t.astype(np.float64) for t in self.recurrent]
+
+    def _check_gru(self, parts, A: int) -> tuple:
+        if len(parts) != 4:
+            raise PolicyFileError("a recurrent policy's GRU is (weight_ih, weight_hh, bias_ih, bias_hh)")
+        arrays = []
+        for name, x in zip(GRU_TENSORS, parts):
+            if np.asarray(x).dtype.kind != "f":
+                raise PolicyFileError(f"gru.{name} must be floating point, got {np.asarray(x).dtype}")
+            x = np.asarray(x, dtype=np.float32)
+            if not np.isfinite(x).all():
+                raise PolicyFileError(f"gru.{name} has non-finite weights")
+            arrays.append(x)
+        w_ih, w_hh, b_ih, b_hh = arrays
+        H3 = w_hh.shape[-1] if w_hh.ndim == 3 else -1
+        if (H3 < 3 or H3 % 3 or w_ih.shape != (A, self.obs_size, H3) or w_hh.shape != (A, H3 // 3, H3)
+                or b_ih.shape != (A, H3) or b_hh.shape != (A, H3)):
+            raise PolicyFileError(f"the GRU's shapes {[x.shape for x in arrays]} do not fit {A} agents with "
+                                  f"observations of {self.obs_size}")
+        return tuple(arrays)
+
+    @property
+    def recurrent_hidden(self) -> int:
+        """The GRU's units (0: no GRU)."""
+        return 0 if self.recurrent is None else self.recurrent[1].shape[1]
 
     @property
     def hidden(self) -> list[int]:
@@ -131,10 +167,11 @@ class PolicyNetwork:
         idx = [self.index(a) for a in agents]
         if self.shared:
             return PolicyNetwork(agents, self.obs_size, self.n_actions, self.layers, self.activation,
-                                 self.frame_stack, self.metadata, shared=True)
+                                 self.frame_stack, self.metadata, shared=True, recurrent=self.recurrent)
+        gru = None if self.recurrent is None else [t[idx] for t in self.recurrent]
         return PolicyNetwork(agents, self.obs_size, self.n_actions,
                              [(w[idx], b[idx]) for w, b in self.layers], self.activation,
-                             self.frame_stack, self.metadata)
+                             self.frame_stack, self.metadata, recurrent=gru)
 
     def logits(self, x) -> np.ndarray:
         """``x [A, n, input]`` (or ``[A, input]``) -> logits ``[A, n, n_actions]`` (float64)."""
@@ -144,12 +181,29 @@ class PolicyNetwork:
             h = h[:, None, :]
         if h.shape[0] != len(self.agents) or h.shape[-1] != self.input_size:
             raise BadInput(f"policy input must be [{len(self.agents)}, n, {self.input_size}], got {h.shape}")
+        if self._gru64 is not None:
+            h = self._gru_state(h)
         last = len(self._layers64) - 1
         for i, (w, b) in enumerate(self._layers64):
             h = np.matmul(h, w) + b
             if i < last:
                 h = self._act(h)
         return h[:, 0] if squeeze else h
+
+    def _gru_state(self, x: np.ndarray) -> np.ndarray:
+        """The GRU's last state after reading the frames of ``x [A, n, input]``, oldest first."""
+        w_ih, w_hh, b_ih, b_hh = self._gru64
+        H = w_hh.shape[1]
+        frames = x.reshape(x.shape[0], x.shape[1], self.frame_stack, self.obs_size)
+        h = np.zeros((x.shape[0], x.shape[1], H))
+        for t in range(self.frame_stack):
+            gi = np.matmul(frames[:, :, t], w_ih) + b_ih[:, None]
+            gh = np.matmul(h, w_hh) + b_hh[:, None]
+            r = 1.0 / (1.0 + np.exp(-(gi[..., :H] + gh[..., :H])))
+            z = 1.0 / (1.0 + np.exp(-(gi[..., H:2 * H] + gh[..., H:2 * H])))
+            n = np.tanh(gi[..., 2 * H:] + r * gh[..., 2 * H:])
+            h = (1.0 - z) * n + z * h
+        return h
 
     def probs(self, x) -> np.ndarray:
         z = self.logits(x)
@@ -173,22 +227,26 @@ class PolicyNetwork:
         return {"format": FORMAT, "format_version": FORMAT_VERSION, "agents": list(self.agents),
                 "obs_size": self.obs_size, "n_actions": self.n_actions, "hidden": self.hidden,
                 "activation": self.activation, "frame_stack": self.frame_stack, "shared": self.shared,
-                **self.metadata}
+                **({"recurrent_hidden": self.recurrent_hidden} if self.recurrent is not None else {}), **self.metadata}
 
     def tensors(self) -> dict[str, np.ndarray]:
         out = {}
+        if self.recurrent is not None:
+            out.update({f"gru.{name}": np.ascontiguousarray(t) for name, t in zip(GRU_TENSORS, self.recurrent)})
         for i, (w, b) in enumerate(self.layers):
             out[f"layer{i}.weight"] = np.ascontiguousarray(w)
             out[f"layer{i}.bias"] = np.ascontiguousarray(b)
         return out
 
     def __repr__(self):
-        return (f"<PolicyNetwork {len(self.agents)} agent(s), {self.input_size} -> {self.hidden} -> "
+        gru = f" GRU {self.recurrent_hidden} ->" if self.recurrent is not None else ""
+        return (f"<PolicyNetwork {len(self.agents)} agent(s), {self.input_size} ->{gru} {self.hidden} -> "
                 f"{self.n_actions} ({self.activation})>")
 
 
 _RESERVED = ("format", "format_version", "agents", "obs_size", "n_actions", "hidden", "activation", "frame_stack",
-             "shared")
+             "shared", "recurrent_hidden")
+GRU_TENSORS = ("weight_ih", "weight_hh", "bias_ih", "bias_hh")
 
 
 def save_policy(net: PolicyNetwork, path) -> Path:
@@ -241,15 +299,22 @@ def _from_parts(meta: dict, tensors: dict, where: str) -> PolicyNetwork:
         raise PolicyFileError(f"{where}: policy format version {header.get('format_version')!r}; this "
                               f"ials_zoo reads version {FORMAT_VERSION}")
     n = len(header.get("hidden", [])) + 1
+    recurrent = header.get("recurrent_hidden", 0)
     try:
         layers = [(tensors[f"layer{i}.weight"], tensors[f"layer{i}.bias"]) for i in range(n)]
-        extra = set(tensors) - {f"layer{i}.{p}" for i in range(n) for p in ("weight", "bias")}
+        gru = [tensors[f"gru.{name}"] for name in GRU_TENSORS] if recurrent else None
+        expected = {f"layer{i}.{p}" for i in range(n) for p in ("weight", "bias")}
+        expected |= {f"gru.{name}" for name in GRU_TENSORS} if recurrent else set()
+        extra = set(tensors) - expected
         if extra:
             raise PolicyFileError(f"{where}: unexpected tensors {sorted(extra)}")
-        return PolicyNetwork(header["agents"], header["obs_size"], header["n_actions"], layers,
-                             header.get("activation", "tanh"), header.get("frame_stack", 1),
-                             {k: v for k, v in header.items() if k not in _RESERVED},
-                             shared=bool(header.get("shared", False)))
+        net = PolicyNetwork(header["agents"], header["obs_size"], header["n_actions"], layers,
+                            header.get("activation", "tanh"), header.get("frame_stack", 1),
+                            {k: v for k, v in header.items() if k not in _RESERVED},
+                            shared=bool(header.get("shared", False)), recurrent=gru)
+        if net.recurrent_hidden != recurrent:
+            raise PolicyFileError(f"recurrent_hidden {recurrent!r} does not fit its GRU ({net.recurrent_hidden} units)")
+        return net
     except KeyError as exc:
         raise PolicyFileError(f"{where}: missing {exc}") from None
     except PolicyFileError as exc:
@@ -342,13 +407,16 @@ def stack_policies(nets: list[PolicyNetwork], metadata: dict | None = None) -> P
     """One policy holding the weights of single-agent policies of the same architecture."""
     first = nets[0]
     for n in nets[1:]:
-        if (n.obs_size, n.n_actions, n.hidden, n.activation, n.frame_stack) != (
-                first.obs_size, first.n_actions, first.hidden, first.activation, first.frame_stack):
+        if (n.obs_size, n.n_actions, n.hidden, n.activation, n.frame_stack, n.recurrent_hidden) != (
+                first.obs_size, first.n_actions, first.hidden, first.activation, first.frame_stack,
+                first.recurrent_hidden):
             raise PolicyFileError("only policies of one architecture can be stacked")
     layers = [(np.concatenate([n.layers[i][0] for n in nets]), np.concatenate([n.layers[i][1] for n in nets]))
               for i in range(len(first.layers))]
+    gru = None if first.recurrent is None else [np.concatenate([n.recurrent[j] for n in nets]) for j in range(4)]
     return PolicyNetwork([a for n in nets for a in n.agents], first.obs_size, first.n_actions, layers,
-                         first.activation, first.frame_stack, metadata if metadata is not None else first.metadata)
+                         first.activation, first.frame_stack, metadata if metadata is not None else first.metadata,
+                         recurrent=gru)
 
 
 def is_policy_file(path) -> bool:

@@ -139,3 +139,32 @@ def test_joint_policy_scores_every_agent(tmp_path):
     # one agent of a joint file is the same weights as the single-agent policy
     single = evaluate(ENV, "robot_1", str(path), episodes=1, robots=(2, 2))
     assert single.policy_sha256 == res.policy_sha256
+
+
+def test_a_recurrent_policy_file_acts_as_the_learner_that_wrote_it(tmp_path):
+    """A batched PPO learner with a GRU over 8 frames: its exported actor (saved, loaded,
+    subset, numpy float64) gives the learner's own logits; the GRU's shapes are checked."""
+    from ials_zoo.baselines.multiagent import joint_policy
+    from ials_zoo.learners.batched_ppo import BatchedPPO, PPOConfig
+
+    agents = ["robot_0", "robot_1", "robot_2"]
+    cfg = PPOConfig(n_envs=2, hidden=(16,), recurrent_hidden=12, frames=8)
+    learner = BatchedPPO(agents, 37 * 8, 4, cfg, seed=3)
+    with torch.no_grad():  # weights away from their initial zeros biases
+        for p in learner.params.values():
+            p.add_(torch.randn_like(p) * 0.1 * (p != 0))
+    x = np.random.default_rng(0).integers(0, 2, (3, 5, 37 * 8)).astype(np.float32)
+    with torch.no_grad():
+        want = learner.forward(learner._input(x))[0].numpy()
+    net = joint_policy(agents, learner.actor_layers(), 37, 4, 8, {"env_id": ENV})
+    assert net.recurrent_hidden == 12 and net.hidden == [16]
+    path = save_policy(net, tmp_path / "gru.safetensors")
+    again = load_policy_file(path)
+    np.testing.assert_allclose(again.logits(x), want, atol=1e-5)
+    np.testing.assert_allclose(again.subset(["robot_2"]).logits(x[2:]), want[2:], atol=1e-5)
+    assert "GRU 12" in repr(again)
+    # the file's header and its tensors must agree
+    with pytest.raises(PolicyFileError, match="do not fit"):
+        PolicyNetwork(agents, 36, 4, net.layers, "tanh", 8, recurrent=net.recurrent)
+    res = evaluate_joint(ENV, str(path), episodes=1, robots=(3, 1))
+    assert res.agents == agents and np.isfinite(res.returns).all()

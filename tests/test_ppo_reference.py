@@ -38,12 +38,30 @@ def test_gae_matches_hand_computed_advantages_with_an_episode_end():
 
 
 class _ReferenceAgent(torch.nn.Module):
-    """One agent's actor and critic, as SB3's ``MlpPolicy`` with separate tanh networks."""
+    """One agent's actor and critic, as SB3's ``MlpPolicy`` with separate tanh networks; a
+    recurrent learner's heads first read the frames through a ``torch.nn.GRU`` each."""
 
     def __init__(self, learner: BatchedPPO, k: int):
         super().__init__()
         self.heads = torch.nn.ModuleDict()
+        self.grus = torch.nn.ModuleDict()
+        self.frames, self.frame_size = learner.cfg.frames, learner.frame_size
         for head in ("pi", "vf"):
+            if learner.recurrent:
+                H, Hp, F = learner.recurrent, -(-learner.recurrent // 8) * 8, learner.frame_size
+                gru = torch.nn.GRU(F, H, batch_first=True)
+
+                def gates(name, rows=None):
+                    t = learner.params[f"{head}.gru.{name}"][k]
+                    t = t[:rows] if rows else t
+                    return torch.cat([t[..., g * Hp:g * Hp + H] for g in range(3)], dim=-1)
+
+                with torch.no_grad():
+                    gru.weight_ih_l0.copy_(gates("weight_ih", F).T)
+                    gru.weight_hh_l0.copy_(gates("weight_hh", H).T)
+                    gru.bias_ih_l0.copy_(gates("bias_ih"))
+                    gru.bias_hh_l0.copy_(gates("bias_hh"))
+                self.grus[head] = gru
             sizes = learner._sizes[head]
             layers = []
             for i, (a, b) in enumerate(zip(sizes[:-1], sizes[1:])):
@@ -56,8 +74,14 @@ class _ReferenceAgent(torch.nn.Module):
                     layers.append(torch.nn.Tanh())
             self.heads[head] = torch.nn.Sequential(*layers)
 
+    def _read(self, head, x):
+        if head not in self.grus:
+            return x
+        _, h = self.grus[head](x.reshape(len(x), self.frames, self.frame_size))
+        return h[0]
+
     def forward(self, x):
-        return self.heads["pi"](x), self.heads["vf"](x)[..., 0]
+        return self.heads["pi"](self._read("pi", x)), self.heads["vf"](self._read("vf", x))[..., 0]
 
 
 def _reference_update(agent: _ReferenceAgent, cfg: PPOConfig, perm_rng, obs, actions, logp_old, returns, adv):
@@ -93,14 +117,16 @@ def _reference_update(agent: _ReferenceAgent, cfg: PPOConfig, perm_rng, obs, act
     return float(np.mean(clip_fractions))
 
 
-@pytest.mark.parametrize("normalize_advantage", [True, False])
-def test_one_update_matches_a_per_agent_sb3_reference(normalize_advantage):
+@pytest.mark.parametrize("normalize_advantage,recurrent", [(True, 0), (False, 0), (True, 5)])
+def test_one_update_matches_a_per_agent_sb3_reference(normalize_advantage, recurrent):
     """Weights after one update (2 epochs of 4 minibatches), and the clip fraction, equal a
-    plain torch PPO per agent run with SB3's formulas, for each of 3 agents in one batch."""
+    plain torch PPO per agent run with SB3's formulas, for each of 3 agents in one batch; with
+    a recurrent encoder, ``torch.nn.GRU`` over the frames is the reference (7 inputs read as
+    a sequence of 7 one-number frames)."""
     agents = ["tls_0", "robot_7", "x"]
     cfg = PPOConfig(n_steps=8, n_envs=4, batch_size=8, n_epochs=2, learning_rate=3e-3, anneal_lr=False,
                     clip_range=0.1, ent_coef=0.05, vf_coef=0.7, max_grad_norm=0.5, hidden=(13, 11),
-                    normalize_advantage=normalize_advantage)
+                    normalize_advantage=normalize_advantage, recurrent_hidden=recurrent, frames=7 if recurrent else 1)
     learner = BatchedPPO(agents, 7, 3, cfg, seed=11)
     references = [_ReferenceAgent(learner, k) for k in range(len(agents))]
     rng = np.random.default_rng(3)
@@ -128,6 +154,13 @@ def test_one_update_matches_a_per_agent_sb3_reference(normalize_advantage):
                 np.testing.assert_allclose(got, lin.weight.detach().numpy().T, atol=2e-5, err_msg=f"{agent} {head}{i}")
                 np.testing.assert_allclose(learner.params[f"{head}.{i}.bias"][k, :b].detach().numpy(),
                                            lin.bias.detach().numpy(), atol=2e-5)
+        if recurrent:
+            exported = learner.actor_layers()[0]
+            gru = ref.grus["pi"]
+            for got, want in zip(exported, (gru.weight_ih_l0, gru.weight_hh_l0, gru.bias_ih_l0, gru.bias_hh_l0)):
+                want = want.detach().numpy()
+                np.testing.assert_allclose(got[k], want.T if want.ndim == 2 else want, atol=2e-5,
+                                           err_msg=f"{agent} GRU")
     assert 0.1 < np.mean(clip_fractions) < 0.9  # the clip is exercised
     assert stats["clip_fraction"] == pytest.approx(np.mean(clip_fractions), abs=1e-6)
 

@@ -167,7 +167,9 @@ def check_args(args: Args):
         if v is not None and v < 1:
             raise BadInput(f"{name} must be >= 1, got {v}")
     copies = int(args.n_envs or dials_of(domain).copies)
-    ppo_config(args, copies)
+    ppo_config(args, copies, frame_stack_of(args, domain))
+    if args.recurrent_hidden and args.learner != "batched":
+        raise BadInput("--recurrent-hidden needs --learner batched (the SB3 learner's policies are MLPs)")
     if args.workers is not None and args.workers < 0:
         raise BadInput(f"workers must be >= 0, got {args.workers}")
     if args.learner not in LEARNERS:
@@ -277,8 +279,8 @@ class ShardsLearner:
 
     def actor_layers(self):
         per_shard = self.backend.call("actor_layers")
-        return [(np.concatenate([ls[i][0] for ls in per_shard]), np.concatenate([ls[i][1] for ls in per_shard]))
-                for i in range(len(per_shard[0]))]
+        return [tuple(np.concatenate([ls[i][j] for ls in per_shard]) for j in range(len(layer)))
+                for i, layer in enumerate(per_shard[0])]
 
     def _next_refresh(self):
         """Steps per agent at which the AIPs are next retrained (None: never again)."""
@@ -345,7 +347,7 @@ def main(args: Args | None = None) -> dict:
     workers = default_workers(len(agents)) if args.workers is None else min(args.workers, len(agents))
     frame_stack = frame_stack_of(args, domain)
     out = Path(args.out_dir or f"runs/{args.env_id}__dials__s{args.seed}")
-    ppo = ppo_config(args, copies)
+    ppo = ppo_config(args, copies, frame_stack)
     label = _label(args.aip, refresh, autoregressive_of(args, domain))
     training = {"simulator": label, "aip": None, "seeds": [args.seed], "env_steps": 0,
                 "wall_clock_seconds": 0.0, "aip_seconds": 0.0, "workers": max(workers, 1), "backend": args.backend,

@@ -132,11 +132,11 @@ def main(args: Args | None = None) -> dict:
     args = args or Args()
     domain, agents, options, processes = check_args(args)
     torch.set_num_threads(1)
-    ppo = ppo_config(args, args.n_envs)
+    frame_stack = frame_stack_of(args, domain)
+    ppo = ppo_config(args, args.n_envs, frame_stack)
     per_update = args.samples_per_update
     total = whole_updates(int(args.total_timesteps or study_of(domain).multi_agent_budget), per_update)
     eval_every = int(args.eval_every or max(per_update, total // 10))
-    frame_stack = frame_stack_of(args, domain)
     out = Path(args.out_dir or f"runs/{args.env_id}__ippo__s{args.seed}")
     training = {"simulator": "gs", "aip": None, "seeds": [args.seed], "env_steps": 0, "wall_clock_seconds": 0.0,
                 "aip_seconds": 0.0, "workers": max(processes, 1),

@@ -44,6 +44,8 @@ class MultiPPOSettings(AblatedPPOSettings):
     normalize_advantage: bool = arg(True, "normalise advantages per agent and minibatch")
     normalize_reward: bool = arg(True, "divide rewards by the running std of each agent's discounted return")
     frame_stack: int | None = arg(None, "observations a policy reads (default: the domain's multi-agent choice)")
+    recurrent_hidden: int = arg(0, "units of a GRU that reads the stacked observations before the MLP (SPEC §6's "
+                                   "warehouse policy: --frame-stack 8 --recurrent-hidden 64); 0: no GRU")
 
 
 PREVIOUS_PPO_SETTINGS = {"learning_rate": 2.5e-4, "anneal_lr": True, "n_epochs": 3, "samples_per_update": 128,
@@ -80,6 +82,8 @@ def check_multi_ppo(args) -> list[int]:
             raise BadInput(f"{name} must be >= 1, got {getattr(args, name)}")
     if args.frame_stack is not None and args.frame_stack < 1:
         raise BadInput(f"frame_stack must be >= 1, got {args.frame_stack}")
+    if args.recurrent_hidden < 0:
+        raise BadInput(f"recurrent_hidden must be >= 0, got {args.recurrent_hidden}")
     check_ppo_settings(args)
     return _hidden(args.hidden)
 
@@ -103,8 +107,9 @@ def frame_stack_of(args, domain) -> int:
     return int(args.frame_stack or dials_of(domain).frame_stack or domain.frame_stack)
 
 
-def ppo_config(args, copies: int) -> dict:
-    """:class:`~ials_zoo.learners.batched_ppo.PPOConfig` fields for ``copies`` per agent."""
+def ppo_config(args, copies: int, frame_stack: int = 1) -> dict:
+    """:class:`~ials_zoo.learners.batched_ppo.PPOConfig` fields for ``copies`` per agent and
+    policies reading ``frame_stack`` observations."""
     if args.samples_per_update % copies:
         raise BadInput(f"samples_per_update ({args.samples_per_update}) must be a multiple of the copies per "
                          f"agent ({copies})")
@@ -113,13 +118,18 @@ def ppo_config(args, copies: int) -> dict:
             "clip_range": args.clip_range, "ent_coef": args.ent_coef, "vf_coef": args.vf_coef, "gamma": args.gamma,
             "gae_lambda": args.gae_lambda, "max_grad_norm": args.max_grad_norm,
             "hidden": tuple(int(x) for x in args.hidden.split(",")),
-            "normalize_advantage": args.normalize_advantage, "normalize_reward": args.normalize_reward}
+            "normalize_advantage": args.normalize_advantage, "normalize_reward": args.normalize_reward,
+            # only a recurrent run records them: earlier runs' settings stay as they were
+            **({"recurrent_hidden": args.recurrent_hidden, "frames": frame_stack} if args.recurrent_hidden else {})}
 
 
 def joint_policy(agents, layers, obs_size: int, n_actions: int, frame_stack: int, metadata: dict):
-    """The agents' actors as one :class:`~ials_zoo.policy.PolicyNetwork`."""
-
-    return PolicyNetwork(agents, obs_size, n_actions, layers, "tanh", frame_stack, metadata)
+    """The agents' actors (:meth:`~ials_zoo.learners.batched_ppo.BatchedPPO.actor_layers`: a
+    GRU's four tensors first where the policy is recurrent) as one
+    :class:`~ials_zoo.policy.PolicyNetwork`."""
+    gru = layers[0] if len(layers[0]) == 4 else None
+    return PolicyNetwork(agents, obs_size, n_actions, layers[1:] if gru else layers, "tanh", frame_stack, metadata,
+                         recurrent=gru)
 
 
 class JointActor:

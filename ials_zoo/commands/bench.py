@@ -201,7 +201,7 @@ def _learner_seconds(env_id: str, copies: int, seed: int, updates: int = 5,
     domain = get_domain(env_id)
     agents = domain.agents()
     args = dials.Args(env_id=env_id, **(settings or {}))
-    cfg = PPOConfig(**ppo_config(args, copies))
+    cfg = PPOConfig(**ppo_config(args, copies, frame_stack_of(args, domain)))
     width = int(np.prod(domain.observation_space.shape)) * frame_stack_of(args, domain)
     threads = torch.get_num_threads()
     torch.set_num_threads(1)

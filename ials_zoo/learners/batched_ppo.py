@@ -41,6 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ials_zoo.core.streams import CopyStreams, agent_key, derived_seed
+from ials_zoo.errors import BadInput
 
 ACTION_STREAM_SALT = 2
 
@@ -64,6 +65,12 @@ class PPOConfig:
     hidden: tuple = (256, 128)
     normalize_advantage: bool = True
     normalize_reward: bool = False
+    recurrent_hidden: int = 0
+    """> 0: actor and critic each read their input through a GRU of this many units, run over
+    the ``frames`` stacked observations (oldest first) -- SPEC §6's warehouse policy,
+    "recurrent over the last 8 observations"; 0: the MLP reads the frames concatenated."""
+    frames: int = 1
+    """How many observations the input stacks (the GRU's sequence length)."""
 
 
 PAD = 8
@@ -110,8 +117,15 @@ class BatchedPPO:
         A = len(self.agents)
         params = {}
         self._sizes = {}
+        self.recurrent = int(cfg.recurrent_hidden)
+        if self.recurrent < 0 or cfg.frames < 1 or self.input_size % cfg.frames:
+            raise BadInput(f"recurrent_hidden must be >= 0 and the input ({self.input_size}) a whole number of "
+                           f"frames ({cfg.frames})")
+        self.frame_size = self.input_size // cfg.frames
         for head, out, gain_out in (("pi", n_actions, 0.01), ("vf", 1, 1.0)):
-            sizes = [self.input_size, *cfg.hidden, out]
+            if self.recurrent:
+                params.update(self._gru_params(head))
+            sizes = [self.recurrent or self.input_size, *cfg.hidden, out]
             self._sizes[head] = sizes
             for i, (a, b) in enumerate(zip(sizes[:-1], sizes[1:])):
                 gain = gain_out if i == len(sizes) - 2 else math.sqrt(2)
@@ -128,6 +142,22 @@ class BatchedPPO:
         self._seed_update()
         self.reward_scale = RewardScale(A, cfg.n_envs, cfg.gamma)
 
+    def _gru_params(self, head: str) -> dict:
+        """A GRU per agent (torch's gate order r, z, n), each gate's block padded to
+        :func:`_padded` units so the padding stays zero; orthogonal weights, zero biases."""
+        import torch
+
+        A, H, F = len(self.agents), self.recurrent, self.frame_size
+        Hp = _padded(H)
+        w_ih = np.zeros((A, _padded(F), 3 * Hp), np.float32)
+        w_hh = np.zeros((A, Hp, 3 * Hp), np.float32)
+        for k, ag in enumerate(self.agents):
+            for g in range(3):
+                w_ih[k, :F, g * Hp:g * Hp + H] = _orthogonal(self._rng(ag, f"{head}.gru.ih{g}"), H, F, 1.0).T
+                w_hh[k, :H, g * Hp:g * Hp + H] = _orthogonal(self._rng(ag, f"{head}.gru.hh{g}"), H, H, 1.0).T
+        return {f"{head}.gru.weight_ih": torch.from_numpy(w_ih), f"{head}.gru.weight_hh": torch.from_numpy(w_hh),
+                f"{head}.gru.bias_ih": torch.zeros(A, 3 * Hp), f"{head}.gru.bias_hh": torch.zeros(A, 3 * Hp)}
+
     def _rng(self, agent: str, what: str, *counters: int) -> np.random.Generator:
         return np.random.default_rng([self.seed, agent_key(agent), agent_key(what), *counters])
 
@@ -137,9 +167,37 @@ class BatchedPPO:
         self._perm_rngs = [self._rng(a, "minibatches", self.updates) for a in self.agents]
 
     # -- networks
+    def _gru(self, head: str, x):
+        """``x [A, B, padded input]`` -> the GRU's last hidden state ``[A, B, padded units]``."""
+        import torch
+
+        p = self.params
+        A, B = x.shape[0], x.shape[1]
+        Fp, Hp = _padded(self.frame_size), _padded(self.recurrent)
+        frames = x[..., :self.input_size].reshape(A, B, self.cfg.frames, self.frame_size)
+        if Fp != self.frame_size:
+            frames = torch.nn.functional.pad(frames, (0, Fp - self.frame_size))
+        # the small weights are split by gate, never the large activations: indexing or
+        # splitting an activation zero-fills all of it in the backward pass, per slice
+        # (measured: 80% of an update)
+        w_ih, w_hh = p[f"{head}.gru.weight_ih"].split(Hp, -1), p[f"{head}.gru.weight_hh"].split(Hp, -1)
+        b_ih, b_hh = p[f"{head}.gru.bias_ih"].split(Hp, -1), p[f"{head}.gru.bias_hh"].split(Hp, -1)
+        flat = frames.reshape(A, -1, Fp)
+        gi = [torch.baddbmm(b[:, None], flat, w).reshape(A, B, self.cfg.frames, Hp).unbind(2)
+              for w, b in zip(w_ih, b_ih)]
+        h = x.new_zeros(A, B, Hp)
+        for t in range(self.cfg.frames):
+            h_r, h_z, h_n = (torch.baddbmm(b[:, None], h, w) for w, b in zip(w_hh, b_hh))
+            r, z = torch.sigmoid(gi[0][t] + h_r), torch.sigmoid(gi[1][t] + h_z)
+            n = torch.sigmoid((gi[2][t] + r * h_n) * 2.0) * 2.0 - 1.0  # tanh (see _mlp)
+            h = n + z * (h - n)
+        return h
+
     def _mlp(self, head: str, x):
         import torch
 
+        if self.recurrent:
+            x = self._gru(head, x)
         for i in range(self.n_layers):
             x = torch.baddbmm(self.params[f"{head}.{i}.bias"][:, None], x, self.params[f"{head}.{i}.weight"])
             if i < self.n_layers - 1:
@@ -256,9 +314,21 @@ class BatchedPPO:
             self.reward_scale.load_state_dict(state["reward_scale"])
 
     def actor_layers(self) -> list:
-        """The actors' ``[(W [A, in, out], b [A, out]), ...]`` as float32 numpy arrays."""
+        """The actors' ``[(W [A, in, out], b [A, out]), ...]`` as float32 numpy arrays; with a
+        recurrent encoder, the first entry is its GRU's ``(W_ih [A, frame, 3H], W_hh [A, H, 3H],
+        b_ih [A, 3H], b_hh [A, 3H])`` (torch's gate order, unpadded)."""
         sizes = self._sizes["pi"]
-        return [(self.params[f"pi.{i}.weight"].detach().numpy()[:, :a, :b].copy(),
+        gru = []
+        if self.recurrent:
+            H, Hp, F = self.recurrent, _padded(self.recurrent), self.frame_size
+
+            def gates(name, rows):
+                t = self.params[f"pi.gru.{name}"].detach().numpy()
+                t = t[:, :rows] if rows else t
+                return np.concatenate([t[..., g * Hp:g * Hp + H] for g in range(3)], axis=-1).copy()
+
+            gru = [(gates("weight_ih", F), gates("weight_hh", H), gates("bias_ih", 0), gates("bias_hh", 0))]
+        return gru + [(self.params[f"pi.{i}.weight"].detach().numpy()[:, :a, :b].copy(),
                  self.params[f"pi.{i}.bias"].detach().numpy()[:, :b].copy())
                 for i, (a, b) in enumerate(zip(sizes[:-1], sizes[1:]))]
 

@@ -58,6 +58,7 @@ CHANGES = {
     "gamma 0.95": {"gamma": 0.95},
     "no advantage normalisation": {"normalize_advantage": False},
     "frame stack 1": {"frame_stack": 1},
+    "GRU 32 over the 8 frames": {"recurrent_hidden": 32},
     # round 2: the changes that helped in round 1, together
     "reward normalisation + gamma 0.95": {"normalize_reward": True, "gamma": 0.95},
     "reward normalisation + gamma 0.95 + hidden 128-128": {"normalize_reward": True, "gamma": 0.95,
@@ -65,6 +66,8 @@ CHANGES = {
     "frame stack 1 + gamma 0.95": {"frame_stack": 1, "gamma": 0.95},
     "frame stack 1 + gamma 0.95 + reward normalisation": {"frame_stack": 1, "gamma": 0.95, "normalize_reward": True},
     "frame stack 1 + gamma 0.95 + hidden 128-128": {"frame_stack": 1, "gamma": 0.95, "hidden": "128,128"},
+    "GRU 32 over the 8 frames + gamma 0.95 + reward normalisation": {"recurrent_hidden": 32, "gamma": 0.95,
+                                                                     "normalize_reward": True},
 }
 """Cell name -> the settings it changes (``old defaults`` replaces them all)."""
 
@@ -74,9 +77,9 @@ ROUND_2 = [c for c in CHANGES if " + " in c]
 def domain_cells(domain, round_: int = 1) -> list[str]:
     """The cells of a domain in round 1 (every single change) or round 2 (the helpful changes
     together); a policy that reads one observation only where the domain's policies read
-    several (frame stack)."""
+    several (frame stack; a GRU over them)."""
     cells = [c for c in CHANGES if (c in ROUND_2) == (round_ == 2)]
-    return [c for c in cells if "frame stack 1" not in c or domain.frame_stack > 1]
+    return [c for c in cells if domain.frame_stack > 1 or not ("frame stack 1" in c or "GRU" in c)]
 
 
 def cell_settings(env_id: str, cell: str) -> dict:
@@ -84,9 +87,10 @@ def cell_settings(env_id: str, cell: str) -> dict:
     if cell not in CHANGES:
         raise BadInput(f"unknown cell {cell!r}; expected one of {', '.join(CHANGES)}")
     change = CHANGES[cell]
-    if cell == "old defaults":
-        return dict(OLD_DEFAULTS)
-    return dict(BASE, **change)
+    settings = dict(OLD_DEFAULTS) if cell == "old defaults" else dict(BASE, **change)
+    # the paper's frame stack unless the cell changes it (the multi-agent default reads one now)
+    settings.setdefault("frame_stack", get_domain(env_id).frame_stack)
+    return settings
 
 
 def _slug(cell: str) -> str:
