@@ -187,6 +187,18 @@ def test_dials_gives_the_same_result_with_any_number_of_workers(tmp_path):
     assert {"aips.pt", "checkpoint.pt", "curve.json", "progress.csv"} <= {p.name for p in folder.iterdir()}
 
 
+def test_a_recurrent_dials_run_is_the_same_on_any_workers_and_writes_a_recurrent_policy(tmp_path):
+    """GRUs over 4 frames: the shards' actors (GRU first) join into one recurrent policy file."""
+    from ials_zoo.policy import load_policy_file
+
+    kw = dict(frame_stack=4, recurrent_hidden=8, refresh="never")
+    in_process, two = _dials(tmp_path, "g0", workers=0, **kw), _dials(tmp_path, "g2", workers=2, **kw)
+    assert_same_run(in_process, two)
+    net = load_policy_file(two[1] / "policy.safetensors")
+    assert net.recurrent_hidden == 8 and net.frame_stack == 4 and list(net.agents) == AGENTS
+    assert two[0]["training"]["hyperparameters"]["ppo"]["recurrent_hidden"] == 8
+
+
 def test_traffic_dials_gives_the_same_result_with_one_and_two_workers(tmp_path):
     """Two lights, one AIP training; each worker's SUMO holds its agents' local simulators."""
     kw = dict(env_id="traffic_grid_v0", agents="tls_12,tls_13", env_options="", collect_steps=300)
@@ -259,6 +271,8 @@ def test_ippo_on_the_gs_is_the_same_with_or_without_worker_processes(tmp_path):
     ({"workers": -1}, "workers must be >= 0"),
     ({"samples_per_update": 100, "n_envs": 3}, "multiple of the copies"),
     ({"ray_address": "127.0.0.1:1"}, "needs --backend ray"),
+    ({"recurrent_hidden": -1}, "recurrent_hidden must be >= 0"),
+    ({"recurrent_hidden": 8, "learner": "sb3"}, "needs --learner batched"),
 ])
 def test_bad_arguments_are_refused_before_anything_starts(tmp_path, kw, message):
     with pytest.raises(ValueError, match=message.replace("(", r"\(").replace("[", r"\[")):
