@@ -102,8 +102,8 @@ def _multi_run(root, label, seed, score, seconds, aip, workers=2, algorithm="dia
 
 
 def test_dials_summary_targets_and_parallel_efficiency(tmp_path):
-    from ials_zoo.reproduce.claims import dials_claims, summarize_dials
-    from ials_zoo.reproduce.report import load_multiagent_runs, write_dials_report
+    from ials_zoo.reproduce.claims import dials_claims, load_multiagent_runs, summarize_dials
+    from ials_zoo.reproduce.report import write_dials_report
 
     for seed, (a, b, c) in enumerate([(10.0, 9.8, 3.0), (10.4, 10.2, 3.2)]):
         _multi_run(tmp_path, "ippo", seed, a, 100.0, 0.0, algorithm="ippo")

@@ -12,7 +12,7 @@ import pytest
 from ials_zoo.policy import PolicyNetwork, save_policy
 from ials_zoo.reproduce import Config, build_plan, describe_plan, reproduce
 from ials_zoo.reproduce import experiments as X
-from ials_zoo.reproduce.report import aggregate_curves, time_to_reach
+from ials_zoo.reproduce.claims import aggregate_curves, time_to_reach
 from ials_zoo.reproduce.runner import run_jobs
 
 # ---------------------------------------------------------------------------------- planning
@@ -351,7 +351,8 @@ def _run(label, seed, finals, curve, steps=1000, seconds=10.0, aip=0.0):
 
 
 def test_summary_ratios_and_claims():
-    from ials_zoo.reproduce.report import summarize_training, training_section
+    from ials_zoo.reproduce.claims import summarize_training
+    from ials_zoo.reproduce.report import training_section
 
     runs = [_run("gs", 0, 10.0, [(0, 0), (100, 10)], seconds=100),
             _run("gs", 1, 10.2, [(0, 0), (100, 10)], seconds=100),

@@ -13,14 +13,10 @@ import numpy as np
 from ials_zoo.baselines.multiagent import DETERMINISTIC_RESULT
 from ials_zoo.errors import BadInput
 from ials_zoo.leaderboard import ResultError, identity, load_entries, merge_results, submit
-from ials_zoo.reproduce.claims import (  # noqa: F401 - names of the former single module
+from ials_zoo.reproduce.claims import (
     CE_ROWS,
-    CLEAR_CE_GAP,
     PAPER,
-    TARGET_SCORE_RATIO,
-    TARGET_TIME_RATIO,
     _load,
-    aggregate_curves,
     dials_claims,
     dset_verdicts,
     group,
@@ -29,11 +25,9 @@ from ials_zoo.reproduce.claims import (  # noqa: F401 - names of the former sing
     load_runs,
     memory_claims,
     memory_stats,
-    paper_steps_per_second,
     reference_scores,
     summarize_dials,
     summarize_training,
-    time_to_reach,
     training_claims,
 )
 from ials_zoo.reproduce.plan import label_of
