@@ -104,8 +104,11 @@ def run(plan: RunPlan, learner: MultiAgentLearner, description: str, domain) -> 
     ``description`` opens the run's first line (the driver adds the budget and the folder)."""
     out = plan.out
     folder = RunFolder(out, resume=plan.resume, overwrite=plan.overwrite, settings=plan.settings)
-    rate = study_of(domain).multi_agent_steps_per_second.get("gs" if learner.simulator == "gs" else "ials", 10_000.0)
-    estimate = plan.total * len(plan.agents) / max(rate, 1.0)
+    on_gs = learner.simulator == "gs"
+    rate = study_of(domain).multi_agent_steps_per_second.get("gs" if on_gs else "ials", 10_000.0)
+    # the GS moves every agent, learning or scripted; an IALS only the learners'
+    simulated = len(domain.agents(**plan.options)) if on_gs else len(plan.agents)
+    estimate = plan.total * simulated / max(rate, 1.0)
     print(f"{description}\n  {plan.total:,} steps per agent; about {format_seconds(estimate)} of training at the "
           f"study's speed ({rate:,.0f} agent-steps/s on 2 cores; evaluations extra); writing {out}/"
           + (" (resuming)" if folder.resuming else ""), flush=True)
