@@ -80,7 +80,8 @@ class MultiAgentLearner(Protocol):
         """Start the simulators and workers at ``steps`` per agent (on the clock)."""
 
     def actor_layers(self) -> list:
-        """Every layer of every agent's actor, stacked over agents: ``[(W, b), ...]``."""
+        """Every layer of every agent's actor, stacked over agents: ``[(W, b), ...]``, a recurrent
+        actor's GRU first (:meth:`~ials_zoo.learners.batched_ppo.BatchedPPO.actor_layers`)."""
 
     def next_stop(self, steps: int) -> int | None:
         """Steps per agent, after ``steps``, at which training must stop for the learner's own

@@ -1,7 +1,8 @@
 """Independent PPO for many agents in one batched torch program.
 
 Every agent has its own actor and critic (separate MLPs with tanh, as SB3's ``MlpPolicy`` with
-``net_arch={"pi": hidden, "vf": hidden}``) and its own PPO update; their weights are stacked on
+``net_arch={"pi": hidden, "vf": hidden}``, each optionally reading its stacked observations
+through its own GRU first: ``PPOConfig.recurrent_hidden``) and its own PPO update; their weights are stacked on
 a leading agent axis, so a forward pass or an update of all agents is one ``torch.bmm`` per
 layer instead of one small model call per agent. Nothing is shared:
 
