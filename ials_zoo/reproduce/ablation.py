@@ -79,7 +79,8 @@ def domain_cells(domain, round_: int = 1) -> list[str]:
     together); a policy that reads one observation only where the domain's policies read
     several (frame stack; a GRU over them)."""
     cells = [c for c in CHANGES if (c in ROUND_2) == (round_ == 2)]
-    return [c for c in cells if domain.frame_stack > 1 or not ("frame stack 1" in c or "GRU" in c)]
+    reads_frames = ("frame_stack", "recurrent_hidden")
+    return [c for c in cells if domain.frame_stack > 1 or not any(k in CHANGES[c] for k in reads_frames)]
 
 
 def cell_settings(env_id: str, cell: str) -> dict:
