@@ -183,7 +183,8 @@ class ScriptedPolicy(Policy):
 
 
 class CallablePolicy(Policy):
-    """Wraps ``fn(obs) -> action``."""
+    """Wraps ``fn(obs) -> action``; a ``fn`` with memory has a ``reset(seed)`` method, called
+    at every episode start."""
 
     kind = "callable"
 
@@ -191,6 +192,10 @@ class CallablePolicy(Policy):
         self.fn = fn
         self.name = name
         self.frame_stack = int(frame_stack or getattr(fn, "frame_stack", 1))
+
+    def reset(self, seed):
+        if callable(getattr(self.fn, "reset", None)):
+            self.fn.reset(seed)
 
     def act(self, obs, action_space):
         return self.fn(obs)

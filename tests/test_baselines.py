@@ -293,3 +293,22 @@ def test_ppo_single_on_the_shipped_aip_charges_only_what_it_did(tmp_path):
     assert aip["charged"] is False and aip["collection_seconds"] + aip["training_seconds"] > 0
     assert result["training"]["aip_seconds"] == 0.0
     assert aip["file"].startswith("ials_zoo/influence/pretrained/") and not aip["file"].startswith("/")
+
+
+def test_the_update_size_is_the_domains_unless_given():
+    from ials_zoo.baselines import ippo
+    from ials_zoo.baselines.multiagent import fill_update_size
+    from ials_zoo.core.domains import get_domain
+
+    warehouse, traffic = get_domain("warehouse_v0"), get_domain("traffic_grid_v0")
+    # the warehouse's learners measured best with 2,048 samples in 256s (docs/ablation.md)
+    assert ppo_single.update_size(ppo_single.Args(n_envs=8), warehouse) == (256, 256)
+    assert ppo_single.update_size(ppo_single.Args(n_envs=8), traffic) == (64, 128)
+    assert ppo_single.update_size(ppo_single.Args(n_envs=8, n_steps=32, batch_size=64), warehouse) == (32, 64)
+    for domain, expected in ((warehouse, (2048, 256)), (traffic, (512, 128))):
+        args = ippo.Args(env_id=domain.env_id)
+        fill_update_size(args, domain)
+        assert (args.samples_per_update, args.batch_size) == expected
+    args = ippo.Args(env_id="warehouse_v0", samples_per_update=256, batch_size=64)
+    fill_update_size(args, warehouse)
+    assert (args.samples_per_update, args.batch_size) == (256, 64)

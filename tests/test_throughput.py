@@ -21,9 +21,9 @@ def test_free_vec_env_truncates_every_episode_at_its_length():
 
 
 def test_ppo_throughput_runs_the_baselines_ppo_on_each_simulator():
-    rows = [ppo_throughput("warehouse_v0", "robot_20", sim, steps=256, n_envs=2) for sim in ("gs", NO_SIMULATOR)]
+    rows = [ppo_throughput("warehouse_v0", "robot_20", sim, steps=2048, n_envs=2) for sim in ("gs", NO_SIMULATOR)]  # one update
     for r in rows:
-        assert r["steps"] == 256 and r["steps_per_s"] > 0 and r["n_envs"] == 2
+        assert r["steps"] == 2048 and r["steps_per_s"] > 0 and r["n_envs"] == 2
     bound = ppo_bound(rows)
     assert bound["time_per_step_vs_gs"]["gs"] == 1.0
     assert bound["floor"] == bound["time_per_step_vs_gs"][NO_SIMULATOR] > 0

@@ -406,3 +406,36 @@ def test_nearest_item_rule_walks_to_the_nearest_item_and_its_joint_score_loop_is
     assert mean == pytest.approx(evaluate_joint("warehouse_v0", "scripted", episodes=3, robots=[2, 2]).mean)
     rule, _, _ = score_joint(3, robots=[2, 2])
     assert rule > evaluate_joint("warehouse_v0", "random", episodes=3, robots=[2, 2]).mean
+
+
+def test_the_memory_rule_walks_to_the_item_it_saw_first_and_forgets_at_each_episode():
+    from ials_zoo.evaluation import load_policy
+    from ials_zoo.warehouse import regions as R
+    from ials_zoo.warehouse.rules import OldestSeenItem, nearest_item_centred, score_joint, toward_centre
+
+    def observe(position, *item_bits):
+        obs = np.zeros(R.OBS_SIZE)
+        obs[position] = 1
+        obs[[R.N_CELLS + b for b in item_bits]] = 1
+        return obs
+
+    far, near = 2, 10  # from the centre: (3, 4) is 3 moves away (down first), (0, 2) 2 (up)
+    rule = OldestSeenItem()
+    assert rule(observe(R.CENTRE, far)) == 1  # the only item
+    assert rule(observe(R.CENTRE, far, near)) == 1  # the nearer newcomer is younger
+    assert rule(observe(R.CENTRE, near)) == 0  # the old one was taken
+    assert rule(observe(R.CENTRE, near, far)) == 0  # far reappeared: a new item, younger
+    assert rule(observe(R.CENTRE + R.SIZE)) == toward_centre(R.CENTRE + R.SIZE) == 0  # empty: back up to the centre
+    assert nearest_item_centred(observe(R.CENTRE - 1)) == 3  # empty: right, to the centre
+    rule.reset(0)
+    rule(observe(R.CENTRE, near))
+    assert rule(observe(R.CENTRE, near, far)) == 0  # nothing remembered across episodes
+    # the evaluator resets a rule with memory at each episode: scores do not depend on history
+    policy = load_policy(OldestSeenItem())
+    rule_state = policy.fn
+    rule_state(observe(R.CENTRE, far))
+    policy.reset(7)
+    assert (rule_state._first_seen == -1).all() and rule_state._step == 0
+    once, _, _ = score_joint(2, rule=OldestSeenItem, robots=[2, 2])
+    again, _, _ = score_joint(2, rule=OldestSeenItem, robots=[2, 2])
+    assert once == again

@@ -146,7 +146,7 @@ def check_args(args: Args):
     options = parse_env_options(args.env_options)
     agents = domain.check_agents(None if args.agents == "all" else args.agents, **options)
     check_seed(args.seed, "seed")
-    check_multi_ppo(args)
+    check_multi_ppo(args, domain)
     refresh = parse_refresh(args.refresh, dials_of(domain).refresh)
     if args.aip == "shipped":
         if not shipped_set_path(args.env_id).is_file():

@@ -67,7 +67,7 @@ def check_args(args: Args):
     options = parse_env_options(args.env_options)
     agents = domain.check_agents(None if args.agents == "all" else args.agents, **options)
     check_seed(args.seed, "seed")
-    check_multi_ppo(args)
+    check_multi_ppo(args, domain)
     check_run_args(args)
     processes = (args.n_envs if domain.one_simulation_per_process else 0) if args.gs_processes is None else args.gs_processes
     if processes < 0:

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ials_zoo.baselines.arguments import AblatedPPOSettings, arg, check_ppo_settings
+from ials_zoo.baselines.arguments import BATCH_SIZE, SAMPLES_PER_UPDATE, AblatedPPOSettings, arg, check_ppo_settings
 from ials_zoo.baselines.ppo_single import _hidden
 from ials_zoo.core.extras import dials_of
 from ials_zoo.errors import BadInput
@@ -38,8 +38,10 @@ class MultiPPOSettings(AblatedPPOSettings):
     Policies are MLPs of ``hidden`` units (64-64: with 25-36 learners PPO's own computation
     dominates a 2-core machine; SPEC §6 used 256-128)."""
 
-    samples_per_update: int = arg(512, "samples of each agent per PPO update")
-    batch_size: int = arg(128, "minibatch size (samples of one agent)")
+    samples_per_update: int | None = arg(None, "samples of each agent per PPO update (default: the domain's: 512 in "
+                                         "traffic, 2048 in the warehouse)")
+    batch_size: int | None = arg(None, "minibatch size (samples of one agent; default: the domain's: 128 in traffic, "
+                                 "256 in the warehouse)")
     hidden: str = arg("64,64", "hidden layers of every actor and critic, comma-separated")
     normalize_advantage: bool = arg(True, "normalise advantages per agent and minibatch")
     normalize_reward: bool = arg(True, "divide rewards by the running std of each agent's discounted return")
@@ -74,9 +76,11 @@ class MultiAgentRunArgs(MultiPPOSettings):
     notes: str = arg("", "notes for result.json")
 
 
-def check_multi_ppo(args) -> list[int]:
-    """Clear errors for the PPO settings; returns the hidden sizes."""
+def check_multi_ppo(args, domain) -> list[int]:
+    """Clear errors for the PPO settings, after filling in the domain's update size where it
+    was not given (:func:`fill_update_size`); returns the hidden sizes."""
 
+    fill_update_size(args, domain)
     for name in ("samples_per_update", "batch_size"):
         if getattr(args, name) < 1:
             raise BadInput(f"{name} must be >= 1, got {getattr(args, name)}")
@@ -86,6 +90,17 @@ def check_multi_ppo(args) -> list[int]:
         raise BadInput(f"recurrent_hidden must be >= 0, got {args.recurrent_hidden}")
     check_ppo_settings(args)
     return _hidden(args.hidden)
+
+
+def fill_update_size(args, domain) -> None:
+    """Set ``args.samples_per_update`` and ``args.batch_size`` where they are None: the
+    domain's choice (:attr:`DIALSSettings.ppo_samples_per_update`, ``ppo_batch_size``), else
+    512 samples in minibatches of 128. Runs record the filled values."""
+    settings = dials_of(domain)
+    if args.samples_per_update is None:
+        args.samples_per_update = int(settings.ppo_samples_per_update or SAMPLES_PER_UPDATE)
+    if args.batch_size is None:
+        args.batch_size = int(settings.ppo_batch_size or BATCH_SIZE)
 
 
 def whole_updates(total: int, per_update: int) -> int:
@@ -243,5 +258,5 @@ def settings_of(args, skip=("resume", "overwrite", "progress", "out_dir", "submi
     return {k: v for k, v in dataclasses.asdict(args).items() if k not in skip}
 
 
-__all__ = ["JointActor", "MultiPPOSettings", "TrainingLog", "atomic_path", "check_multi_ppo", "joint_policy",
+__all__ = ["JointActor", "MultiPPOSettings", "TrainingLog", "atomic_path", "check_multi_ppo", "fill_update_size", "joint_policy",
            "DETERMINISTIC_RESULT", "PREVIOUS_PPO_SETTINGS", "final_results", "frame_stack_of", "merge_shard_stats", "whole_updates", "policy_file", "ppo_config", "save_aips", "settings_of", "write_curve"]

@@ -56,7 +56,15 @@ from pathlib import Path
 
 import ials_zoo
 from ials_zoo.baselines.aip_record import predictor_record
-from ials_zoo.baselines.arguments import AblatedPPOSettings, arg, check_ppo_settings, parse_env_options, run_cli
+from ials_zoo.baselines.arguments import (
+    BATCH_SIZE,
+    SAMPLES_PER_UPDATE,
+    AblatedPPOSettings,
+    arg,
+    check_ppo_settings,
+    parse_env_options,
+    run_cli,
+)
 from ials_zoo.baselines.runs import RunFolder, training_logger
 from ials_zoo.baselines.sb3_run import Evaluator, TrainingRun, as_float_box, estimate_seconds, make_ppo, scale_rewards
 from ials_zoo.core.domains import domain_ids, get_domain
@@ -82,8 +90,9 @@ class Args(AblatedPPOSettings):
     seed: int = arg(0, "training seed")
     total_timesteps: int | None = arg(None, "environment steps of training (default: the domain's study budget)")
     n_envs: int = arg(8, "parallel environments")
-    n_steps: int = arg(64, "rollout length per environment and update")
-    batch_size: int = arg(128, "minibatch size")
+    n_steps: int | None = arg(None, "rollout length per environment and update (default: the domain's samples "
+                              "per update / n_envs: 512 / 8 = 64 in traffic, 2048 / 8 = 256 in the warehouse)")
+    batch_size: int | None = arg(None, "minibatch size (default: the domain's: 128 in traffic, 256 in the warehouse)")
     net_arch: str = arg("64,64", "hidden layer sizes, comma-separated (policy and value nets)")
     frame_stack: int | None = arg(None, "observations the policy reads (default: the domain's choice for learned "
                                   "policies, DIALSSettings.frame_stack, else its frame_stack)")
@@ -117,6 +126,16 @@ def _hidden(net_arch: str) -> list[int]:
     if not sizes or min(sizes) < 1:
         raise BadInput(f"net_arch {net_arch!r}: expected comma-separated positive ints, e.g. 256,128")
     return sizes
+
+
+def update_size(args, domain) -> tuple[int, int]:
+    """``(n_steps, batch_size)``: the given ones, else the domain's choice
+    (:attr:`DIALSSettings.ppo_samples_per_update` split over ``n_envs``, ``ppo_batch_size``),
+    else 512 samples per update in minibatches of 128."""
+    settings = dials_of(domain)
+    samples = settings.ppo_samples_per_update or SAMPLES_PER_UPDATE
+    n_steps = args.n_steps or max(1, samples // args.n_envs)
+    return int(n_steps), int(args.batch_size or settings.ppo_batch_size or BATCH_SIZE)
 
 
 def check_ppo_args(args, positive=()) -> None:
@@ -194,6 +213,7 @@ def main(args: Args | None = None) -> dict:
     agent = dom.check_agent(args.agent or dom.default_agents[0], **options)
     if args.total_timesteps is None:
         args.total_timesteps = study_of(dom).budget
+    args.n_steps, args.batch_size = update_size(args, dom)
     frame_stack = int(args.frame_stack or dials_of(dom).frame_stack or dom.frame_stack)
     out = Path(args.out_dir) if args.out_dir else default_out_dir(args, agent)
     settings = {k: v for k, v in dataclasses.asdict(args).items()

@@ -17,7 +17,7 @@ import time
 import numpy as np
 from stable_baselines3.common.vec_env import VecEnv
 
-from ials_zoo.baselines.ppo_single import Args, _hidden, make_training_env
+from ials_zoo.baselines.ppo_single import Args, _hidden, make_training_env, update_size
 from ials_zoo.baselines.sb3_run import as_float_box, make_ppo
 from ials_zoo.core.domains import get_domain
 from ials_zoo.errors import BadInput
@@ -88,6 +88,7 @@ def ppo_throughput(env_id: str, agent: str, simulator: str, steps: int = 30_000,
     agent = dom.check_agent(agent)
     args = Args(env_id=env_id, agent=agent, simulator="ials" if simulator == NO_SIMULATOR else simulator,
                 n_envs=n_envs, seed=seed)
+    args.n_steps, args.batch_size = update_size(args, dom)
     venv, _ = make_training_env(args, agent)
     try:
         if simulator == NO_SIMULATOR:

@@ -31,7 +31,7 @@ import numpy as np
 
 import ials_zoo
 from ials_zoo.baselines import dials
-from ials_zoo.baselines.multiagent import PREVIOUS_PPO_SETTINGS, frame_stack_of, ppo_config
+from ials_zoo.baselines.multiagent import PREVIOUS_PPO_SETTINGS, fill_update_size, frame_stack_of, ppo_config
 from ials_zoo.baselines.throughput import NO_SIMULATOR, ppo_bound, ppo_throughput
 from ials_zoo.commands import CommandError
 from ials_zoo.core.domains import domain_ids, get_domain
@@ -201,6 +201,7 @@ def _learner_seconds(env_id: str, copies: int, seed: int, updates: int = 5,
     domain = get_domain(env_id)
     agents = domain.agents()
     args = dials.Args(env_id=env_id, **(settings or {}))
+    fill_update_size(args, domain)
     cfg = PPOConfig(**ppo_config(args, copies, frame_stack_of(args, domain)))
     width = int(np.prod(domain.observation_space.shape)) * frame_stack_of(args, domain)
     threads = torch.get_num_threads()

@@ -50,8 +50,12 @@ STUDY = StudySettings(budget=2_000_000, ppo_steps_per_second={"gs": 4900.0, "ial
 # DIALS's AIPs read their own last draw (autoregressive, lr 1e-2): a neighbour that lingers
 # stays one arrival (docs/fidelity.md), and DIALS scored 13.3 against 12.4 with memoryless
 # AIPs (10 and 5 seeds, 256,000 steps per agent; leaderboard/writeup.md)
+# A single learner among scripted robots (robot_20, 512k steps, 3 seeds) reached 13.8 with
+# 2,048 samples per update in minibatches of 256, against 8.9 with 512 in 128s; 4,096 in 512s
+# and 2,048 in 128s scored 11.9 (docs/ablation.md, "What holds robot_20 back")
 DIALS = DIALSSettings(aip_arch="gru", aip_hidden=64, aip_lr=1e-3, aip_epochs=10, aip_batch=8, copies=16,
-                     collect_steps=10_000, refresh=0, frame_stack=1, aip_autoregressive=True)
+                     collect_steps=10_000, refresh=0, frame_stack=1, aip_autoregressive=True,
+                     ppo_samples_per_update=2048, ppo_batch_size=256)
 
 DOMAIN = Domain(
     env_id=R.DOMAIN_ID,
