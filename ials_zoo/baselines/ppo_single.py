@@ -13,7 +13,8 @@ marginal) or a path to a predictor ``.pt`` file (:mod:`ials_zoo.influence.specs`
 
 The defaults are the multi-agent ablation's (``docs/ablation.md``; SPEC §3's, the authors', in
 :data:`PREVIOUS_SETTINGS`): lr 1e-3 held constant, 10 epochs of 512 samples per update (8
-parallel envs x 64 steps) in minibatches of 128, gamma 0.95, rewards divided by the running
+parallel envs x 64 steps) in minibatches of 128 (the warehouse: 2,048 = 8 x 256 in minibatches
+of 256, the domain's choice, :func:`update_size`), gamma 0.95, rewards divided by the running
 std of the discounted return (SB3's ``VecNormalize``, observations untouched), MLPs of 64-64
 (separate policy and value networks); clip 0.1, entropy 0.01, value coefficient 1, GAE lambda
 0.95 and gradient clipping at 0.5 stay the authors'. The warehouse policy reads one
