@@ -58,6 +58,13 @@ def test_ppo_single_short_run(tmp_path, simulator):
     out = tmp_path / "run"
     result = ppo_single.main(ppo_single.Args(simulator=simulator, out_dir=str(out), **TINY))
     data = _check_run(out, simulator, result)
+    # the same policy, scored again with its most likely actions, as the multi-agent runs do
+    det = json.loads((out / "result_deterministic.json").read_text())
+    assert det["evaluation"]["deterministic"] is True and not data["evaluation"]["deterministic"]
+    reference = evaluate(ENV, AGENT, str(out / "policy.safetensors"), episodes=TINY["final_eval_episodes"],
+                         deterministic=True)
+    assert det["scores"][0]["returns"] == reference.returns
+    assert det["training"] == data["training"]
     if simulator == "gs":
         assert data["training"]["aip"] is None
     else:

@@ -15,6 +15,7 @@ import numpy as np
 
 from ials_zoo.baselines.arguments import BATCH_SIZE, SAMPLES_PER_UPDATE, AblatedPPOSettings, arg, check_ppo_settings
 from ials_zoo.baselines.ppo_single import _hidden
+from ials_zoo.baselines.runs import DETERMINISTIC_RESULT
 from ials_zoo.core.extras import dials_of
 from ials_zoo.errors import BadInput
 from ials_zoo.evaluation import evaluate_joint, load_model
@@ -226,9 +227,6 @@ def save_aips(path: Path, predictors: dict) -> None:
     save_predictor_set(predictors.values(), path)
 
 
-DETERMINISTIC_RESULT = "result_deterministic.json"
-
-
 def final_results(out: Path, env_id: str, policy_path: Path, algorithm: str, training: dict, curve: list,
                   agents: list, seed: int, episodes: int, options: dict, submitter: str = "", notes: str = "",
                   progress: bool = False) -> tuple[dict, dict]:
@@ -262,4 +260,4 @@ def settings_of(args, skip=("resume", "overwrite", "progress", "out_dir", "submi
 
 
 __all__ = ["JointActor", "MultiPPOSettings", "TrainingLog", "atomic_path", "check_multi_ppo", "fill_update_size", "joint_policy",
-           "DETERMINISTIC_RESULT", "PREVIOUS_PPO_SETTINGS", "final_results", "frame_stack_of", "merge_shard_stats", "whole_updates", "policy_file", "ppo_config", "save_aips", "settings_of", "write_curve"]
+           "PREVIOUS_PPO_SETTINGS", "final_results", "frame_stack_of", "merge_shard_stats", "whole_updates", "policy_file", "ppo_config", "save_aips", "settings_of", "write_curve"]

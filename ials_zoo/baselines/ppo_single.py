@@ -36,7 +36,9 @@ is refused unless ``--resume`` or ``--overwrite``), all written atomically (see
 * ``policy.safetensors`` -- the final policy (weights + JSON, loadable without running code:
   ``ials-zoo evaluate --policy runs/.../policy.safetensors``);
 * ``result.json`` -- a leaderboard result with the final GS score over
-  ``--final-eval-episodes`` episodes.
+  ``--final-eval-episodes`` episodes;
+* ``result_deterministic.json`` -- the same policy scored with its most likely actions (not
+  written with ``--deterministic-eval``, whose ``result.json`` is already that score).
 
 **Wall-clock**: one figure, ``training.wall_clock_seconds`` = the seconds spent training
 (rollouts and updates; GS evaluations and checkpoints excluded), plus, for an IALS, the AIP's
@@ -66,7 +68,7 @@ from ials_zoo.baselines.arguments import (
     parse_env_options,
     run_cli,
 )
-from ials_zoo.baselines.runs import RunFolder, training_logger
+from ials_zoo.baselines.runs import DETERMINISTIC_RESULT, RunFolder, training_logger
 from ials_zoo.baselines.sb3_run import Evaluator, TrainingRun, as_float_box, estimate_seconds, make_ppo, scale_rewards
 from ials_zoo.core.domains import domain_ids, get_domain
 from ials_zoo.core.extras import dials_of, study_of
@@ -253,12 +255,18 @@ def main(args: Args | None = None) -> dict:
         trainer = TrainingRun(model, run, meta, {agent: evaluator}, aip_seconds, frame_stack=frame_stack)
         final = trainer.learn(args.total_timesteps, args.eval_every, args.final_eval_episodes,
                               args.progress)[agent]
-        result = make_result(
-            [final], algorithm="ppo_single", training=training, training_seeds=[args.seed],
-            learning_curves=[{"seed": args.seed, "points": trainer.curve}], trained_agents=[agent],
-            submitter=args.submitter, notes=args.notes,
-        )
-        write_result(out / "result.json", result)
+        finals = [(final, "result.json")]
+        if not args.deterministic_eval:
+            finals.append((_score_deterministic(args, agent, out, dom, options), DETERMINISTIC_RESULT))
+        results = {}
+        for ev, name in finals:
+            results[name] = make_result(
+                [ev], algorithm="ppo_single", training=training, training_seeds=[args.seed],
+                learning_curves=[{"seed": args.seed, "points": trainer.curve}], trained_agents=[agent],
+                submitter=args.submitter, notes=args.notes,
+            )
+            write_result(out / name, results[name])
+        result = results["result.json"]
     s = result["score"]
     total = training["wall_clock_seconds"] + training["aip_seconds"]
     print(f"ppo_single: GS score of {agent} {s['mean']:.3f} [{s['ci_low']:.3f}, {s['ci_high']:.3f}] "
@@ -266,8 +274,22 @@ def main(args: Args | None = None) -> dict:
           f"{format_seconds(total)} (training" + (f" + AIP {format_seconds(training['aip_seconds'])}" if aip_seconds else "")
           + ")" + (f"; the AIP was made earlier (its own {format_seconds(aip['collection_seconds'] + aip['training_seconds'])}"
                    " not counted)" if aip and not aip["charged"] and aip["collection_seconds"] + aip["training_seconds"] else "")
+          + (f"; deterministic {finals[1][0].mean:.3f}" if len(finals) > 1 else "")
           + f"; wrote {out}/result.json", flush=True)
     return result
+
+
+def _score_deterministic(args: Args, agent: str, out: Path, dom, options: dict):
+    """The final policy scored again with its most likely actions (``result_deterministic.json``,
+    as the multi-agent runs write), on the same protocol episodes."""
+    evaluator = Evaluator(args.env_id, agent, args.final_eval_episodes, True,
+                          in_subprocess=dom.one_simulation_per_process, options=options)
+    try:
+        ev = evaluator(str(out / "policy.safetensors"), progress=args.progress)
+    finally:
+        evaluator.close()
+    ev.policy_file = "policy.safetensors"
+    return ev
 
 
 if __name__ == "__main__":

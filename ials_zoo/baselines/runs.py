@@ -9,7 +9,9 @@ Every baseline writes into one folder (``--out-dir``)::
                        plain containers only: read back with ``torch.load(weights_only=True)``)
     checkpoint.json    the run's counters, curve and clock at that checkpoint
     policy.safetensors the final policy (:mod:`ials_zoo.policy`): what results point to
-    result.json        the leaderboard result of the final policy
+    result.json        the leaderboard result of the final policy (sampled actions, unless the
+                       run was asked to evaluate deterministically)
+    result_deterministic.json  the same policy scored with its most likely actions
 
 A folder that already holds a run is refused, unless the caller asks to ``resume`` it (from
 its last checkpoint, same settings) or to ``overwrite`` it (everything in it is removed
@@ -34,6 +36,7 @@ from ials_zoo.utils import atomic_path, atomic_write_text, remove_stale_temporar
 
 STATUS = "status.json"
 LOCK = ".lock"
+DETERMINISTIC_RESULT = "result_deterministic.json"
 FINISHED, RUNNING, FAILED, INTERRUPTED, KILLED = "finished", "running", "failed", "interrupted", "killed"
 
 

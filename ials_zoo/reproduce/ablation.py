@@ -30,7 +30,8 @@ import numpy as np
 
 from ials_zoo.baselines.ippo import Args
 from ials_zoo.baselines.ippo import main as train_ippo
-from ials_zoo.baselines.multiagent import DETERMINISTIC_RESULT, PREVIOUS_PPO_SETTINGS
+from ials_zoo.baselines.multiagent import PREVIOUS_PPO_SETTINGS
+from ials_zoo.baselines.runs import DETERMINISTIC_RESULT
 from ials_zoo.core.domains import get_domain
 from ials_zoo.errors import BadInput
 from ials_zoo.evaluation import evaluate_joint

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ials_zoo.baselines.multiagent import DETERMINISTIC_RESULT
+from ials_zoo.baselines.runs import DETERMINISTIC_RESULT
 from ials_zoo.errors import BadInput
 from ials_zoo.leaderboard import ResultError, identity, load_entries, merge_results, submit
 from ials_zoo.reproduce.claims import (
