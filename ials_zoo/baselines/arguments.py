@@ -109,13 +109,6 @@ class AblatedPPOSettings(PPOSettings):
     gamma: float = arg(0.95, "discount")
 
 
-SAMPLES_PER_UPDATE = 512
-"""Samples of each learner per PPO update where its domain does not choose
-(:attr:`~ials_zoo.core.extras.DIALSSettings.ppo_samples_per_update`)."""
-BATCH_SIZE = 128
-"""The PPO minibatch where the domain does not choose (``DIALSSettings.ppo_batch_size``)."""
-
-
 def check_ppo_settings(args) -> None:
     """Clear errors for the :class:`PPOSettings` fields of ``args``."""
     import math

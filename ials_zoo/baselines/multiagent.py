@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ials_zoo.baselines.arguments import BATCH_SIZE, SAMPLES_PER_UPDATE, AblatedPPOSettings, arg, check_ppo_settings
+from ials_zoo.baselines.arguments import AblatedPPOSettings, arg, check_ppo_settings
 from ials_zoo.baselines.ppo_single import _hidden
 from ials_zoo.baselines.runs import DETERMINISTIC_RESULT
 from ials_zoo.core.extras import dials_of
@@ -98,13 +98,13 @@ def check_multi_ppo(args, domain) -> list[int]:
 
 def fill_update_size(args, domain) -> None:
     """Set ``args.samples_per_update`` and ``args.batch_size`` where they are None: the
-    domain's choice (:attr:`DIALSSettings.ppo_samples_per_update`, ``ppo_batch_size``), else
-    512 samples in minibatches of 128. Runs record the filled values."""
+    domain's choice (:attr:`DIALSSettings.ppo_samples_per_update`, ``ppo_batch_size``). Runs
+    record the filled values."""
     settings = dials_of(domain)
     if args.samples_per_update is None:
-        args.samples_per_update = int(settings.ppo_samples_per_update or SAMPLES_PER_UPDATE)
+        args.samples_per_update = int(settings.ppo_samples_per_update)
     if args.batch_size is None:
-        args.batch_size = int(settings.ppo_batch_size or BATCH_SIZE)
+        args.batch_size = int(settings.ppo_batch_size)
 
 
 def whole_updates(total: int, per_update: int) -> int:

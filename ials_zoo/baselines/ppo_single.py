@@ -60,8 +60,6 @@ from pathlib import Path
 import ials_zoo
 from ials_zoo.baselines.aip_record import predictor_record
 from ials_zoo.baselines.arguments import (
-    BATCH_SIZE,
-    SAMPLES_PER_UPDATE,
     AblatedPPOSettings,
     arg,
     check_ppo_settings,
@@ -133,12 +131,10 @@ def _hidden(net_arch: str) -> list[int]:
 
 def update_size(args, domain) -> tuple[int, int]:
     """``(n_steps, batch_size)``: the given ones, else the domain's choice
-    (:attr:`DIALSSettings.ppo_samples_per_update` split over ``n_envs``, ``ppo_batch_size``),
-    else 512 samples per update in minibatches of 128."""
+    (:attr:`DIALSSettings.ppo_samples_per_update` split over ``n_envs``, ``ppo_batch_size``)."""
     settings = dials_of(domain)
-    samples = settings.ppo_samples_per_update or SAMPLES_PER_UPDATE
-    n_steps = args.n_steps or max(1, samples // args.n_envs)
-    return int(n_steps), int(args.batch_size or settings.ppo_batch_size or BATCH_SIZE)
+    n_steps = args.n_steps or max(1, settings.ppo_samples_per_update // args.n_envs)
+    return int(n_steps), int(args.batch_size or settings.ppo_batch_size)
 
 
 def check_ppo_args(args, positive=()) -> None:

@@ -67,8 +67,7 @@ class DIALSSettings:
             default (None: the domain's ``frame_stack``); chosen from the PPO ablation.
         ppo_samples_per_update, ppo_batch_size: the PPO update of every learner (IPPO, DIALS,
             ``ppo_single``) by default: samples of each agent per update (split over its
-            copies) and minibatch (None: the shared defaults, 512 in minibatches of 128);
-            chosen from the PPO ablation.
+            copies) and minibatch; chosen from the PPO ablation.
         aip_autoregressive: DIALS's AIPs also read their previous influence ``u_{t-1}``
             (:mod:`ials_zoo.influence.base`) by default.
         aip_autoregressive_lr: the learning rate of autoregressive AIPs (at ``aip_lr`` for
@@ -84,8 +83,8 @@ class DIALSSettings:
     collect_steps: int = 10_000
     refresh: int = 0
     frame_stack: int | None = None
-    ppo_samples_per_update: int | None = None
-    ppo_batch_size: int | None = None
+    ppo_samples_per_update: int = 512
+    ppo_batch_size: int = 128
     aip_autoregressive: bool = False
     aip_autoregressive_lr: float = 1e-2
 
