@@ -35,9 +35,9 @@ def _check_run(out, simulator, result):
     assert (out / "policy.safetensors").is_file() and (out / "progress.csv").is_file()
     assert (out / "checkpoint.pt").is_file() and (out / "checkpoint.json").is_file()
     assert run_state(out) == "finished"
-    assert "train/entropy_loss" in (out / "progress.csv").read_text().splitlines()[0]
+    assert "entropy" in (out / "progress.csv").read_text().splitlines()[0].split(",")
     curve = json.loads((out / "curve.json").read_text())["points"]
-    assert [p["env_steps"] for p in curve] == [512, 1024]
+    assert [p["env_steps"] for p in curve] == [0, 512, 1024]
     assert all(b["wall_clock_seconds"] > a["wall_clock_seconds"] for a, b in zip(curve, curve[1:]))
     data = load_result(out / "result.json")
     assert data == result
@@ -77,13 +77,13 @@ def test_ppo_single_scales_rewards_over_every_step_and_checkpoints_the_scale(tmp
     out = tmp_path / "run"
     ppo_single.main(ppo_single.Args(simulator="untrained-ials", out_dir=str(out), normalize_reward=True,
                                     **dict(TINY, eval_every=0)))
-    rms = torch.load(out / "checkpoint.pt", weights_only=True)["reward_rms"]
+    rms = torch.load(out / "checkpoint.pt", weights_only=True)["model"]["reward_rms"]
     assert float(rms["count"]) == pytest.approx(1024, abs=1e-3)  # VecNormalize saw every training step
     assert float(rms["var"]) > 0
     plain = tmp_path / "plain"
     ppo_single.main(ppo_single.Args(simulator="untrained-ials", out_dir=str(plain), normalize_reward=False,
                                     **dict(TINY, eval_every=0)))
-    assert "reward_rms" not in torch.load(plain / "checkpoint.pt", weights_only=True)
+    assert "reward_rms" not in torch.load(plain / "checkpoint.pt", weights_only=True)["model"]
 
 def test_ppo_single_on_trained_ials_counts_aip_time(tmp_path, small_aip):
     from ials_zoo.influence.files import load_predictor
@@ -164,7 +164,7 @@ def test_ppo_shared_short_run(tmp_path):
         data = load_result(out / f"result_{r['agent']}.json")
         assert data["algorithm"] == "ppo_shared"
         assert data["trained_agents"] == ["robot_20", "robot_21"]
-    assert [p["env_steps"] for p in results[0]["learning_curves"][0]["points"]] == [256, 512]
+    assert [p["env_steps"] for p in results[0]["learning_curves"][0]["points"]] == [0, 256, 512]
 
 
 # --------------------------------------------------------------------------------------------

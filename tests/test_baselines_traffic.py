@@ -23,8 +23,8 @@ def _check(out, simulator, result):
     data = load_result(out / "result.json")
     assert data == result and data["training"]["simulator"] == simulator
     curve = json.loads((out / "curve.json").read_text())["points"]
-    assert [p["env_steps"] for p in curve] == [300, 600]
-    assert curve[1]["wall_clock_seconds"] > curve[0]["wall_clock_seconds"]
+    assert [p["env_steps"] for p in curve] == [0, 300, 600]
+    assert curve[2]["wall_clock_seconds"] > curve[1]["wall_clock_seconds"]
     # scored again later from the saved file, in this process (training ran its GS copies and
     # evaluations in worker processes, so no libsumo simulation is live here)
     again = evaluate(ENV, AGENT, str(out / "policy.safetensors"), episodes=2)

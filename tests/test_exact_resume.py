@@ -1,6 +1,7 @@
 """A run stopped after a checkpoint and resumed ends bitwise equal to the run that was never
-stopped: the same weights, learning curve, score and training log, for IPPO and for DIALS on
-every backend.
+stopped: the same weights, learning curve, score and training log, for IPPO, for DIALS on
+every backend and with either learner, and for the SB3 baselines (ppo_single on the GS and on
+an IALS, ppo_shared).
 
 The stop is a crash at the GS evaluation after a checkpoint, so the run trained past its last
 checkpoint (an AIP refresh included) in the middle of the GS and IALS episodes (the budgets
@@ -100,6 +101,87 @@ def test_a_resumed_traffic_run_ends_bitwise_as_the_uninterrupted_one(tmp_path, m
         kwargs.update(refresh="384", collect_steps=300, aip_epochs=1, workers=2)
     whole = module.main(module.Args(**kwargs, out_dir=str(tmp_path / "whole"))), tmp_path / "whole"
     assert_same_run(whole, _stopped_and_resumed(monkeypatch, module, tmp_path / "resumed", kwargs))
+
+
+SINGLE = dict(env_id=ENV, env_options=json.dumps(OPTIONS), agent="robot_0", total_timesteps=1024, n_envs=2, n_steps=64,
+              batch_size=64, n_epochs=2, net_arch="16", eval_every=256, eval_episodes=1, final_eval_episodes=2,
+              progress=False)
+
+
+@pytest.mark.parametrize("simulator,extra", [("gs", {}), ("untrained-ials", {"anneal_lr": True}),
+                                             ("fixed:0.2", {"frame_stack": 2})])
+def test_a_resumed_ppo_single_run_ends_bitwise_as_the_uninterrupted_one(tmp_path, monkeypatch, simulator, extra):
+    """SB3's PPO on the GS and on IALSs (the AIP's random stream), with the reward scale, a
+    learning rate that decays, a frame stack: the crash at 512 steps resumes from 256, in the
+    middle of 100-step episodes."""
+    from ials_zoo.baselines import ppo_single
+
+    kwargs = dict(SINGLE, simulator=simulator, **extra)
+    whole = ppo_single.main(ppo_single.Args(**kwargs, out_dir=str(tmp_path / "whole"))), tmp_path / "whole"
+    resumed = _stopped_and_resumed(monkeypatch, ppo_single, tmp_path / "resumed", kwargs)
+    assert_same_run(whole, resumed)
+    assert _progress_rows(whole[1]) == _progress_rows(resumed[1])
+    for name in ("result.json", "result_deterministic.json"):
+        a, b = (json.loads((f / name).read_text()) for f in (whole[1], resumed[1]))
+        assert a["scores"][0]["returns"] == b["scores"][0]["returns"]
+
+
+def test_a_resumed_traffic_ppo_single_run_ends_bitwise_as_the_uninterrupted_one(tmp_path, monkeypatch):
+    """SUMO GS copies in worker processes, restarted at each checkpoint from their seeds: the
+    crash at 900 steps resumes from 300, half-way through 300-step episodes."""
+    from ials_zoo.baselines import ppo_single
+
+    kwargs = dict(env_id="traffic_grid_v0", agent="tls_12", simulator="gs", total_timesteps=1200, n_envs=2,
+                  n_steps=150, batch_size=150, n_epochs=2, net_arch="16", eval_every=300, eval_episodes=1,
+                  final_eval_episodes=1, progress=False)
+    whole = ppo_single.main(ppo_single.Args(**kwargs, out_dir=str(tmp_path / "whole"))), tmp_path / "whole"
+    assert_same_run(whole, _stopped_and_resumed(monkeypatch, ppo_single, tmp_path / "resumed", kwargs))
+
+
+def test_a_resumed_ppo_shared_run_ends_bitwise_as_the_uninterrupted_one(tmp_path, monkeypatch):
+    from ials_zoo.baselines import ppo_shared
+
+    kwargs = dict(env_id=ENV, env_options=json.dumps(OPTIONS), learners="robot_0,robot_1", total_timesteps=1024,
+                  n_steps=64, batch_size=64, n_epochs=2, net_arch="16", eval_every=256, eval_episodes=1,
+                  final_eval_episodes=2, progress=False)
+    whole = ppo_shared.main(ppo_shared.Args(**kwargs, out_dir=str(tmp_path / "whole"))), tmp_path / "whole"
+    resumed = _stopped_and_resumed(monkeypatch, ppo_shared, tmp_path / "resumed", kwargs)
+    assert_same_run((whole[0][0], whole[1]), (resumed[0][0], resumed[1]))
+    assert _progress_rows(whole[1]) == _progress_rows(resumed[1])
+
+
+def test_a_resumed_dials_run_with_sb3_learners_ends_bitwise_as_the_uninterrupted_one(tmp_path, monkeypatch):
+    from ials_zoo.baselines import dials
+
+    kwargs = dict(DIALS, workers=2, backend="process", learner="sb3")
+    whole = dials.main(dials.Args(**kwargs, out_dir=str(tmp_path / "whole"))), tmp_path / "whole"
+    resumed = _stopped_and_resumed(monkeypatch, dials, tmp_path / "resumed", kwargs)
+    assert_same_run(whole, resumed)
+    assert _progress_rows(whole[1]) == _progress_rows(resumed[1])
+
+
+def test_an_sb3_resume_without_its_weights_or_its_random_streams_would_be_caught(tmp_path, monkeypatch):
+    """The ppo_single check is not blind: a resume that loads no weights, or that leaves the
+    random streams as the fresh model set them, ends elsewhere."""
+    from ials_zoo.baselines import ppo_single, sb3_run
+
+    kwargs = dict(SINGLE, simulator="gs")
+    whole = ppo_single.main(ppo_single.Args(**kwargs, out_dir=str(tmp_path / "whole"))), tmp_path / "whole"
+    real_load = sb3_run.load_model_state
+    mutants = {"weights": ("load_model_state", lambda model, state: real_load(model, dict(
+                   state, policy=model.policy.state_dict()))),
+               "streams": ("set_random_streams", lambda state: None)}
+    for name, (attribute, mutant) in mutants.items():
+        out = tmp_path / name
+        _crash_after_checkpoints(monkeypatch, 2)
+        with pytest.raises(Crash):
+            ppo_single.main(ppo_single.Args(**kwargs, out_dir=str(out)))
+        monkeypatch.undo()
+        monkeypatch.setattr(sb3_run, attribute, mutant)
+        resumed = ppo_single.main(ppo_single.Args(**kwargs, out_dir=str(out), resume=True)), out
+        monkeypatch.undo()
+        with pytest.raises(AssertionError):
+            assert_same_run(whole, resumed)
 
 
 def test_a_resume_that_started_from_the_initial_weights_would_be_caught(tmp_path, monkeypatch):

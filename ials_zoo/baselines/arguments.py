@@ -131,3 +131,14 @@ def parse_env_options(text: str | None) -> dict:
     """``--env-options`` (a JSON object of GS/LS options, e.g. ``{"item_lifetime": 8}``)."""
 
     return parse_json_object(text, "env_options")
+
+
+def hidden_sizes(net_arch: str) -> list[int]:
+    """Hidden layer sizes from ``"256,128"``; a clear error for anything else."""
+    try:
+        sizes = [int(x) for x in str(net_arch).split(",") if x.strip()]
+    except ValueError:
+        sizes = []
+    if not sizes or min(sizes) < 1:
+        raise BadInput(f"net_arch {net_arch!r}: expected comma-separated positive ints, e.g. 256,128")
+    return sizes

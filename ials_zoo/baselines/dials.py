@@ -57,7 +57,7 @@ import torch
 
 from ials_zoo.baselines.aip_record import portable_path
 from ials_zoo.baselines.arguments import arg, parse_env_options, run_cli
-from ials_zoo.baselines.driver import RunPlan, check_run_args, run
+from ials_zoo.baselines.driver import JointActors, RunPlan, check_run_args, run
 from ials_zoo.baselines.multiagent import (
     JointActor,
     MultiAgentRunArgs,
@@ -230,7 +230,7 @@ def refresh_aips(env_id, agents, options, net, seed, steps, domain, epochs, old,
                    "mean_test_cross_entropy": report["mean_test_cross_entropy"], "warm_start": bool(warm)}
 
 
-class ShardsLearner:
+class ShardsLearner(JointActors):
     """The driver's adapter for DIALS: the agents split into shards (:mod:`ials_zoo.dials.shard`),
     each training its agents' PPO on their own IALS in a worker (``backend``), with the AIPs
     retrained on GS data from the joint policy at the refresh points (``refresh``)."""
@@ -240,6 +240,7 @@ class ShardsLearner:
     def __init__(self, args: Args, domain, agents, options, refresh, copies, workers, ppo, frame_stack, updates,
                  training: dict, out: Path):
         self.args, self.out, self.domain, self.agents, self.options = args, out, domain, agents, options
+        self.obs_size, self.n_actions = int(np.prod(domain.observation_space.shape)), domain.n_actions
         self.refresh = refresh
         self.copies, self.workers, self.ppo, self.frame_stack, self.updates = copies, workers, ppo, frame_stack, updates
         self.training, self.simulator = training, training["simulator"]
@@ -259,9 +260,6 @@ class ShardsLearner:
             return
         self.aips = load_predictor_set(self.out / "aips.pt", env_id=args.env_id)
         self.state = state
-        if args.learner == "sb3":
-            print("  resuming with the SB3 learner: it continues from its last checkpoint (not bitwise the run that "
-                  "was never stopped; the batched learner is)", flush=True)
         self.charged_seconds, self.refreshes = float(info["aip_seconds"]), int(info["refreshes"])
         self.aip_split = info.get("aip_split", self.aip_split)
         self.training["aip"] = info.get("aip")

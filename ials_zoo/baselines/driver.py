@@ -1,23 +1,28 @@
-"""The multi-agent training-run driver: what every multi-agent baseline does around its learner.
+"""The training-run driver: what every baseline does around its learner.
 
-A baseline (:mod:`.ippo`, :mod:`.dials`) checks its arguments, describes its run
-(:class:`RunPlan`) and hands the driver a small *learner adapter* (:class:`MultiAgentLearner`):
-the part that owns the simulators and the PPO updates. The driver owns the rest, the same for
+A baseline (:mod:`.ippo`, :mod:`.dials`, :mod:`.ppo_single`, :mod:`.ppo_shared`) checks its
+arguments, describes its run (:class:`RunPlan`) and hands the driver a small *learner adapter*
+(:class:`Learner`): the part that owns the simulators and the PPO updates, and a *scoring
+adapter* (:class:`Scoring`): how its policy is scored on the GS (the joint policy on the
+multi-agent track, :class:`JointScoring`; one agent among scripted ones,
+:class:`~ials_zoo.baselines.sb3_run.SingleAgentScoring`). The driver owns the rest, the same for
 every learner:
 
 - the run folder (:class:`~ials_zoo.baselines.runs.RunFolder`: claim, resume, overwrite,
   status) and the opening line;
 - the training clock (GS evaluations and checkpoints excluded; AIP time charged);
-- the cadence: a GS evaluation of the joint policy every ``eval_every`` steps per agent, each
-  one a learning-curve point and a checkpoint; a ``progress.csv`` row per stretch of training;
-  the learner's own stops (an AIP refresh) in between;
+- the cadence: a GS evaluation of the policy every ``eval_every`` steps per agent, each one a
+  learning-curve point and a checkpoint (and a checkpoint alone every ``checkpoint_every``);
+  a ``progress.csv`` row per stretch of training; the learner's own stops (an AIP refresh) in
+  between;
 - the progress bar;
-- the final joint policy, its two GS scores (sampled and deterministic) and ``result.json``;
+- the final policy, its GS scores (sampled, and deterministic) and the result files;
 - the closing line.
 
-An adapter answers: its actors' layers, its checkpoint (tensors + JSON), how to train up to a
-number of steps per agent, and where it must stop before that (:meth:`next_stop`,
-:meth:`before_training`).
+A learner answers: its policy, its checkpoint (tensors + JSON: everything its future depends
+on, so that a resumed run ends bitwise equal to the uninterrupted one), how to train up to a
+number of steps per agent, and where it must stop before that (:meth:`Learner.next_stop`,
+:meth:`Learner.before_training`).
 """
 
 from __future__ import annotations
@@ -27,7 +32,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Protocol
 
-import numpy as np
 from tqdm.auto import tqdm
 
 import ials_zoo
@@ -63,25 +67,32 @@ class RunPlan:
     progress: bool = True
     submitter: str = ""
     notes: str = ""
-    meta: dict = field(default_factory=dict)
+    meta: dict = field(default_factory=dict)  # the policy's metadata beyond the driver's
+    checkpoint_every: int | None = None  # checkpoints between evaluations too (steps per agent)
+    speed: float | None = None  # the study's steps per second (None: the multi-agent runs')
+    unit: str = "step/agent"  # the progress bar's
 
 
-class MultiAgentLearner(Protocol):
-    """A learner adapter: every agent's PPO and the simulators it learns on."""
+UNITS = {"step/agent": "steps per agent", "transition": "agent transitions"}
+"""The closing line's words for a progress bar's unit (otherwise the unit plus an s)."""
+
+
+class Learner(Protocol):
+    """A learner adapter: the agents' PPO and the simulators it learns on."""
 
     simulator: str  # training.simulator, also the curve's header
     charged_seconds: float  # AIP seconds on the clock, excluded from training.wall_clock_seconds
     reports_aip_time: bool  # the closing line splits the wall-clock into training and AIPs
 
     def load(self, state: dict | None, info: dict | None) -> None:
-        """Before the clock starts: a fresh start (``None``) or a checkpoint to resume."""
+        """Before the clock starts: a fresh start (``None``) or a checkpoint to resume (what
+        it makes before the clock starts, an AIP, is in :attr:`charged_seconds`)."""
 
     def start(self, steps: int) -> None:
         """Start the simulators and workers at ``steps`` per agent (on the clock)."""
 
-    def actor_layers(self) -> list:
-        """Every layer of every agent's actor, stacked over agents: ``[(W, b), ...]``, a recurrent
-        actor's GRU first (:meth:`~ials_zoo.learners.batched_ppo.BatchedPPO.actor_layers`)."""
+    def policy(self, metadata: dict):
+        """The current policy as a :class:`~ials_zoo.policy.PolicyNetwork` carrying ``metadata``."""
 
     def next_stop(self, steps: int) -> int | None:
         """Steps per agent, after ``steps``, at which training must stop for the learner's own
@@ -99,97 +110,178 @@ class MultiAgentLearner(Protocol):
     def close(self) -> None: ...
 
 
-def run(plan: RunPlan, learner: MultiAgentLearner, description: str, domain) -> dict:
-    """Drive ``learner`` through ``plan``; returns the sampled result (also ``result.json``).
+class Scoring(Protocol):
+    """A scoring adapter: how a run's policy is scored on the GS."""
 
-    ``description`` opens the run's first line (the driver adds the budget and the folder)."""
-    out = plan.out
-    folder = RunFolder(out, resume=plan.resume, overwrite=plan.overwrite, settings=plan.settings)
-    on_gs = learner.simulator == "gs"
+    curve_header: dict  # what curve.json says beyond the run's id
+    subject: str  # the closing line's: whose score the result is
+
+    def curve(self, policy):
+        """A learning-curve evaluation (``plan.eval_episodes``): an ``EvaluationResult``."""
+
+    def final(self, path, training: dict, curve: list) -> tuple[dict, dict | None]:
+        """Score the policy file at ``path`` and write the result files: ``(result,
+        deterministic result or None)``."""
+
+    def close(self, kill: bool = False) -> None: ...
+
+
+class JointScoring:
+    """The multi-agent track: the joint policy on the GS, every agent acting (scored sampled,
+    ``result.json``, and deterministic, ``result_deterministic.json``)."""
+
+    curve_header: dict = {}
+
+    def __init__(self, plan: RunPlan):
+        self.plan = plan
+        self.subject = f"mean over {len(plan.agents)} agents"
+
+    def curve(self, policy):
+        return evaluate_joint(self.plan.env_id, policy, episodes=self.plan.eval_episodes, **self.plan.options)
+
+    def final(self, path, training, curve):
+        p = self.plan
+        return final_results(p.out, p.env_id, path, p.algorithm, training, curve, p.agents, p.seed,
+                             p.final_eval_episodes, p.options, p.submitter, p.notes, p.progress)
+
+    def close(self, kill: bool = False) -> None:
+        pass
+
+
+class JointActors:
+    """:meth:`Learner.policy` for a learner whose every agent has its own actor, stacked
+    (:meth:`~ials_zoo.learners.batched_ppo.BatchedPPO.actor_layers`: ``[(W, b), ...]``, a
+    recurrent actor's GRU first). The learner has ``agents``, ``obs_size``, ``n_actions``,
+    ``frame_stack`` and ``actor_layers()``."""
+
+    def policy(self, metadata: dict):
+        return joint_policy(self.agents, self.actor_layers(), self.obs_size, self.n_actions, self.frame_stack,
+                            metadata)
+
+
+def estimate_text(plan: RunPlan, learner: Learner, domain) -> str:
+    """The opening line's budget: the expected training time at the study's measured speed."""
     study = study_of(domain)
+    if plan.speed is not None:
+        seconds = plan.total / max(plan.speed, 1.0)
+        return (f"{plan.total:,} steps; about {format_seconds(seconds)} of training at the study's speed "
+                f"({plan.speed:,.0f} steps/s on 2 cores; evaluations extra)")
+    on_gs = learner.simulator == "gs"
     rate = study.multi_agent_steps_per_second.get("gs" if on_gs else "ials", 10_000.0)
-    estimate = plan.total * len(plan.agents) / max(rate, 1.0)
+    seconds = plan.total * len(plan.agents) / max(rate, 1.0)
     if on_gs and len(plan.agents) < len(domain.agents(**plan.options)):
         # the GS also moves the scripted agents: about what one learner on the GS costs in
         # ppo_single (robot_20 alone, 512k steps: this says 2.0 min, it took 1.6-2.0)
-        estimate += plan.total / max(study.ppo_steps_per_second.get("gs", 1000.0), 1.0)
-    print(f"{description}\n  {plan.total:,} steps per agent; about {format_seconds(estimate)} of training at the "
-          f"study's speed ({rate:,.0f} agent-steps/s on 2 cores; evaluations extra); writing {out}/"
+        seconds += plan.total / max(study.ppo_steps_per_second.get("gs", 1000.0), 1.0)
+    return (f"{plan.total:,} steps per agent; about {format_seconds(seconds)} of training at the study's speed "
+            f"({rate:,.0f} agent-steps/s on 2 cores; evaluations extra)")
+
+
+def run(plan: RunPlan, learner: Learner, description: str, domain, scoring: Scoring | None = None) -> dict:
+    """Drive ``learner`` through ``plan``; returns the sampled result (also ``result.json``, or
+    the scoring's files). ``scoring``: the multi-agent track's (:class:`JointScoring`) unless
+    given. ``description`` opens the run's first line (the driver adds the budget and the
+    folder)."""
+    out = plan.out
+    scoring = scoring or JointScoring(plan)
+    folder = RunFolder(out, resume=plan.resume, overwrite=plan.overwrite, settings=plan.settings)
+    print(f"{description}\n  {estimate_text(plan, learner, domain)}; writing {out}/"
           + (" (resuming)" if folder.resuming else ""), flush=True)
     meta = dict({"algorithm": plan.algorithm, "env_id": plan.env_id, "env_options": plan.options, "seed": plan.seed,
                  "package_version": ials_zoo.__version__, "created": now_iso()}, **plan.meta)
     training = plan.training
-    obs_size = int(np.prod(domain.observation_space.shape))
+    ok = False
     with folder.running():
         log = TrainingLog(out / "progress.csv")
         steps, curve = 0, []
-        if folder.resuming:
-            state, info = load_training_state(out)
-            learner.load(state, info)
-            steps, curve = int(info["steps"]), info["curve"]
-            log.truncate(steps)
-            clock = Clock(offset=float(info["clock"]))
-        else:
-            learner.load(None, None)
-            clock = Clock(offset=learner.charged_seconds)
         try:
-            learner.start(steps)  # inside: a start that fails half-way still closes what it started
+            try:
+                # inside: a load or start that fails half-way still closes what it started
+                if folder.resuming:
+                    state, info = load_training_state(out)
+                    learner.load(state, info)
+                    steps, curve = int(info["steps"]), info["curve"]
+                    log.truncate(steps)
+                    clock = Clock(offset=float(info["clock"]))
+                else:
+                    learner.load(None, None)
+                    clock = Clock(offset=learner.charged_seconds)
+                learner.start(steps)
 
-            def policy_net():
-                return joint_policy(plan.agents, learner.actor_layers(), obs_size, domain.n_actions, plan.frame_stack,
-                                    dict(meta, training=training, learning_curve=curve))
+                def policy_net():
+                    return learner.policy(dict(meta, training=training, learning_curve=curve))
 
-            bar = _Bar(plan, steps)
-            next_eval = curve[-1]["env_steps"] + plan.eval_every if curve else 0
-            while True:
-                if steps < plan.total:
-                    learner.before_training(steps, plan.total, policy_net, bar.note)
-                if steps >= next_eval or steps >= plan.total:
-                    with clock.pause():
-                        score = _curve_point(plan, learner, policy_net(), steps, curve, clock)
-                    bar.score(score)
-                    next_eval = steps + plan.eval_every
-                if steps >= plan.total:
-                    break
-                target = min(plan.total, next_eval)
-                stop = learner.next_stop(steps)
-                if stop is not None:
-                    target = min(target, stop)
-                target = max(steps + plan.per_update, target // plan.per_update * plan.per_update)
-                row = learner.train(steps, target, bar.advance)
-                steps = target
-                log.add(dict(row, steps_per_agent=steps, wall_clock_seconds=round(clock.seconds, 3)))
-                bar.reach(steps)
-            bar.close()
-            charged = learner.charged_seconds
-            training.update(env_steps=steps, wall_clock_seconds=clock.seconds - charged, aip_seconds=charged)
-            path = policy_file(out, policy_net())
+                steps = _train(plan, learner, scoring, policy_net, log, clock, steps, curve)
+                charged = learner.charged_seconds
+                training.update(env_steps=steps, wall_clock_seconds=clock.seconds - charged, aip_seconds=charged)
+                path = policy_file(out, policy_net())
+            finally:
+                learner.close()
+            result, deterministic = scoring.final(path, training, curve)
+            ok = True
         finally:
-            learner.close()
-        result, deterministic = final_results(out, plan.env_id, path, plan.algorithm, training, curve, plan.agents,
-                                              plan.seed, plan.final_eval_episodes, plan.options, plan.submitter,
-                                              plan.notes, plan.progress)
+            scoring.close(kill=not ok)
     s = result["score"]
     seconds = training["wall_clock_seconds"] + training["aip_seconds"]
     split = (f" (of which AIP collection and training {format_seconds(training['aip_seconds'])})"
              if learner.reports_aip_time else "")
-    print(f"{plan.algorithm}: GS score (mean over {len(plan.agents)} agents) {s['mean']:.3f} "
-          f"[{s['ci_low']:.3f}, {s['ci_high']:.3f}] after {steps:,} steps per agent; wall-clock "
-          f"{format_seconds(seconds)}{split}; deterministic {deterministic['score']['mean']:.3f}; "
-          f"wrote {out}/result.json", flush=True)
+    det = "" if deterministic is None else f"; deterministic {deterministic['score']['mean']:.3f}"
+    print(f"{plan.algorithm}: GS score ({scoring.subject}) {s['mean']:.3f} "
+          f"[{s['ci_low']:.3f}, {s['ci_high']:.3f}] after {steps:,} {UNITS.get(plan.unit, plan.unit + 's')}; "
+          f"wall-clock {format_seconds(seconds)}{split}{det}; wrote {out}/", flush=True)
     return result
 
 
-def _curve_point(plan: RunPlan, learner, policy, steps: int, curve: list, clock: Clock) -> float:
-    """A GS evaluation of the joint policy: a learning-curve point and a checkpoint."""
-    ev = evaluate_joint(plan.env_id, policy, episodes=plan.eval_episodes, **plan.options)
+def _train(plan: RunPlan, learner: Learner, scoring: Scoring, policy_net, log: TrainingLog, clock: Clock,
+           steps: int, curve: list) -> int:
+    """The cadence, from ``steps`` to the budget: training stretches between evaluations,
+    checkpoints and the learner's own stops. Returns the steps reached."""
+    bar = _Bar(plan, steps)
+    next_eval = curve[-1]["env_steps"] + plan.eval_every if curve else 0
+    every = plan.checkpoint_every
+    next_checkpoint = (steps // every + 1) * every if every else None
+    while True:
+        if steps < plan.total:
+            learner.before_training(steps, plan.total, policy_net, bar.note)
+        if steps >= next_eval or steps >= plan.total:
+            with clock.pause():
+                score = _curve_point(plan, learner, scoring, policy_net(), steps, curve, clock)
+            bar.score(score)
+            next_eval = steps + plan.eval_every
+        elif next_checkpoint is not None and steps >= next_checkpoint:
+            with clock.pause():
+                _checkpoint(plan, learner, steps, curve, clock)
+        if next_checkpoint is not None and steps >= next_checkpoint:
+            next_checkpoint = (steps // every + 1) * every
+        if steps >= plan.total:
+            break
+        target = min(plan.total, next_eval, next_checkpoint or plan.total)
+        stop = learner.next_stop(steps)
+        if stop is not None:
+            target = min(target, stop)
+        target = max(steps + plan.per_update, target // plan.per_update * plan.per_update)
+        row = learner.train(steps, target, bar.advance)
+        steps = target
+        log.add(dict(row, steps_per_agent=steps, wall_clock_seconds=round(clock.seconds, 3)))
+        bar.reach(steps)
+    bar.close()
+    return steps
+
+
+def _curve_point(plan: RunPlan, learner, scoring: Scoring, policy, steps: int, curve: list, clock: Clock) -> float:
+    """A GS evaluation of the policy: a learning-curve point and a checkpoint."""
+    ev = scoring.curve(policy)
     curve.append({"env_steps": steps, "wall_clock_seconds": clock.seconds, "mean": ev.mean, "ci_low": ev.ci_low,
                   "ci_high": ev.ci_high})
-    write_curve(plan.out, {"env_id": plan.env_id, "algorithm": plan.algorithm, "seed": plan.seed,
-                           "simulator": learner.simulator}, curve)
+    write_curve(plan.out, dict({"env_id": plan.env_id, "algorithm": plan.algorithm, "seed": plan.seed},
+                               **scoring.curve_header, simulator=learner.simulator), curve)
+    _checkpoint(plan, learner, steps, curve, clock)
+    return ev.mean
+
+
+def _checkpoint(plan: RunPlan, learner, steps: int, curve: list, clock: Clock) -> None:
     tensors, info = learner.checkpoint(plan.out)
     save_training_state(plan.out, tensors, dict(info, steps=steps, curve=curve, clock=clock.seconds))
-    return ev.mean
 
 
 class _Bar:
@@ -198,7 +290,7 @@ class _Bar:
     def __init__(self, plan: RunPlan, steps: int):
         self.bar = None
         if plan.progress:
-            self.bar = tqdm(total=plan.total, initial=steps, unit="step/agent", dynamic_ncols=True,
+            self.bar = tqdm(total=plan.total, initial=steps, unit=plan.unit, dynamic_ncols=True,
                             desc=plan.algorithm)
 
     def note(self, text: str) -> None:
@@ -233,4 +325,4 @@ def check_run_args(args) -> None:
             raise BadInput(f"{name} must be >= 1, got {v}")
 
 
-__all__ = ["MultiAgentLearner", "RunPlan", "check_run_args", "run"]
+__all__ = ["JointActors", "JointScoring", "Learner", "RunPlan", "Scoring", "check_run_args", "estimate_text", "run"]

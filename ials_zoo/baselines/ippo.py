@@ -27,7 +27,7 @@ import numpy as np
 import torch
 
 from ials_zoo.baselines.arguments import arg, parse_env_options, run_cli
-from ials_zoo.baselines.driver import RunPlan, check_run_args, run
+from ials_zoo.baselines.driver import JointActors, RunPlan, check_run_args, run
 from ials_zoo.baselines.multiagent import (
     MultiAgentRunArgs,
     check_multi_ppo,
@@ -75,7 +75,7 @@ def check_args(args: Args):
     return domain, agents, options, processes
 
 
-class GSCopiesLearner:
+class GSCopiesLearner(JointActors):
     """The driver's adapter for IPPO: every agent's PPO (:class:`BatchedPPO`) on ``copies``
     GS copies in ``processes`` worker processes, one update of ``samples_per_update`` samples
     of each agent at a time."""
@@ -85,6 +85,7 @@ class GSCopiesLearner:
     def __init__(self, env_id, agents, options, copies, processes, ppo, frame_stack, seed, updates, obs_size, n_actions):
         self.env_id, self.agents, self.options, self.copies, self.processes = env_id, agents, options, copies, processes
         self.frame_stack, self.seed, self.per_update = frame_stack, seed, ppo["n_steps"] * ppo["n_envs"]
+        self.obs_size, self.n_actions = obs_size, n_actions
         self.learner = BatchedPPO(agents, obs_size * frame_stack, n_actions, PPOConfig(**ppo), seed, updates)
         self.env = self.trainer = self.episode_state = None
 

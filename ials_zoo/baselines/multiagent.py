@@ -13,8 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ials_zoo.baselines.arguments import AblatedPPOSettings, arg, check_ppo_settings
-from ials_zoo.baselines.ppo_single import _hidden
+from ials_zoo.baselines.arguments import AblatedPPOSettings, arg, check_ppo_settings, hidden_sizes
 from ials_zoo.baselines.runs import DETERMINISTIC_RESULT
 from ials_zoo.core.extras import dials_of
 from ials_zoo.errors import BadInput
@@ -93,7 +92,7 @@ def check_multi_ppo(args, domain) -> list[int]:
     if args.recurrent_hidden < 0:
         raise BadInput(f"recurrent_hidden must be >= 0, got {args.recurrent_hidden}")
     check_ppo_settings(args)
-    return _hidden(args.hidden)
+    return hidden_sizes(args.hidden)
 
 
 def fill_update_size(args, domain) -> None:

@@ -24,9 +24,10 @@ Evaluation: the shared policy is scored with the standard protocol
 (:mod:`ials_zoo.evaluation`: one agent controlled by the policy, the others scripted) for each
 agent in ``--eval-agents`` (default: the domain's default agents that are learners, else
 the first learner); one ``result_<agent>.json``
-per evaluated agent. The learning curve follows the first evaluated agent. Outputs as in
-:mod:`ials_zoo.baselines.ppo_single` (``curve.json``, ``checkpoint.zip``, ``model.zip`` +
-``model.meta.json``).
+per evaluated agent. The learning curve follows the first evaluated agent. The other outputs
+are :mod:`ials_zoo.baselines.ppo_single`'s (``status.json``, ``progress.csv``, ``curve.json``,
+``checkpoint.pt`` + ``.json``, ``policy.safetensors``); ``--resume`` ends bitwise equal to the
+run that was never stopped.
 """
 
 from __future__ import annotations
@@ -37,15 +38,21 @@ from pathlib import Path
 
 import numpy as np
 
-import ials_zoo
-from ials_zoo.baselines.arguments import PPOSettings, arg, parse_env_options, run_cli
-from ials_zoo.baselines.ppo_single import _hidden, check_ppo_args
-from ials_zoo.baselines.runs import RunFolder, training_logger
-from ials_zoo.baselines.sb3_run import Evaluator, TrainingRun, as_float_box, estimate_seconds, make_ppo
+from ials_zoo.baselines.arguments import PPOSettings, arg, hidden_sizes, parse_env_options, run_cli
+from ials_zoo.baselines.driver import RunPlan, run
+from ials_zoo.baselines.multiagent import settings_of
+from ials_zoo.baselines.ppo_single import check_ppo_args
+from ials_zoo.baselines.sb3_run import (
+    CHECKPOINT_EVERY,
+    RUN_ONLY,
+    SB3Learner,
+    SingleAgentScoring,
+    ppo_speed,
+    sb3_env,
+    whole_rollouts,
+)
 from ials_zoo.core.domains import domain_ids, get_domain
 from ials_zoo.errors import BadInput
-from ials_zoo.leaderboard import make_result, now_iso, write_result
-from ials_zoo.utils import format_seconds
 
 
 def _sb3_wrapper_base():
@@ -151,7 +158,6 @@ def _agent_list(text: str | None, env_id: str, default, **options) -> list[str]:
 def main(args: Args | None = None) -> list[dict]:
     """Train, evaluate and save; returns one result dict per evaluated agent."""
     import torch
-    from stable_baselines3.common.vec_env import VecFrameStack, VecMonitor
 
     args = args or Args()
 
@@ -167,57 +173,36 @@ def main(args: Args | None = None) -> list[dict]:
     outside = [a for a in eval_agents if a not in learners]
     if outside or not eval_agents:
         raise BadInput(f"eval_agents {outside or eval_agents} must be learners ({learners})")
-    hidden = _hidden(args.net_arch)
+    hidden = hidden_sizes(args.net_arch)
     frame_stack = int(args.frame_stack or dom.frame_stack)
+    per_update = args.n_steps * args.n_copies * len(learners)
+    total = whole_rollouts(args.total_timesteps, per_update)
     out = Path(args.out_dir or f"runs/{args.env_id}__shared__s{args.seed}")
-    settings = {k: v for k, v in dataclasses.asdict(args).items()
-                if k not in ("resume", "overwrite", "progress", "out_dir", "submitter", "notes")}
-    run = RunFolder(out, resume=args.resume, overwrite=args.overwrite, settings=settings)
-    eta = estimate_seconds(args.env_id, "gs", args.total_timesteps)
-    print(f"ppo_shared: one PPO policy shared by {len(learners)} learners of {args.env_id} on the GS, seed "
-          f"{args.seed}\n  {args.total_timesteps:,} agent transitions, expected ~{format_seconds(eta)} here; "
-          f"writing {out}/" + (" (resuming)" if run.resuming else ""), flush=True)
-
+    training = {"simulator": "gs", "aip": None, "seeds": [args.seed], "env_steps": 0,
+                "wall_clock_seconds": 0.0, "aip_seconds": 0.0,
+                "hyperparameters": dict(dataclasses.asdict(args), learners=learners, eval_agents=eval_agents)}
+    plan = RunPlan("ppo_shared", args.env_id, learners, options, args.seed, total, per_update,
+                   args.eval_every or total, args.eval_episodes, args.final_eval_episodes, frame_stack, out,
+                   settings_of(args, skip=RUN_ONLY), training, args.resume, args.overwrite, args.progress,
+                   args.submitter, args.notes, meta={"agent": eval_agents[0], "frame_stack": frame_stack},
+                   checkpoint_every=None if args.eval_every else CHECKPOINT_EVERY,
+                   speed=ppo_speed(dom, "gs"), unit="transition")
     all_agents = dom.agents(**options)
-    with run.running():
-        venv = make_shared_vec_env(args.env_id,
-                                   learners=None if learners == all_agents else learners,
+
+    def make_env(training):
+        venv = make_shared_vec_env(args.env_id, learners=None if learners == all_agents else learners,
                                    n_copies=args.n_copies, seed=args.seed, **options)
-        venv = VecMonitor(as_float_box(venv))
-        if frame_stack > 1:
-            venv = VecFrameStack(venv, frame_stack)
-        model = make_ppo(venv, args, hidden)
-        model.set_logger(training_logger(out))
-        training = {
-            "simulator": "gs", "aip": None, "seeds": [args.seed], "env_steps": 0,
-            "wall_clock_seconds": 0.0, "aip_seconds": 0.0,
-            "hyperparameters": dict(dataclasses.asdict(args), learners=learners,
-                                    eval_agents=eval_agents),
-        }
-        meta = {
-            "algorithm": "ppo_shared", "env_id": args.env_id, "agent": eval_agents[0],
-            "frame_stack": frame_stack, "env_options": options, "seed": args.seed, "training": training,
-            "learning_curve": [], "package_version": ials_zoo.__version__, "created": now_iso(),
-        }
-        evaluators = {a: Evaluator(args.env_id, a, args.eval_episodes, args.deterministic_eval,
-                                   in_subprocess=dom.one_simulation_per_process, options=options)
-                      for a in eval_agents}
-        trainer = TrainingRun(model, run, meta, evaluators, policy_agents=learners, frame_stack=frame_stack)
-        finals = trainer.learn(args.total_timesteps, args.eval_every, args.final_eval_episodes,
-                               args.progress)
-        results = []
-        for a, final in finals.items():
-            result = make_result(
-                [final], algorithm="ppo_shared", training=training, training_seeds=[args.seed],
-                learning_curves=[{"seed": args.seed, "points": trainer.curve}] if a == trainer.curve_agent else [],
-                trained_agents=learners, submitter=args.submitter, notes=args.notes)
-            write_result(out / f"result_{a}.json", result)
-            results.append(result)
-    for r in results:
+        return sb3_env(venv, None, frame_stack), 0.0
+
+    learner = SB3Learner(make_env, args, hidden, learners, frame_stack, total, training)
+    scoring = SingleAgentScoring(plan, eval_agents, learners, args.deterministic_eval, dom.one_simulation_per_process,
+                                 lambda agent: f"result_{agent}.json", None)
+    run(plan, learner, f"ppo_shared: one PPO policy shared by {len(learners)} learners of {args.env_id} on the GS, "
+        f"seed {args.seed} (steps count agent transitions)", dom, scoring)
+    results = [scoring.results[f"result_{a}.json"] for a in eval_agents]
+    for r in results[1:]:
         s = r["score"]
         print(f"ppo_shared: GS score of {r['agent']} {s['mean']:.3f} [{s['ci_low']:.3f}, {s['ci_high']:.3f}]")
-    print(f"ppo_shared: {training['env_steps']:,} agent transitions, wall-clock "
-          f"{format_seconds(training['wall_clock_seconds'])} (training); wrote {out}", flush=True)
     return results
 
 

@@ -28,11 +28,14 @@ is refused unless ``--resume`` or ``--overwrite``), all written atomically (see
 :mod:`ials_zoo.baselines.runs`):
 
 * ``status.json`` -- running / finished / failed / interrupted;
-* ``progress.csv`` -- SB3's training metrics per update (episode return, losses, entropy);
-* ``curve.json`` -- the learning curve, rewritten after every evaluation: GS mean return and
-  95% CI vs environment steps and wall-clock seconds;
-* ``checkpoint.pt`` + ``checkpoint.json`` -- the training state, saved after the first
-  update, at every evaluation and every 5 minutes (``--resume`` continues from it);
+* ``progress.csv`` -- training metrics per stretch between evaluations (SB3's mean episode
+  return, losses, entropy; the columns of the multi-agent runs);
+* ``curve.json`` -- the learning curve, rewritten after every evaluation (the first at step
+  0): GS mean return and 95% CI vs environment steps and wall-clock seconds;
+* ``checkpoint.pt`` + ``checkpoint.json`` -- the training state, saved at every evaluation
+  (every 100k steps with ``--eval-every 0``): ``--resume`` continues from it and ends bitwise
+  equal to the run that was never stopped (:mod:`ials_zoo.learners.sb3_state`: each
+  checkpoint starts new episodes, seeded by the seed and the step count);
 * ``policy.safetensors`` -- the final policy (weights + JSON, loadable without running code:
   ``ials-zoo evaluate --policy runs/.../policy.safetensors``);
 * ``result.json`` -- a leaderboard result with the final GS score over
@@ -57,23 +60,32 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
-import ials_zoo
 from ials_zoo.baselines.aip_record import predictor_record
 from ials_zoo.baselines.arguments import (
     AblatedPPOSettings,
     arg,
     check_ppo_settings,
+    hidden_sizes,
     parse_env_options,
     run_cli,
 )
-from ials_zoo.baselines.runs import DETERMINISTIC_RESULT, RunFolder, training_logger
-from ials_zoo.baselines.sb3_run import Evaluator, TrainingRun, as_float_box, estimate_seconds, make_ppo, scale_rewards
+from ials_zoo.baselines.driver import RunPlan, run
+from ials_zoo.baselines.multiagent import settings_of
+from ials_zoo.baselines.runs import DETERMINISTIC_RESULT
+from ials_zoo.baselines.sb3_run import (
+    CHECKPOINT_EVERY,
+    RUN_ONLY,
+    SB3Learner,
+    SingleAgentScoring,
+    ppo_speed,
+    sb3_env,
+    whole_rollouts,
+)
 from ials_zoo.core.domains import domain_ids, get_domain
 from ials_zoo.core.extras import dials_of, study_of
 from ials_zoo.errors import BadInput
 from ials_zoo.influence.ials import make_ials_vec_env, trained_predictor
 from ials_zoo.influence.specs import parse_predictor, predictor_for, simulator_label
-from ials_zoo.leaderboard import make_result, now_iso, write_result
 from ials_zoo.single_agent import make_gs_vec_env
 from ials_zoo.utils import check_seed, format_seconds
 
@@ -119,16 +131,6 @@ PREVIOUS_SETTINGS = {"n_epochs": 3, "learning_rate": 2.5e-4, "anneal_lr": True, 
 defaults before the ablation: kept to measure against."""
 
 
-def _hidden(net_arch: str) -> list[int]:
-    try:
-        sizes = [int(x) for x in str(net_arch).split(",") if x.strip()]
-    except ValueError:
-        sizes = []
-    if not sizes or min(sizes) < 1:
-        raise BadInput(f"net_arch {net_arch!r}: expected comma-separated positive ints, e.g. 256,128")
-    return sizes
-
-
 def update_size(args, domain) -> tuple[int, int]:
     """``(n_steps, batch_size)``: the given ones, else the domain's choice
     (:attr:`DIALSSettings.ppo_samples_per_update` split over ``n_envs``, ``ppo_batch_size``)."""
@@ -151,7 +153,7 @@ def check_ppo_args(args, positive=()) -> None:
     if args.frame_stack is not None and args.frame_stack < 1:
         raise BadInput(f"frame_stack must be >= 1, got {args.frame_stack}")
     check_seed(args.seed, "seed")
-    _hidden(args.net_arch)
+    hidden_sizes(args.net_arch)
     parse_env_options(args.env_options)
 
 
@@ -202,7 +204,6 @@ def default_out_dir(args: Args, agent: str) -> Path:
 def main(args: Args | None = None) -> dict:
     """Train, evaluate and save; returns the result dict (also written to result.json)."""
     import torch
-    from stable_baselines3.common.vec_env import VecFrameStack, VecMonitor
 
     args = args or Args()
     check_args(args)
@@ -210,82 +211,40 @@ def main(args: Args | None = None) -> dict:
     dom = get_domain(args.env_id)
     options = parse_env_options(args.env_options)
     agent = dom.check_agent(args.agent or dom.default_agents[0], **options)
-    if args.total_timesteps is None:
-        args.total_timesteps = study_of(dom).budget
     args.n_steps, args.batch_size = update_size(args, dom)
+    per_update = args.n_steps * args.n_envs
+    total = whole_rollouts(args.total_timesteps or study_of(dom).budget, per_update)
+    args.total_timesteps = total
     frame_stack = int(args.frame_stack or dials_of(dom).frame_stack or dom.frame_stack)
     out = Path(args.out_dir) if args.out_dir else default_out_dir(args, agent)
-    settings = {k: v for k, v in dataclasses.asdict(args).items()
-                if k not in ("resume", "overwrite", "progress", "out_dir", "submitter", "notes")}
-    run = RunFolder(out, resume=args.resume, overwrite=args.overwrite, settings=settings)
-    sim_text = "the GS (every other agent scripted)" if args.simulator == "gs" else f"the IALS ({args.simulator})"
-    eta = estimate_seconds(args.env_id, args.simulator, args.total_timesteps)
-    print(f"ppo_single: PPO for {agent} of {args.env_id}, trained on {sim_text}, seed {args.seed}\n"
-          f"  {args.total_timesteps:,} steps, expected ~{format_seconds(eta)} here (plus GS evaluations every "
-          f"{args.eval_every:,} steps); writing {out}/" + (" (resuming)" if run.resuming else ""), flush=True)
+    training = {"simulator": args.simulator, "aip": None, "seeds": [args.seed], "env_steps": 0,
+                "wall_clock_seconds": 0.0, "aip_seconds": 0.0, "hyperparameters": dataclasses.asdict(args)}
+    plan = RunPlan("ppo_single", args.env_id, [agent], options, args.seed, total, per_update,
+                   args.eval_every or total, args.eval_episodes, args.final_eval_episodes, frame_stack, out,
+                   settings_of(args, skip=RUN_ONLY), training, args.resume, args.overwrite, args.progress,
+                   args.submitter, args.notes, meta={"agent": agent, "frame_stack": frame_stack},
+                   checkpoint_every=None if args.eval_every else CHECKPOINT_EVERY,
+                   speed=ppo_speed(dom, args.simulator), unit="step")
 
-    with run.running():
+    def make_env(training):
         venv, aip = make_training_env(args, agent)
+        training.update(simulator=simulator_label(args.simulator, (aip or {}).get("variant")), aip=aip)
         # only what this run did is on its clock; a shipped or cached AIP's own cost is recorded
         # in training.aip, not charged
-        aip_seconds = (aip["collection_seconds"] + aip["training_seconds"]) if aip and aip["charged"] else 0.0
-        venv = VecMonitor(as_float_box(venv))
-        if args.normalize_reward:
-            venv = scale_rewards(venv, args.gamma)
-        if frame_stack > 1:
-            venv = VecFrameStack(venv, frame_stack)
-        model = make_ppo(venv, args, _hidden(args.net_arch))
-        model.set_logger(training_logger(out))
-        training = {
-            "simulator": simulator_label(args.simulator, (aip or {}).get("variant")), "aip": aip, "seeds": [args.seed], "env_steps": 0,
-            "wall_clock_seconds": 0.0, "aip_seconds": aip_seconds,
-            "hyperparameters": dataclasses.asdict(args),
-        }
-        meta = {
-            "algorithm": "ppo_single", "env_id": args.env_id, "agent": agent, "frame_stack": frame_stack,
-            "env_options": options, "seed": args.seed, "training": training, "learning_curve": [],
-            "package_version": ials_zoo.__version__, "created": now_iso(),
-        }
-        evaluator = Evaluator(args.env_id, agent, args.eval_episodes, args.deterministic_eval,
-                              in_subprocess=dom.one_simulation_per_process, options=options)
-        trainer = TrainingRun(model, run, meta, {agent: evaluator}, aip_seconds, frame_stack=frame_stack)
-        final = trainer.learn(args.total_timesteps, args.eval_every, args.final_eval_episodes,
-                              args.progress)[agent]
-        finals = [(final, "result.json")]
-        if not args.deterministic_eval:
-            finals.append((_score_deterministic(args, agent, out, dom, options), DETERMINISTIC_RESULT))
-        results = {}
-        for ev, name in finals:
-            results[name] = make_result(
-                [ev], algorithm="ppo_single", training=training, training_seeds=[args.seed],
-                learning_curves=[{"seed": args.seed, "points": trainer.curve}], trained_agents=[agent],
-                submitter=args.submitter, notes=args.notes,
-            )
-            write_result(out / name, results[name])
-        result = results["result.json"]
-    s = result["score"]
-    total = training["wall_clock_seconds"] + training["aip_seconds"]
-    print(f"ppo_single: GS score of {agent} {s['mean']:.3f} [{s['ci_low']:.3f}, {s['ci_high']:.3f}] "
-          f"({result['evaluation']['episodes']} episodes) after {training['env_steps']:,} steps; wall-clock "
-          f"{format_seconds(total)} (training" + (f" + AIP {format_seconds(training['aip_seconds'])}" if aip_seconds else "")
-          + ")" + (f"; the AIP was made earlier (its own {format_seconds(aip['collection_seconds'] + aip['training_seconds'])}"
-                   " not counted)" if aip and not aip["charged"] and aip["collection_seconds"] + aip["training_seconds"] else "")
-          + (f"; deterministic {finals[1][0].mean:.3f}" if len(finals) > 1 else "")
-          + f"; wrote {out}/result.json", flush=True)
+        charged = (aip["collection_seconds"] + aip["training_seconds"]) if aip and aip["charged"] else 0.0
+        return sb3_env(venv, args.gamma if args.normalize_reward else None, frame_stack), charged
+
+    learner = SB3Learner(make_env, args, hidden_sizes(args.net_arch), [agent], frame_stack, total, training)
+    scoring = SingleAgentScoring(plan, [agent], [agent], args.deterministic_eval, dom.one_simulation_per_process,
+                                 lambda _agent: "result.json", None if args.deterministic_eval else DETERMINISTIC_RESULT)
+    sim_text = "the GS (every other agent scripted)" if args.simulator == "gs" else f"the IALS ({args.simulator})"
+    result = run(plan, learner, f"ppo_single: PPO for {agent} of {args.env_id}, trained on {sim_text}, seed "
+                 f"{args.seed}", dom, scoring)
+    aip = training["aip"]
+    if aip and not aip["charged"] and aip["collection_seconds"] + aip["training_seconds"]:
+        print(f"  the AIP was made earlier: its own {format_seconds(aip['collection_seconds'] + aip['training_seconds'])}"
+              " are recorded in training.aip, not counted", flush=True)
     return result
-
-
-def _score_deterministic(args: Args, agent: str, out: Path, dom, options: dict):
-    """The final policy scored again with its most likely actions (``result_deterministic.json``,
-    as the multi-agent runs write), on the same protocol episodes."""
-    evaluator = Evaluator(args.env_id, agent, args.final_eval_episodes, True,
-                          in_subprocess=dom.one_simulation_per_process, options=options)
-    try:
-        ev = evaluator(str(out / "policy.safetensors"), progress=args.progress)
-    finally:
-        evaluator.close()
-    ev.policy_file = "policy.safetensors"
-    return ev
 
 
 if __name__ == "__main__":

@@ -230,24 +230,10 @@ def load_training_state(folder) -> tuple[dict, dict]:
     return state, info
 
 
-def training_logger(folder):
-    """SB3's logger writing ``progress.csv`` (and TensorBoard events when tensorboard is
-    installed) into ``folder``."""
-    from stable_baselines3.common.logger import configure
-
-    formats = ["csv"]
-    with contextlib.suppress(ImportError):
-        import tensorboard  # noqa: F401
-
-        formats.append("tensorboard")
-    return configure(str(folder), formats)
-
-
 __all__ = [
     "Clock",
     "RunFolder",
     "load_training_state",
     "run_state",
     "save_training_state",
-    "training_logger",
 ]

@@ -1,23 +1,30 @@
-"""One stable-baselines3 PPO training run (``ppo_single``, ``ppo_shared``): the SB3 model and
-its vec env, the periodic GS evaluation with its learning curve, checkpoints, the clock and
-the final policy file.
+"""The stable-baselines3 baselines (``ppo_single``, ``ppo_shared``) on the run driver
+(:mod:`ials_zoo.baselines.driver`): the learner adapter (:class:`SB3Learner`: one SB3 PPO on
+the vec env its baseline builds, checkpointed exactly, :mod:`ials_zoo.learners.sb3_state`) and
+the scoring adapter (:class:`SingleAgentScoring`: the policy controls one agent of the GS, the
+others scripted, scored in a worker process where the GS is SUMO).
 """
 
 from __future__ import annotations
 
-import json
-import time
-
 import numpy as np
 
-from ials_zoo.baselines.runs import Clock, load_training_state, save_training_state
+from ials_zoo.baselines.runs import DETERMINISTIC_RESULT
 from ials_zoo.core.extras import study_of
 from ials_zoo.evaluation import NetworkPolicy, _evaluate_worker, evaluate, load_model
 from ials_zoo.influence.specs import GS
-from ials_zoo.policy import PolicyNetwork, policy_from_sb3_model, save_policy
+from ials_zoo.leaderboard import make_result, write_result
+from ials_zoo.learners.sb3_state import (
+    episode_seed,
+    load_model_state,
+    model_state,
+    random_streams,
+    restart_episodes,
+    set_random_streams,
+)
+from ials_zoo.policy import PolicyNetwork, policy_from_sb3_model
 from ials_zoo.processes import shutdown_pool, spawn_pool
 from ials_zoo.single_agent import box_space
-from ials_zoo.utils import atomic_write_text
 
 
 def as_float_box(venv):
@@ -101,37 +108,44 @@ class Evaluator:
         self._pool = None
 
 
-def curve_point(steps: int, seconds: float, ev) -> dict:
-    return {"env_steps": int(steps), "wall_clock_seconds": float(seconds), "mean": ev.mean,
-            "ci_low": ev.ci_low, "ci_high": ev.ci_high}
-
-
 # --------------------------------------------------------------------------------------------
 # PPO and the training run
 
 
-def make_ppo(venv, args, hidden: list[int]):
+def make_ppo(venv, args, hidden: list[int], total: int | None = None):
     """SB3 PPO with the baseline's hyper-parameters (``args``: ppo_single/ppo_shared Args);
-    the learning rate decays linearly to 0 when ``args.anneal_lr``."""
+    the learning rate decays linearly to 0 over ``total`` steps (the run's budget) when
+    ``args.anneal_lr``. The schedule reads the model's step count, not SB3's progress, which
+    restarts at every ``learn()`` call (one per stretch between the driver's evaluations)."""
     from stable_baselines3 import PPO
-    from stable_baselines3.common.utils import LinearSchedule
 
-    lr = LinearSchedule(args.learning_rate, 0.0, 1.0) if args.anneal_lr else args.learning_rate
-    return PPO(
-        "MlpPolicy", venv, learning_rate=lr, n_steps=args.n_steps, batch_size=args.batch_size,
+    model = PPO(
+        "MlpPolicy", venv, learning_rate=args.learning_rate, n_steps=args.n_steps, batch_size=args.batch_size,
         n_epochs=args.n_epochs, gamma=args.gamma, gae_lambda=args.gae_lambda,
         clip_range=args.clip_range, ent_coef=args.ent_coef, vf_coef=args.vf_coef,
         max_grad_norm=args.max_grad_norm, seed=args.seed, device="cpu", verbose=0,
         policy_kwargs={"net_arch": {"pi": hidden, "vf": hidden}},
     )
+    if args.anneal_lr:
+        budget = max(int(total or 1), 1)
+        model.lr_schedule = lambda _progress: args.learning_rate * max(0.0, 1.0 - model.num_timesteps / budget)
+    return model
 
 
-def estimate_seconds(env_id: str, simulator: str, steps: int) -> float:
-    """Rough training time from the domain's measured PPO throughput (``study_of(domain)``)."""
+def whole_rollouts(total: int, per_update: int) -> int:
+    """The budget as whole PPO updates, rounded up as SB3 itself trains (whole rollouts of every
+    environment); said so when it changes."""
+    rounded = -(-int(total) // per_update) * per_update
+    if rounded != total:
+        print(f"note: --total-timesteps {int(total):,} rounded up to {rounded:,}, a whole number of PPO updates of "
+              f"{per_update:,} samples", flush=True)
+    return rounded
 
-    rates = study_of(env_id).ppo_steps_per_second
-    rate = rates.get("gs" if simulator == GS else "ials", 1000.0)
-    return steps / max(rate, 1.0)
+
+def ppo_speed(domain, simulator: str) -> float:
+    """The study's measured PPO steps per second on 2 cores (``study_of(domain)``), for the
+    run's opening estimate."""
+    return float(study_of(domain).ppo_steps_per_second.get("gs" if simulator == GS else "ials", 1000.0))
 
 
 def scale_rewards(venv, gamma: float):
@@ -143,180 +157,185 @@ def scale_rewards(venv, gamma: float):
     return VecNormalize(venv, norm_obs=False, norm_reward=True, gamma=gamma)
 
 
-def reward_scale_of(venv):
-    """The ``VecNormalize`` inside a chain of SB3 vec-env wrappers, or None."""
-    from stable_baselines3.common.vec_env import VecNormalize
+def sb3_env(venv, reward_gamma: float | None, frame_stack: int):
+    """The training vec env as PPO reads it: float observations, episode statistics
+    (``VecMonitor``), rewards scaled with ``reward_gamma`` (:func:`scale_rewards`; None: not),
+    the last ``frame_stack`` observations."""
+    from stable_baselines3.common.vec_env import VecFrameStack, VecMonitor
 
-    while venv is not None:
-        if isinstance(venv, VecNormalize):
-            return venv
-        venv = getattr(venv, "venv", None)
-    return None
-
-
-class TrainingRun:
-    """The bookkeeping of one SB3 training run in a :class:`~ials_zoo.baselines.runs.RunFolder`.
-
-    * every ``eval_every`` steps: checkpoint, score the policy on the GS, rewrite ``curve.json``;
-    * every ``checkpoint_seconds`` of training (and after the first update): checkpoint, so a
-      crash loses little and ``--resume`` continues from there;
-    * at the end: ``policy.safetensors`` and its GS score for every evaluator's agent.
-
-    ``meta`` is the policy metadata (domain, agents, algorithm, frame stack, options); its
-    ``training`` record and ``learning_curve`` are updated in place. The first evaluator's agent
-    is the one the curve follows. The clock (training only: evaluation and checkpointing
-    excluded) starts at ``aip_seconds`` (plus a resumed run's seconds).
-    """
-
-    def __init__(self, model, run, meta: dict, evaluators: dict, aip_seconds: float = 0.0,
-                 policy_agents=None, frame_stack: int = 1, checkpoint_seconds: float = 300.0):
-        self.model, self.run, self.meta = model, run, meta
-        self.out = run.path
-        self.training, self.curve = meta["training"], meta["learning_curve"]
-        self.evaluators = evaluators
-        self.curve_agent = next(iter(evaluators))
-        self.policy_agents = list(policy_agents or [self.curve_agent])
-        self.frame_stack = int(frame_stack)
-        self.aip_seconds = float(aip_seconds)
-        self.checkpoint_seconds = float(checkpoint_seconds)
-        self.clock = Clock(offset=self.aip_seconds)
-        if run.resuming:
-            self._resume()
-        self._last_checkpoint = time.monotonic()
-
-    def _resume(self):
-        # SB3 keeps its environments' episodes and torch's global generator out of our reach:
-        # the run continues from its checkpoint but is not bitwise the uninterrupted one
-        print("  resuming an SB3 run: it continues from its last checkpoint (not bitwise the run that was never "
-              "stopped; the batched learners of ippo and dials are)", flush=True)
-        state, info = load_training_state(self.out)
-        self.model.policy.load_state_dict(state["policy"])
-        self.model.policy.optimizer.load_state_dict(state["optimizer"])
-        scale = reward_scale_of(self.model.get_env())
-        if scale is not None and "reward_rms" in state:
-            rms = state["reward_rms"]
-            scale.ret_rms.mean, scale.ret_rms.var = rms["mean"].numpy(), rms["var"].numpy()
-            scale.ret_rms.count = float(rms["count"])
-        self.model.num_timesteps = int(info["num_timesteps"])
-        self.curve[:] = info["learning_curve"]
-        self.clock = Clock(offset=float(info["clock_seconds"]))
-
-    def policy(self):
-        return policy_of(self.model, self.policy_agents, self.frame_stack, self.meta)
-
-    def checkpoint(self):
-        import torch
+    venv = VecMonitor(as_float_box(venv))
+    if reward_gamma is not None:
+        venv = scale_rewards(venv, reward_gamma)
+    if frame_stack > 1:
+        venv = VecFrameStack(venv, frame_stack)
+    return venv
 
 
-        with self.clock.pause():
-            state = {"policy": self.model.policy.state_dict(),
-                     "optimizer": self.model.policy.optimizer.state_dict()}
-            scale = reward_scale_of(self.model.get_env())
-            if scale is not None:
-                state["reward_rms"] = {"mean": torch.as_tensor(scale.ret_rms.mean),
-                                       "var": torch.as_tensor(scale.ret_rms.var),
-                                       "count": torch.as_tensor(float(scale.ret_rms.count))}
-            info = {"num_timesteps": int(self.model.num_timesteps), "clock_seconds": self.clock.seconds,
-                    "learning_curve": self.curve}
-            save_training_state(self.out, state, info)
-        self._last_checkpoint = time.monotonic()
+# --------------------------------------------------------------------------------------------
+# The driver's adapters
 
-    def maybe_checkpoint(self, first: bool = False):
-        if first or time.monotonic() - self._last_checkpoint > self.checkpoint_seconds:
-            self.checkpoint()
+RUN_ONLY = ("resume", "overwrite", "progress", "out_dir", "submitter", "notes")
+"""The arguments that do not shape a run's numbers (a resume may change them)."""
 
-    def record(self, steps: int):
-        """Score the current policy on the GS, append it to the curve, checkpoint (clock paused)."""
-        with self.clock.pause():
-            self.training["env_steps"] = int(steps)
-            self.training["wall_clock_seconds"] = self.clock.seconds - self.aip_seconds
-            ev = self.evaluators[self.curve_agent](self.policy())
-            self.curve.append(curve_point(steps, self.clock.seconds, ev))
-            header = {k: self.meta[k] for k in ("env_id", "algorithm", "seed")}
-            atomic_write_text(self.out / "curve.json", json.dumps(dict(
-                header, agent=self.curve_agent, simulator=self.training["simulator"],
-                points=self.curve), indent=2) + "\n")
-            self.checkpoint()
-        return ev
+CHECKPOINT_EVERY = 100_000
+"""Steps between checkpoints of a run that evaluates only at its end (``--eval-every 0``)."""
 
-    def learn(self, total_timesteps: int, eval_every: int, final_episodes: int,
-              progress: bool) -> dict:
-        """Train up to ``total_timesteps``; return ``{agent: EvaluationResult}`` of the final
-        policy (``policy.safetensors``) over ``final_episodes`` GS episodes. Closes the
-        training env and the evaluators (killing workers after an error or an interrupt)."""
 
-        done = int(self.model.num_timesteps)
-        callback = make_progress_callback(total_timesteps, self, eval_every, progress)
-        ok = False
-        try:
-            if done < total_timesteps:
-                self.model.learn(total_timesteps=total_timesteps - done, callback=callback,
-                                 reset_num_timesteps=done == 0)
-            steps = int(self.model.num_timesteps)
-            # The final policy is on the curve (unless the last evaluation was at this very
-            # step) and is scored again for the result on final_episodes episodes.
-            if not self.curve or self.curve[-1]["env_steps"] != steps:
-                self.record(steps)
-            self.training["env_steps"] = steps
-            self.training["wall_clock_seconds"] = self.clock.seconds - self.aip_seconds
-            path = self.out / "policy.safetensors"
-            with self.clock.pause():
-                save_policy(self.policy(), path)
-                finals = {a: ev(_file_policy(path), final_episodes, progress=progress)
-                          for a, ev in self.evaluators.items()}
-            ok = True
-        finally:
-            for ev in self.evaluators.values():
-                ev.close(kill=not ok)
+STATS = {"policy_loss": "train/policy_gradient_loss", "value_loss": "train/value_loss", "entropy": "train/entropy_loss",
+         "clip_fraction": "train/clip_fraction", "approx_kl": "train/approx_kl", "learning_rate": "train/learning_rate"}
+"""``progress.csv``'s columns (:class:`~ials_zoo.baselines.multiagent.TrainingLog`) from SB3's
+logged keys (SB3 logs the entropy's negative as a loss)."""
+
+
+class SB3Learner:
+    """The driver's adapter for one SB3 PPO, on the vec env ``make_env(training)`` returns with
+    the AIP seconds this run is charged, ``(venv, seconds)`` (it fills ``training["simulator"]``
+    and ``training["aip"]``). Its checkpoint is exact (:mod:`ials_zoo.learners.sb3_state`): every checkpoint
+    starts new episodes seeded by the run's seed and step count, and a resumed run starts the
+    same ones."""
+
+    def __init__(self, make_env, args, hidden: list[int], agents: list, frame_stack: int, total: int,
+                 training: dict):
+        self.make_env, self.args, self.hidden = make_env, args, hidden
+        self.agents, self.frame_stack, self.total, self.training = list(agents), int(frame_stack), total, training
+        self.seed = int(args.seed)
+        self.charged_seconds = 0.0
+        self.model = self._streams = None
+        self._log = []
+
+    @property
+    def simulator(self) -> str:
+        return self.training["simulator"]
+
+    @property
+    def reports_aip_time(self) -> bool:  # an AIP made by this run is on its clock
+        return self.charged_seconds > 0
+
+    def load(self, state, info):
+        from stable_baselines3.common.logger import Logger
+
+        venv, charged = self.make_env(self.training)
+        self.model = make_ppo(venv, self.args, self.hidden, self.total)
+        self.model.set_logger(Logger(None, [_recorder(self._log)]))
+        if state is None:
+            self.charged_seconds = float(charged)
+            return
+        load_model_state(self.model, state["model"])
+        self._streams = state["streams"]
+        # what the first run was charged and recorded (its AIP is cached by now)
+        self.charged_seconds = float(info["aip_seconds"])
+        self.training.update(simulator=info["simulator"], aip=info["aip"])
+
+    def start(self, steps):
+        if self._streams is not None:  # resuming: the episodes and random streams of the checkpoint
+            restart_episodes(self.model, episode_seed(self.seed, steps))
+            set_random_streams(self._streams)
+            self._streams = None
+
+    def policy(self, metadata):
+        return policy_of(self.model, self.agents, self.frame_stack, metadata)
+
+    def next_stop(self, steps):
+        return None
+
+    def before_training(self, steps, total, policy, note):
+        pass
+
+    def train(self, steps, target, advance):
+        from stable_baselines3.common.callbacks import BaseCallback
+
+        class Advance(BaseCallback):
+            def _on_step(self):
+                return True
+
+            def _on_rollout_end(self):
+                advance(self.model.n_steps * self.model.env.num_envs)
+
+        model = self.model
+        self._log.clear()
+        model.learn(target - model.num_timesteps, callback=Advance(), reset_num_timesteps=False)
+        model.logger.dump(model.num_timesteps)  # the last update's losses (SB3 logs them with the next rollout)
+        row = {}
+        for column, key in STATS.items():
+            values = [d[key] for d in self._log if key in d]
+            if values:
+                row[column] = float(np.mean(values)) * (-1.0 if column == "entropy" else 1.0)
+        returns = [d["rollout/ep_rew_mean"] for d in self._log if "rollout/ep_rew_mean" in d]
+        row["mean_episode_return"] = float(returns[-1]) if returns else None
+        return row
+
+    def checkpoint(self, out):
+        restart_episodes(self.model, episode_seed(self.seed, self.model.num_timesteps))
+        return ({"model": model_state(self.model), "streams": random_streams()},
+                {"aip_seconds": self.charged_seconds, "aip": self.training["aip"], "simulator": self.simulator})
+
+    def close(self):
+        if self.model is not None:
             self.model.get_env().close()
-        for ev in finals.values():
+            self.model = None
+
+
+def _recorder_class():
+    from stable_baselines3.common.logger import KVWriter
+
+    class Recorder(KVWriter):
+        """SB3's logger output into a list (one dict per dump)."""
+
+        def __init__(self, rows: list):
+            self.rows = rows
+
+        def write(self, key_values, key_excluded, step=0):
+            self.rows.append(dict(key_values))
+
+        def close(self):
+            pass
+
+    return Recorder
+
+
+def _recorder(rows: list):
+    return _recorder_class()(rows)
+
+
+class SingleAgentScoring:
+    """Scores the policy with the single-agent protocol (:func:`ials_zoo.evaluation.evaluate`:
+    the policy controls one agent of the GS, the others scripted) for each of ``agents``; the
+    learning curve follows the first. ``result_names(agent)``: the result file of an agent;
+    ``deterministic_result``: also score the first agent with its most likely actions into this
+    file (None: not). SUMO GSs are scored in a worker process (one simulation per process)."""
+
+    def __init__(self, plan, agents: list, trained_agents: list, deterministic: bool, in_subprocess: bool,
+                 result_name, deterministic_result: str | None = DETERMINISTIC_RESULT):
+        self.plan, self.agents, self.trained_agents = plan, list(agents), list(trained_agents)
+        self.result_name, self.deterministic_result = result_name, deterministic_result
+        self.evaluators = {a: Evaluator(plan.env_id, a, plan.eval_episodes, deterministic, in_subprocess, plan.options)
+                           for a in self.agents}
+        if deterministic_result is not None:
+            self.evaluators["deterministic"] = Evaluator(plan.env_id, self.agents[0], plan.eval_episodes, True,
+                                                         in_subprocess, plan.options)
+        self.curve_header = {"agent": self.agents[0]}
+        self.subject = f"of {self.agents[0]}"
+        self.results = {}
+
+    def curve(self, policy):
+        return self.evaluators[self.agents[0]](policy)
+
+    def final(self, path, training, curve):
+        p = self.plan
+        scored = [(a, self.evaluators[a], self.result_name(a)) for a in self.agents]
+        if self.deterministic_result is not None:
+            scored.append((self.agents[0], self.evaluators["deterministic"], self.deterministic_result))
+        for agent, evaluator, name in scored:
+            ev = evaluator(load_model(path), p.final_eval_episodes, progress=p.progress)
             ev.policy_file = "policy.safetensors"  # relative to the run folder (where results live)
-        return finals
+            curves = [{"seed": p.seed, "points": curve}] if agent == self.agents[0] else []
+            self.results[name] = make_result([ev], algorithm=p.algorithm, training=training, training_seeds=[p.seed],
+                                             learning_curves=curves, trained_agents=self.trained_agents,
+                                             submitter=p.submitter, notes=p.notes)
+            write_result(p.out / name, self.results[name])
+        first = self.results[self.result_name(self.agents[0])]
+        return first, self.results.get(self.deterministic_result)
 
-
-def _file_policy(path):
-
-    return load_model(path)
-
-
-def make_progress_callback(total: int, run: TrainingRun, eval_every: int, progress: bool):
-    """An SB3 callback: a tqdm progress bar (with the last GS score), ``run.record`` every
-    ``eval_every`` environment steps (0 = never), checkpoints after the first update and every
-    ``run.checkpoint_seconds``."""
-    from stable_baselines3.common.callbacks import BaseCallback
-
-    class _Callback(BaseCallback):
-        def _on_training_start(self):
-            start = self.num_timesteps
-            self.next_eval = None
-            if eval_every > 0:
-                self.next_eval = (start // eval_every + 1) * eval_every
-            self.bar = None
-            if progress:
-                from tqdm.auto import tqdm
-
-                self.bar = tqdm(total=total, initial=start, unit="step", dynamic_ncols=True, desc="train")
-            self.last = start
-            self.updates = 0
-
-        def _on_step(self):
-            if self.bar is not None:
-                self.bar.update(self.num_timesteps - self.last)
-            self.last = self.num_timesteps
-            if self.next_eval is not None and self.num_timesteps >= self.next_eval:
-                ev = run.record(self.num_timesteps)
-                if self.bar is not None:
-                    self.bar.set_postfix(gs=f"{ev.mean:.2f}")
-                while self.next_eval <= self.num_timesteps:
-                    self.next_eval += eval_every
-            return True
-
-        def _on_rollout_end(self):
-            self.updates += 1
-            run.maybe_checkpoint(first=self.updates == 1)
-
-        def _on_training_end(self):
-            if self.bar is not None:
-                self.bar.close()
-
-    return _Callback()
+    def close(self, kill: bool = False):
+        for evaluator in self.evaluators.values():
+            evaluator.close(kill=kill)

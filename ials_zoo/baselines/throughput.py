@@ -17,7 +17,8 @@ import time
 import numpy as np
 from stable_baselines3.common.vec_env import VecEnv
 
-from ials_zoo.baselines.ppo_single import Args, _hidden, make_training_env, update_size
+from ials_zoo.baselines.arguments import hidden_sizes
+from ials_zoo.baselines.ppo_single import Args, make_training_env, update_size
 from ials_zoo.baselines.sb3_run import as_float_box, make_ppo
 from ials_zoo.core.domains import get_domain
 from ials_zoo.errors import BadInput
@@ -99,7 +100,7 @@ def ppo_throughput(env_id: str, agent: str, simulator: str, steps: int = 30_000,
         venv = VecMonitor(as_float_box(venv))
         if dom.frame_stack > 1:
             venv = VecFrameStack(venv, dom.frame_stack)
-        model = make_ppo(venv, args, _hidden(args.net_arch))
+        model = make_ppo(venv, args, hidden_sizes(args.net_arch))
         start = time.perf_counter()
         model.learn(steps)
         seconds = time.perf_counter() - start

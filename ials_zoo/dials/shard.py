@@ -31,6 +31,14 @@ from ials_zoo.influence.ials import make_ials_vec_env
 from ials_zoo.influence.multi import make_multi_agent_ials
 from ials_zoo.learners.batched_ppo import BatchedPPO, PPOConfig
 from ials_zoo.learners.rollout import IALSVecEnv, RolloutTrainer
+from ials_zoo.learners.sb3_state import (
+    episode_seed,
+    load_model_state,
+    model_state,
+    random_streams,
+    restart_episodes,
+    set_random_streams,
+)
 from ials_zoo.policy import policy_from_sb3_model, stack_policies
 
 LEARNERS = ("batched", "sb3")
@@ -84,10 +92,10 @@ class AgentShard:
     # -- one SB3 PPO per agent (the reference learner)
     def _init_sb3(self, spec):
         cfg = self.cfg
-        self.models = {}
+        self.models, self.seeds = {}, {a: (spec.seed * 1_000_003 + agent_key(a)) % 2**31 for a in self.agents}
         for a in self.agents:
             venv = make_ials_vec_env(spec.env_id, a, n_envs=spec.n_envs, predictor=spec.predictors[a],
-                                     seed=(spec.seed * 1_000_003 + agent_key(a)) % 2**31, **spec.options)
+                                     seed=self.seeds[a], **spec.options)
             wrapped = VecMonitor(venv)
             if spec.frame_stack > 1:
                 wrapped = VecFrameStack(wrapped, spec.frame_stack)
@@ -96,7 +104,7 @@ class AgentShard:
                 "MlpPolicy", wrapped, learning_rate=lr, n_steps=cfg.n_steps, batch_size=cfg.batch_size,
                 n_epochs=cfg.n_epochs, gamma=cfg.gamma, gae_lambda=cfg.gae_lambda, clip_range=cfg.clip_range,
                 ent_coef=cfg.ent_coef, vf_coef=cfg.vf_coef, max_grad_norm=cfg.max_grad_norm,
-                seed=(spec.seed * 1_000_003 + agent_key(a)) % 2**31, device="cpu", verbose=0,
+                seed=self.seeds[a], device="cpu", verbose=0,
                 policy_kwargs={"net_arch": {"pi": list(cfg.hidden), "vf": list(cfg.hidden)}})
             self.models[a]._ials_venv = venv
         # the learning rate decays over the whole run (SB3's own schedule would restart at every
@@ -179,13 +187,16 @@ class AgentShard:
         return stack_policies(nets).layers
 
     def state(self) -> dict:
-        """The learners' state (tensors and plain containers) and the step count."""
+        """The learners' state (tensors and plain containers) and the step count: everything
+        the shard's future depends on. The SB3 learners' episodes cannot be saved: every
+        agent starts new ones here, seeded by its seed and the step count, and
+        :meth:`load_state` starts the same ones (:mod:`ials_zoo.learners.sb3_state`)."""
         if self.spec.learner == "batched":
             return {"steps": self.steps, "learner": self.learner.state_dict(), "trainer": self.trainer.state()}
-        return {"steps": self.steps, "models": {a: {"policy": m.policy.state_dict(),
-                                                    "optimizer": m.policy.optimizer.state_dict(),
-                                                    "num_timesteps": int(m.num_timesteps)}
-                                                for a, m in self.models.items()}}
+        for a, m in self.models.items():
+            restart_episodes(m, episode_seed(self.seeds[a], self.steps))
+        return {"steps": self.steps, "models": {a: model_state(m) for a, m in self.models.items()},
+                "streams": random_streams()}
 
     def load_state(self, state: dict) -> None:
         self.steps = int(state["steps"])
@@ -195,10 +206,9 @@ class AgentShard:
                 self.trainer.restore(state["trainer"])
             return
         for a, s in state["models"].items():
-            m = self.models[a]
-            m.policy.load_state_dict(s["policy"])
-            m.policy.optimizer.load_state_dict(s["optimizer"])
-            m.num_timesteps = int(s["num_timesteps"])
+            load_model_state(self.models[a], s)
+            restart_episodes(self.models[a], episode_seed(self.seeds[a], self.steps))
+        set_random_streams(state["streams"])
 
     def close(self) -> None:
         if self.spec.learner == "batched":
