@@ -431,6 +431,73 @@ def test_kill_9_of_a_ray_run_leaves_no_ray_process():
     assert not left, [(p, _cmdline(p)) for p in left]
 
 
+
+def test_kill_9_of_a_run_on_a_cluster_it_joined_leaves_the_cluster_alone(tmp_path):
+    """``--ray-address``: the run's actors die with it, and the cluster it only connected to
+    (started here with ``ray start --head``: GCS, raylet, agents) lives on."""
+    pytest.importorskip("ray")
+    import socket
+
+    from ials_zoo.processes import _descendants, _proc_table
+
+    # no token authentication: Ray 2.59+ turns it on for a head where ~/.ray/auth_token exists,
+    # and a joining driver sends no token (an in-process ray.init() may also have set the mode)
+    env = dict(os.environ, HOME=str(tmp_path), RAY_AUTH_MODE="disabled")
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    # its own session: the cluster's daemons form a process group apart from this test's
+    started = subprocess.run([str(Path(sys.executable).parent / "ray"), "start", "--head", f"--port={port}",
+                              "--num-cpus=2", "--include-dashboard=false", "--disable-usage-stats",
+                              "--node-ip-address=127.0.0.1"], env=env, capture_output=True, timeout=120,
+                             start_new_session=True)
+    assert started.returncode == 0, started.stderr[-2000:]
+    gcs = [p for p in _proc_table() if "gcs_server" in _cmdline(p) and f"={port}" in _cmdline(p)]
+    assert len(gcs) == 1, "the cluster's GCS not found"
+    group = os.getpgid(gcs[0])
+    assert group != os.getpgrp()
+    proc, shards = None, []
+    try:
+        cluster = sorted(p for p in _proc_table() if _group(p) == group)
+        raylet = [p for p in cluster if "raylet/raylet" in _cmdline(p)]
+        assert len(raylet) == 1
+        cmd = [sys.executable, "-m", "baselines.dials", "--env", ENV, "--agents", ",".join(AGENTS), "--env-options",
+               json.dumps(OPTIONS), "--total-timesteps", "1000000", "--samples-per-update", "128", "--batch-size",
+               "64", "--n-envs", "2", "--collect-steps", "200", "--aip-epochs", "1", "--eval-every", "500000",
+               "--eval-episodes", "1", "--final-eval-episodes", "1", "--workers", "2", "--backend", "ray",
+               "--ray-address", f"127.0.0.1:{port}", "--no-progress", "--out-dir", str(tmp_path / "run")]
+        proc = subprocess.Popen(cmd, cwd=Path(__file__).resolve().parents[1], env=env, stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL)
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and len(shards) < 2:
+            shards = [p for p in _descendants(raylet[0], _proc_table()) if "ray::AgentShard" in _cmdline(p)]
+            time.sleep(0.5)
+        assert len(shards) >= 2, "no Ray actors within 120 s"
+        proc.kill()
+        proc.wait()
+        assert all(_gone(p, within=30.0) for p in shards), "the run's actors outlived it"
+        alive = [p for p in cluster if not _gone(p, within=0.0)]
+        assert alive == cluster, "the cluster the run joined lost processes"
+    finally:
+        if proc is not None and proc.poll() is None:
+            proc.kill()
+        for pid in shards:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(group, signal.SIGKILL)
+        current = Path(tempfile.gettempdir()) / "ray" / "ray_current_cluster"  # where ray.init() would look
+        with contextlib.suppress(OSError):
+            if current.read_text().strip().endswith(f":{port}"):
+                current.unlink()
+
+
+def _group(pid: int):
+    try:
+        return os.getpgid(pid)
+    except OSError:
+        return None
+
 def _cmdline(pid: int) -> str:
     try:
         with open(f"/proc/{pid}/cmdline", "rb") as f:

@@ -7,9 +7,13 @@ Every backend runs one :class:`~ials_zoo.dials.shard.AgentShard` per worker and 
 * :class:`ProcessBackend` (default): one fresh interpreter per shard (no extra dependency),
   dying with this process; a worker that dies, is stopped, or stops sending its heartbeat for
   :data:`UNRESPONSIVE_SECONDS` raises :class:`~ials_zoo.processes.WorkerError` naming it;
-* :class:`RayBackend`: one Ray actor per shard, on a local Ray (``ray.init()``) or an existing
-  cluster (``address``; an address where nothing answers is refused within seconds, before
-  Ray would wait for it). Needs ``pip install "ials-zoo[ray]"``.
+* :class:`RayBackend`: one Ray actor per shard, on a new local Ray of its own (it dies with the
+  run, even after kill -9; never a cluster already running here) or an existing cluster
+  (``address``: the run's actors die with it, the cluster is left alone; an address where
+  nothing answers is refused within seconds, before Ray would wait for it). Needs
+  ``pip install "ials-zoo[ray]"``. Ray 2.59+ turns token authentication on for ``ray start
+  --head`` when ``~/.ray/auth_token`` exists, and a joining driver sends no token: start such a
+  head with ``RAY_AUTH_MODE=disabled`` or join it with ``RAY_AUTH_MODE=token``.
 """
 
 from __future__ import annotations
@@ -120,9 +124,13 @@ class RayBackend:
                 # a cluster we only connect to is left alone
                 reap_descendants_when_gone()
             try:
-                ray.init(address=address, **kwargs)
+                # "local": a Ray of our own, never a cluster that ray.init() would otherwise find
+                # on this machine (or a dead one its address file still names)
+                ray.init(address=address or "local", **kwargs)
             except ConnectionError as exc:  # something answers there, but not a Ray we may join
-                raise BadInput(f"--ray-address {address!r}: Ray could not connect ({exc})") from None
+                raise BadInput(f"--ray-address {address!r}: Ray could not connect ({exc}); a head that runs token "
+                               "authentication (Ray 2.59+ turns it on where ~/.ray/auth_token exists) needs "
+                               "RAY_AUTH_MODE=token here") from None
         actor = ray.remote(num_cpus=1)(AgentShard)
         try:
             self.actors = [actor.remote(spec) for spec in specs]
