@@ -77,13 +77,13 @@ def test_ppo_single_scales_rewards_over_every_step_and_checkpoints_the_scale(tmp
     out = tmp_path / "run"
     ppo_single.main(ppo_single.Args(simulator="untrained-ials", out_dir=str(out), normalize_reward=True,
                                     **dict(TINY, eval_every=0)))
-    rms = torch.load(out / "checkpoint.pt", weights_only=True)["model"]["reward_rms"]
+    rms = torch.load(out / "checkpoint.pt", weights_only=True)["models"]["policy"]["reward_rms"]
     assert float(rms["count"]) == pytest.approx(1024, abs=1e-3)  # VecNormalize saw every training step
     assert float(rms["var"]) > 0
     plain = tmp_path / "plain"
     ppo_single.main(ppo_single.Args(simulator="untrained-ials", out_dir=str(plain), normalize_reward=False,
                                     **dict(TINY, eval_every=0)))
-    assert "reward_rms" not in torch.load(plain / "checkpoint.pt", weights_only=True)["model"]
+    assert "reward_rms" not in torch.load(plain / "checkpoint.pt", weights_only=True)["models"]["policy"]
 
 def test_ppo_single_on_trained_ials_counts_aip_time(tmp_path, small_aip):
     from ials_zoo.influence.files import load_predictor

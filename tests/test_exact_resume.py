@@ -163,11 +163,12 @@ def test_a_resumed_dials_run_with_sb3_learners_ends_bitwise_as_the_uninterrupted
 def test_an_sb3_resume_without_its_weights_or_its_random_streams_would_be_caught(tmp_path, monkeypatch):
     """The ppo_single check is not blind: a resume that loads no weights, or that leaves the
     random streams as the fresh model set them, ends elsewhere."""
-    from ials_zoo.baselines import ppo_single, sb3_run
+    from ials_zoo.baselines import ppo_single
+    from ials_zoo.learners import sb3_state
 
     kwargs = dict(SINGLE, simulator="gs")
     whole = ppo_single.main(ppo_single.Args(**kwargs, out_dir=str(tmp_path / "whole"))), tmp_path / "whole"
-    real_load = sb3_run.load_model_state
+    real_load = sb3_state.load_model_state
     mutants = {"weights": ("load_model_state", lambda model, state: real_load(model, dict(
                    state, policy=model.policy.state_dict()))),
                "streams": ("set_random_streams", lambda state: None)}
@@ -177,7 +178,7 @@ def test_an_sb3_resume_without_its_weights_or_its_random_streams_would_be_caught
         with pytest.raises(Crash):
             ppo_single.main(ppo_single.Args(**kwargs, out_dir=str(out)))
         monkeypatch.undo()
-        monkeypatch.setattr(sb3_run, attribute, mutant)
+        monkeypatch.setattr(sb3_state, attribute, mutant)
         resumed = ppo_single.main(ppo_single.Args(**kwargs, out_dir=str(out), resume=True)), out
         monkeypatch.undo()
         with pytest.raises(AssertionError):

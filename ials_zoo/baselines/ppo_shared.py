@@ -136,7 +136,8 @@ class Args(PPOSettings):
     net_arch: str = arg("256,128", "hidden layer sizes, comma-separated")
     frame_stack: int | None = arg(None, "observations the policy reads (default: the domain's)")
     env_options: str = arg("", "GS options as a JSON object, e.g. '{\"item_lifetime\": 8}'")
-    eval_every: int = arg(100_000, "GS evaluation every this many agent transitions (0: end only)")
+    eval_every: int = arg(100_000, "GS evaluation every this many agent transitions (0: only at the start and the end, "
+                          f"with a checkpoint every {CHECKPOINT_EVERY:,})")
     eval_episodes: int = arg(10, "GS episodes per periodic evaluation")
     final_eval_episodes: int = arg(20, "GS episodes of the final evaluation")
     deterministic_eval: bool = arg(False, "evaluate with the most likely action")

@@ -14,14 +14,7 @@ from ials_zoo.core.extras import study_of
 from ials_zoo.evaluation import NetworkPolicy, _evaluate_worker, evaluate, load_model
 from ials_zoo.influence.specs import GS
 from ials_zoo.leaderboard import make_result, write_result
-from ials_zoo.learners.sb3_state import (
-    episode_seed,
-    load_model_state,
-    model_state,
-    random_streams,
-    restart_episodes,
-    set_random_streams,
-)
+from ials_zoo.learners.sb3_state import checkpoint_models, resume_models
 from ials_zoo.policy import PolicyNetwork, policy_from_sb3_model
 from ials_zoo.processes import shutdown_pool, spawn_pool
 from ials_zoo.single_agent import box_space
@@ -190,9 +183,9 @@ logged keys (SB3 logs the entropy's negative as a loss)."""
 class SB3Learner:
     """The driver's adapter for one SB3 PPO, on the vec env ``make_env(training)`` returns with
     the AIP seconds this run is charged, ``(venv, seconds)`` (it fills ``training["simulator"]``
-    and ``training["aip"]``). Its checkpoint is exact (:mod:`ials_zoo.learners.sb3_state`): every checkpoint
-    starts new episodes seeded by the run's seed and step count, and a resumed run starts the
-    same ones."""
+    and ``training["aip"]``). Its checkpoint is exact (:mod:`ials_zoo.learners.sb3_state`):
+    every checkpoint starts new episodes seeded by the run's seed and step count, and a resumed
+    run starts the same ones."""
 
     def __init__(self, make_env, args, hidden: list[int], agents: list, frame_stack: int, total: int,
                  training: dict):
@@ -200,7 +193,7 @@ class SB3Learner:
         self.agents, self.frame_stack, self.total, self.training = list(agents), int(frame_stack), total, training
         self.seed = int(args.seed)
         self.charged_seconds = 0.0
-        self.model = self._streams = None
+        self.model = self._state = None
         self._log = []
 
     @property
@@ -220,17 +213,15 @@ class SB3Learner:
         if state is None:
             self.charged_seconds = float(charged)
             return
-        load_model_state(self.model, state["model"])
-        self._streams = state["streams"]
+        self._state = state  # put back at the start, right before training
         # what the first run was charged and recorded (its AIP is cached by now)
         self.charged_seconds = float(info["aip_seconds"])
         self.training.update(simulator=info["simulator"], aip=info["aip"])
 
     def start(self, steps):
-        if self._streams is not None:  # resuming: the episodes and random streams of the checkpoint
-            restart_episodes(self.model, episode_seed(self.seed, steps))
-            set_random_streams(self._streams)
-            self._streams = None
+        if self._state is not None:
+            resume_models({"policy": self.model}, {"policy": self.seed}, steps, self._state)
+            self._state = None
 
     def policy(self, metadata):
         return policy_of(self.model, self.agents, self.frame_stack, metadata)
@@ -265,8 +256,7 @@ class SB3Learner:
         return row
 
     def checkpoint(self, out):
-        restart_episodes(self.model, episode_seed(self.seed, self.model.num_timesteps))
-        return ({"model": model_state(self.model), "streams": random_streams()},
+        return (checkpoint_models({"policy": self.model}, {"policy": self.seed}, self.model.num_timesteps),
                 {"aip_seconds": self.charged_seconds, "aip": self.training["aip"], "simulator": self.simulator})
 
     def close(self):
@@ -300,7 +290,7 @@ def _recorder(rows: list):
 class SingleAgentScoring:
     """Scores the policy with the single-agent protocol (:func:`ials_zoo.evaluation.evaluate`:
     the policy controls one agent of the GS, the others scripted) for each of ``agents``; the
-    learning curve follows the first. ``result_names(agent)``: the result file of an agent;
+    learning curve follows the first. ``result_name(agent)``: the result file of an agent;
     ``deterministic_result``: also score the first agent with its most likely actions into this
     file (None: not). SUMO GSs are scored in a worker process (one simulation per process)."""
 
@@ -310,9 +300,8 @@ class SingleAgentScoring:
         self.result_name, self.deterministic_result = result_name, deterministic_result
         self.evaluators = {a: Evaluator(plan.env_id, a, plan.eval_episodes, deterministic, in_subprocess, plan.options)
                            for a in self.agents}
-        if deterministic_result is not None:
-            self.evaluators["deterministic"] = Evaluator(plan.env_id, self.agents[0], plan.eval_episodes, True,
-                                                         in_subprocess, plan.options)
+        self.deterministic_evaluator = None if deterministic_result is None else Evaluator(
+            plan.env_id, self.agents[0], plan.eval_episodes, True, in_subprocess, plan.options)
         self.curve_header = {"agent": self.agents[0]}
         self.subject = f"of {self.agents[0]}"
         self.results = {}
@@ -324,7 +313,7 @@ class SingleAgentScoring:
         p = self.plan
         scored = [(a, self.evaluators[a], self.result_name(a)) for a in self.agents]
         if self.deterministic_result is not None:
-            scored.append((self.agents[0], self.evaluators["deterministic"], self.deterministic_result))
+            scored.append((self.agents[0], self.deterministic_evaluator, self.deterministic_result))
         for agent, evaluator, name in scored:
             ev = evaluator(load_model(path), p.final_eval_episodes, progress=p.progress)
             ev.policy_file = "policy.safetensors"  # relative to the run folder (where results live)
@@ -337,5 +326,6 @@ class SingleAgentScoring:
         return first, self.results.get(self.deterministic_result)
 
     def close(self, kill: bool = False):
-        for evaluator in self.evaluators.values():
-            evaluator.close(kill=kill)
+        for evaluator in [*self.evaluators.values(), self.deterministic_evaluator]:
+            if evaluator is not None:
+                evaluator.close(kill=kill)

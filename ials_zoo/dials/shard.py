@@ -31,14 +31,7 @@ from ials_zoo.influence.ials import make_ials_vec_env
 from ials_zoo.influence.multi import make_multi_agent_ials
 from ials_zoo.learners.batched_ppo import BatchedPPO, PPOConfig
 from ials_zoo.learners.rollout import IALSVecEnv, RolloutTrainer
-from ials_zoo.learners.sb3_state import (
-    episode_seed,
-    load_model_state,
-    model_state,
-    random_streams,
-    restart_episodes,
-    set_random_streams,
-)
+from ials_zoo.learners.sb3_state import checkpoint_models, resume_models
 from ials_zoo.policy import policy_from_sb3_model, stack_policies
 
 LEARNERS = ("batched", "sb3")
@@ -193,10 +186,7 @@ class AgentShard:
         :meth:`load_state` starts the same ones (:mod:`ials_zoo.learners.sb3_state`)."""
         if self.spec.learner == "batched":
             return {"steps": self.steps, "learner": self.learner.state_dict(), "trainer": self.trainer.state()}
-        for a, m in self.models.items():
-            restart_episodes(m, episode_seed(self.seeds[a], self.steps))
-        return {"steps": self.steps, "models": {a: model_state(m) for a, m in self.models.items()},
-                "streams": random_streams()}
+        return dict(checkpoint_models(self.models, self.seeds, self.steps), steps=self.steps)
 
     def load_state(self, state: dict) -> None:
         self.steps = int(state["steps"])
@@ -205,10 +195,7 @@ class AgentShard:
             if "trainer" in state:  # the checkpoint's episodes, replayed to where they were
                 self.trainer.restore(state["trainer"])
             return
-        for a, s in state["models"].items():
-            load_model_state(self.models[a], s)
-            restart_episodes(self.models[a], episode_seed(self.seeds[a], self.steps))
-        set_random_streams(state["streams"])
+        resume_models(self.models, self.seeds, self.steps, state)
 
     def close(self) -> None:
         if self.spec.learner == "batched":

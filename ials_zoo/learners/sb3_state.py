@@ -117,5 +117,24 @@ def load_model_state(model, state: dict) -> None:
         scale.ret_rms.count = float(rms["count"].item())
 
 
-__all__ = ["episode_seed", "load_model_state", "model_state", "random_streams", "restart_episodes",
-           "reward_scale_of", "set_random_streams"]
+def checkpoint_models(models: dict, seeds: dict, steps: int) -> dict:
+    """The exact checkpoint of SB3 models that share this process's random streams, at
+    ``steps``: each model starts new episodes (seeded by ``seeds[key]`` and ``steps``), then
+    their states and the streams are taken, in that order (:func:`resume_models` repeats it)."""
+    for key, model in models.items():
+        restart_episodes(model, episode_seed(seeds[key], steps))
+    return {"models": {key: model_state(model) for key, model in models.items()}, "streams": random_streams()}
+
+
+def resume_models(models: dict, seeds: dict, steps: int, state: dict) -> None:
+    """Put :func:`checkpoint_models`' ``state`` back into freshly built ``models``: their
+    learning state, the same new episodes, then the random streams (last: building and resetting
+    may draw from them)."""
+    for key, model in models.items():
+        load_model_state(model, state["models"][key])
+        restart_episodes(model, episode_seed(seeds[key], steps))
+    set_random_streams(state["streams"])
+
+
+__all__ = ["checkpoint_models", "episode_seed", "load_model_state", "model_state", "random_streams", "restart_episodes",
+           "resume_models", "reward_scale_of", "set_random_streams"]
