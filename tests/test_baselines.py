@@ -35,7 +35,12 @@ def _check_run(out, simulator, result):
     assert (out / "policy.safetensors").is_file() and (out / "progress.csv").is_file()
     assert (out / "checkpoint.pt").is_file() and (out / "checkpoint.json").is_file()
     assert run_state(out) == "finished"
-    assert "entropy" in (out / "progress.csv").read_text().splitlines()[0].split(",")
+    import csv
+
+    with open(out / "progress.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert [int(r["steps_per_agent"]) for r in rows] == [512, 1024]  # one row per stretch between evaluations
+    assert all(float(r["entropy"]) > 0 and r["policy_loss"] and r["learning_rate"] for r in rows)
     curve = json.loads((out / "curve.json").read_text())["points"]
     assert [p["env_steps"] for p in curve] == [0, 512, 1024]
     assert all(b["wall_clock_seconds"] > a["wall_clock_seconds"] for a, b in zip(curve, curve[1:]))
@@ -319,3 +324,19 @@ def test_the_update_size_is_the_domains_unless_given():
     args = ippo.Args(env_id="warehouse_v0", samples_per_update=256, batch_size=64)
     fill_update_size(args, warehouse)
     assert (args.samples_per_update, args.batch_size) == (256, 64)
+
+
+def test_a_checkpoint_without_the_state_of_an_exact_resume_is_refused_by_name(tmp_path):
+    """A checkpoint of the earlier SB3 format (weights and optimiser only) cannot continue the
+    run exactly: the resume says so instead of failing on a missing key."""
+    import torch
+
+    out = tmp_path / "run"
+    args = dict(TINY, total_timesteps=512, eval_every=256, final_eval_episodes=2)
+    ppo_single.main(ppo_single.Args(simulator="gs", out_dir=str(out), **args))
+    state = torch.load(out / "checkpoint.pt", weights_only=True)
+    torch.save({"policy": state["models"]["policy"]["policy"]}, out / "checkpoint.pt")
+    status = json.loads((out / "status.json").read_text())
+    (out / "status.json").write_text(json.dumps(dict(status, state="failed")))
+    with pytest.raises(ValueError, match="earlier version"):
+        ppo_single.main(ppo_single.Args(simulator="gs", out_dir=str(out), resume=True, **args))

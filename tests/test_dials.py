@@ -412,6 +412,13 @@ def test_kill_9_of_a_ray_run_leaves_no_ray_process():
            "--final-eval-episodes", "1", "--workers", "2", "--backend", "ray", "--no-progress", "--out-dir",
            str(Path(tempfile.mkdtemp()) / "run")]
     root = Path(__file__).resolve().parents[1]
+    # a dead cluster named where ray.init() looks (what a killed `ray start --head` leaves): the
+    # run starts a Ray of its own all the same
+    current = Path(tempfile.gettempdir()) / "ray" / "ray_current_cluster"
+    stale = not current.exists()
+    if stale:
+        current.parent.mkdir(parents=True, exist_ok=True)
+        current.write_text("127.0.0.1:9\n")
     proc = subprocess.Popen(cmd, cwd=root, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         deadline = time.monotonic() + 120
@@ -427,6 +434,10 @@ def test_kill_9_of_a_ray_run_leaves_no_ray_process():
     finally:
         proc.kill()
         proc.wait()
+        if stale:
+            with contextlib.suppress(OSError):
+                if current.read_text().strip() == "127.0.0.1:9":
+                    current.unlink()
     left = [p for p in family if not _gone(p, within=30.0)]
     assert not left, [(p, _cmdline(p)) for p in left]
 

@@ -116,7 +116,8 @@ class Args(MultiAgentRunArgs):
     learner: str = arg("batched", "batched (one torch program) | sb3 (one SB3 PPO per agent)")
     workers: int | None = arg(None, "worker processes (default: one per core; 0: this process)")
     backend: str = arg("process", "process | ray")
-    ray_address: str | None = arg(None, "an existing Ray cluster (host:port); default: a local Ray")
+    ray_address: str | None = arg(None, "an existing Ray cluster (host:port); default: a new local Ray of the run's "
+                                  "own (RAY_ADDRESS and clusters running here are not joined)")
     out_dir: str | None = arg(None, "output folder (default: runs/<env>__dials__s<seed>)")
 
 

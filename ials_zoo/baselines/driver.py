@@ -69,7 +69,7 @@ class RunPlan:
     notes: str = ""
     meta: dict = field(default_factory=dict)  # the policy's metadata beyond the driver's
     checkpoint_every: int | None = None  # checkpoints between evaluations too (steps per agent)
-    speed: float | None = None  # the study's steps per second (None: the multi-agent runs')
+    steps_per_second: float | None = None  # the study's speed, for the opening estimate (None: the multi-agent runs')
     unit: str = "step/agent"  # the progress bar's
 
 
@@ -89,7 +89,8 @@ class Learner(Protocol):
         it makes before the clock starts, an AIP, is in :attr:`charged_seconds`)."""
 
     def start(self, steps: int) -> None:
-        """Start the simulators and workers at ``steps`` per agent (on the clock)."""
+        """Start the simulators and workers at ``steps`` per agent (on the clock), or put the
+        loaded state into those :meth:`load` built."""
 
     def policy(self, metadata: dict):
         """The current policy as a :class:`~ials_zoo.policy.PolicyNetwork` carrying ``metadata``."""
@@ -105,7 +106,9 @@ class Learner(Protocol):
         """Train from ``steps`` to ``target`` steps per agent; returns a ``progress.csv`` row."""
 
     def checkpoint(self, out: Path) -> tuple[dict, dict]:
-        """``(tensors, JSON info)`` of a resumable state (may write its own files into ``out``)."""
+        """``(tensors, JSON info)`` of a resumable state (may write its own files into ``out``):
+        everything the run's future depends on. A learner whose episodes cannot be saved starts
+        new, seeded ones here (the SB3 learners), so where checkpoints fall is part of the run."""
 
     def close(self) -> None: ...
 
@@ -162,10 +165,11 @@ class JointActors:
 def estimate_text(plan: RunPlan, learner: Learner, domain) -> str:
     """The opening line's budget: the expected training time at the study's measured speed."""
     study = study_of(domain)
-    if plan.speed is not None:
-        seconds = plan.total / max(plan.speed, 1.0)
-        return (f"{plan.total:,} steps; about {format_seconds(seconds)} of training at the study's speed "
-                f"({plan.speed:,.0f} steps/s on 2 cores; evaluations extra)")
+    if plan.steps_per_second is not None:
+        seconds = plan.total / max(plan.steps_per_second, 1.0)
+        unit = UNITS.get(plan.unit, plan.unit + "s")
+        return (f"{plan.total:,} {unit}; about {format_seconds(seconds)} of training at the study's speed "
+                f"({plan.steps_per_second:,.0f} {unit}/s on 2 cores; evaluations extra)")
     on_gs = learner.simulator == "gs"
     rate = study.multi_agent_steps_per_second.get("gs" if on_gs else "ials", 10_000.0)
     seconds = plan.total * len(plan.agents) / max(rate, 1.0)
@@ -198,7 +202,7 @@ def run(plan: RunPlan, learner: Learner, description: str, domain, scoring: Scor
             try:
                 # inside: a load or start that fails half-way still closes what it started
                 if folder.resuming:
-                    state, info = load_training_state(out)
+                    state, info = _load_checkpoint(out)
                     learner.load(state, info)
                     steps, curve = int(info["steps"]), info["curve"]
                     log.truncate(steps)
@@ -235,37 +239,48 @@ def run(plan: RunPlan, learner: Learner, description: str, domain, scoring: Scor
 def _train(plan: RunPlan, learner: Learner, scoring: Scoring, policy_net, log: TrainingLog, clock: Clock,
            steps: int, curve: list) -> int:
     """The cadence, from ``steps`` to the budget: training stretches between evaluations,
-    checkpoints and the learner's own stops. Returns the steps reached."""
+    checkpoints and the learner's own stops. Evaluations and checkpoints keep to fixed grids
+    (multiples of ``eval_every`` and ``checkpoint_every``), each at the first whole update at or
+    past its point; a learner's stop comes at the last whole update before it. Returns the
+    steps reached."""
+    per = plan.per_update
     bar = _Bar(plan, steps)
-    next_eval = curve[-1]["env_steps"] + plan.eval_every if curve else 0
+    next_eval = _after(curve[-1]["env_steps"], plan.eval_every) if curve else 0
     every = plan.checkpoint_every
-    next_checkpoint = (steps // every + 1) * every if every else None
+    next_checkpoint = _after(steps, every) if every else None
     while True:
         if steps < plan.total:
             learner.before_training(steps, plan.total, policy_net, bar.note)
-        if steps >= next_eval or steps >= plan.total:
+        scored = bool(curve) and curve[-1]["env_steps"] == steps  # a resume at the very end
+        if (steps >= next_eval or steps >= plan.total) and not scored:
             with clock.pause():
                 score = _curve_point(plan, learner, scoring, policy_net(), steps, curve, clock)
             bar.score(score)
-            next_eval = steps + plan.eval_every
-        elif next_checkpoint is not None and steps >= next_checkpoint:
+            next_eval = _after(steps, plan.eval_every)
+        elif next_checkpoint is not None and steps >= next_checkpoint and not scored:
             with clock.pause():
                 _checkpoint(plan, learner, steps, curve, clock)
         if next_checkpoint is not None and steps >= next_checkpoint:
-            next_checkpoint = (steps // every + 1) * every
+            next_checkpoint = _after(steps, every)
         if steps >= plan.total:
             break
-        target = min(plan.total, next_eval, next_checkpoint or plan.total)
+        target = min(plan.total, -(-next_eval // per) * per,
+                     -(-next_checkpoint // per) * per if next_checkpoint is not None else plan.total)
         stop = learner.next_stop(steps)
         if stop is not None:
-            target = min(target, stop)
-        target = max(steps + plan.per_update, target // plan.per_update * plan.per_update)
+            target = min(target, stop // per * per)
+        target = max(steps + per, target)
         row = learner.train(steps, target, bar.advance)
         steps = target
         log.add(dict(row, steps_per_agent=steps, wall_clock_seconds=round(clock.seconds, 3)))
         bar.reach(steps)
     bar.close()
     return steps
+
+
+def _after(steps: int, every: int) -> int:
+    """The first multiple of ``every`` past ``steps``."""
+    return (steps // every + 1) * every
 
 
 def _curve_point(plan: RunPlan, learner, scoring: Scoring, policy, steps: int, curve: list, clock: Clock) -> float:
@@ -281,7 +296,17 @@ def _curve_point(plan: RunPlan, learner, scoring: Scoring, policy, steps: int, c
 
 def _checkpoint(plan: RunPlan, learner, steps: int, curve: list, clock: Clock) -> None:
     tensors, info = learner.checkpoint(plan.out)
-    save_training_state(plan.out, tensors, dict(info, steps=steps, curve=curve, clock=clock.seconds))
+    # the steps in both files: a run killed between the two writes leaves them apart
+    save_training_state(plan.out, dict(tensors, driver_steps=steps),
+                        dict(info, steps=steps, curve=curve, clock=clock.seconds))
+
+
+def _load_checkpoint(out: Path) -> tuple[dict, dict]:
+    state, info = load_training_state(out)
+    if int(state.pop("driver_steps", info["steps"])) != int(info["steps"]):
+        raise BadInput(f"{out}: checkpoint.pt and checkpoint.json are from different checkpoints (the run was killed "
+                       "while writing them); it cannot continue exactly: start it again with --overwrite")
+    return state, info
 
 
 class _Bar:

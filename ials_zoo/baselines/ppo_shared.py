@@ -136,8 +136,8 @@ class Args(PPOSettings):
     net_arch: str = arg("256,128", "hidden layer sizes, comma-separated")
     frame_stack: int | None = arg(None, "observations the policy reads (default: the domain's)")
     env_options: str = arg("", "GS options as a JSON object, e.g. '{\"item_lifetime\": 8}'")
-    eval_every: int = arg(100_000, "GS evaluation every this many agent transitions (0: only at the start and the end, "
-                          f"with a checkpoint every {CHECKPOINT_EVERY:,})")
+    eval_every: int = arg(100_000, "GS evaluation every this many agent transitions (0: only at the start and the "
+                          f"end); checkpoints come with them and every {CHECKPOINT_EVERY:,}")
     eval_episodes: int = arg(10, "GS episodes per periodic evaluation")
     final_eval_episodes: int = arg(20, "GS episodes of the final evaluation")
     deterministic_eval: bool = arg(False, "evaluate with the most likely action")
@@ -177,7 +177,7 @@ def main(args: Args | None = None) -> list[dict]:
     hidden = hidden_sizes(args.net_arch)
     frame_stack = int(args.frame_stack or dom.frame_stack)
     per_update = args.n_steps * args.n_copies * len(learners)
-    total = whole_rollouts(args.total_timesteps, per_update)
+    total = args.total_timesteps = whole_rollouts(args.total_timesteps, per_update)
     out = Path(args.out_dir or f"runs/{args.env_id}__shared__s{args.seed}")
     training = {"simulator": "gs", "aip": None, "seeds": [args.seed], "env_steps": 0,
                 "wall_clock_seconds": 0.0, "aip_seconds": 0.0,
@@ -186,8 +186,8 @@ def main(args: Args | None = None) -> list[dict]:
                    args.eval_every or total, args.eval_episodes, args.final_eval_episodes, frame_stack, out,
                    settings_of(args, skip=RUN_ONLY), training, args.resume, args.overwrite, args.progress,
                    args.submitter, args.notes, meta={"agent": eval_agents[0], "frame_stack": frame_stack},
-                   checkpoint_every=None if args.eval_every else CHECKPOINT_EVERY,
-                   speed=ppo_speed(dom, "gs"), unit="transition")
+                   checkpoint_every=CHECKPOINT_EVERY,
+                   steps_per_second=ppo_speed(dom, "gs"), unit="transition")
     all_agents = dom.agents(**options)
 
     def make_env(training):

@@ -112,8 +112,8 @@ class Args(AblatedPPOSettings):
     normalize_reward: bool = arg(True, "divide rewards by the running std of the discounted return (VecNormalize)")
     env_options: str = arg("", "GS/LS options as a JSON object, e.g. '{\"item_lifetime\": 8}' (memory variant)")
     dset_kind: str | None = arg(None, "d-set kind of the AIP (dset | full; default: the predictor's)")
-    eval_every: int = arg(100_000, "GS evaluation every this many steps (0: only at the start and the end, with a "
-                          f"checkpoint every {CHECKPOINT_EVERY:,} steps)")
+    eval_every: int = arg(100_000, "GS evaluation every this many steps (0: only at the start and the end); "
+                          f"checkpoints come with them and every {CHECKPOINT_EVERY:,} steps")
     eval_episodes: int = arg(10, "GS episodes per periodic evaluation")
     final_eval_episodes: int = arg(20, "GS episodes of the final evaluation (result.json)")
     deterministic_eval: bool = arg(False, "evaluate with the most likely action instead of sampling")
@@ -224,8 +224,8 @@ def main(args: Args | None = None) -> dict:
                    args.eval_every or total, args.eval_episodes, args.final_eval_episodes, frame_stack, out,
                    settings_of(args, skip=RUN_ONLY), training, args.resume, args.overwrite, args.progress,
                    args.submitter, args.notes, meta={"agent": agent, "frame_stack": frame_stack},
-                   checkpoint_every=None if args.eval_every else CHECKPOINT_EVERY,
-                   speed=ppo_speed(dom, args.simulator), unit="step")
+                   checkpoint_every=CHECKPOINT_EVERY,
+                   steps_per_second=ppo_speed(dom, args.simulator), unit="step")
 
     def make_env(training):
         venv, aip = make_training_env(args, agent)

@@ -3,10 +3,12 @@
 Every baseline writes into one folder (``--out-dir``)::
 
     status.json        {"state": "running" | "finished" | "failed" | "interrupted", ...}
-    progress.csv       training metrics (episode return, losses, entropy, ...) per update
+    progress.csv       training metrics (episode return, losses, entropy, ...) per stretch of
+                       training between evaluations and checkpoints
     curve.json         the GS learning curve (steps, wall-clock, score, CI)
-    checkpoint.pt      resumable training state: weights and optimiser state (tensors and
-                       plain containers only: read back with ``torch.load(weights_only=True)``)
+    checkpoint.pt      resumable training state: everything the run's future depends on
+                       (weights, optimiser, random streams, episodes; tensors and plain
+                       containers only: read back with ``torch.load(weights_only=True)``)
     checkpoint.json    the run's counters, curve and clock at that checkpoint
     policy.safetensors the final policy (:mod:`ials_zoo.policy`): what results point to
     result.json        the leaderboard result of the final policy (sampled actions, unless the

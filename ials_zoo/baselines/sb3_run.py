@@ -11,6 +11,7 @@ import numpy as np
 
 from ials_zoo.baselines.runs import DETERMINISTIC_RESULT
 from ials_zoo.core.extras import study_of
+from ials_zoo.errors import BadInput
 from ials_zoo.evaluation import NetworkPolicy, _evaluate_worker, evaluate, load_model
 from ials_zoo.influence.specs import GS
 from ials_zoo.leaderboard import make_result, write_result
@@ -120,7 +121,9 @@ def make_ppo(venv, args, hidden: list[int], total: int | None = None):
         policy_kwargs={"net_arch": {"pi": hidden, "vf": hidden}},
     )
     if args.anneal_lr:
-        budget = max(int(total or 1), 1)
+        if total is None:
+            raise BadInput("a learning rate that decays needs the run's budget (make_ppo's total)")
+        budget = max(int(total), 1)
         model.lr_schedule = lambda _progress: args.learning_rate * max(0.0, 1.0 - model.num_timesteps / budget)
     return model
 
@@ -171,7 +174,9 @@ RUN_ONLY = ("resume", "overwrite", "progress", "out_dir", "submitter", "notes")
 """The arguments that do not shape a run's numbers (a resume may change them)."""
 
 CHECKPOINT_EVERY = 100_000
-"""Steps between checkpoints of a run that evaluates only at its end (``--eval-every 0``)."""
+"""Steps between checkpoints of an SB3 run, besides those at its evaluations. Each one starts
+new, seeded episodes (:mod:`ials_zoo.learners.sb3_state`): where checkpoints fall is part of the
+run, so they keep to steps, never to wall-clock."""
 
 
 STATS = {"policy_loss": "train/policy_gradient_loss", "value_loss": "train/value_loss", "entropy": "train/entropy_loss",
@@ -185,7 +190,8 @@ class SB3Learner:
     the AIP seconds this run is charged, ``(venv, seconds)`` (it fills ``training["simulator"]``
     and ``training["aip"]``). Its checkpoint is exact (:mod:`ials_zoo.learners.sb3_state`):
     every checkpoint starts new episodes seeded by the run's seed and step count, and a resumed
-    run starts the same ones."""
+    run starts the same ones. Its ``progress.csv`` rows give SB3's mean return over its last 100
+    episodes (the batched learners: the stretch's episodes)."""
 
     def __init__(self, make_env, args, hidden: list[int], agents: list, frame_stack: int, total: int,
                  training: dict):
@@ -193,7 +199,7 @@ class SB3Learner:
         self.agents, self.frame_stack, self.total, self.training = list(agents), int(frame_stack), total, training
         self.seed = int(args.seed)
         self.charged_seconds = 0.0
-        self.model = self._state = None
+        self.model = self._state = self._venv = None
         self._log = []
 
     @property
@@ -207,12 +213,15 @@ class SB3Learner:
     def load(self, state, info):
         from stable_baselines3.common.logger import Logger
 
-        venv, charged = self.make_env(self.training)
-        self.model = make_ppo(venv, self.args, self.hidden, self.total)
+        self._venv, charged = self.make_env(self.training)  # closed by close() even if PPO fails to build
+        self.model = make_ppo(self._venv, self.args, self.hidden, self.total)
         self.model.set_logger(Logger(None, [_recorder(self._log)]))
         if state is None:
             self.charged_seconds = float(charged)
             return
+        if "models" not in state or "streams" not in state:
+            raise BadInput("this checkpoint was written by an earlier version of ials_zoo, without the state an exact "
+                           "resume needs; start the run again with --overwrite")
         self._state = state  # put back at the start, right before training
         # what the first run was charged and recorded (its AIP is cached by now)
         self.charged_seconds = float(info["aip_seconds"])
@@ -260,9 +269,9 @@ class SB3Learner:
                 {"aip_seconds": self.charged_seconds, "aip": self.training["aip"], "simulator": self.simulator})
 
     def close(self):
-        if self.model is not None:
-            self.model.get_env().close()
-            self.model = None
+        if self._venv is not None:
+            self._venv.close()
+        self.model = self._venv = None
 
 
 def _recorder_class():

@@ -195,6 +195,9 @@ class AgentShard:
             if "trainer" in state:  # the checkpoint's episodes, replayed to where they were
                 self.trainer.restore(state["trainer"])
             return
+        if "streams" not in state:
+            raise BadInput("this checkpoint was written by an earlier version of ials_zoo, without the state an exact "
+                           "resume of SB3 learners needs; start the run again with --overwrite")
         resume_models(self.models, self.seeds, self.steps, state)
 
     def close(self) -> None:
