@@ -138,6 +138,33 @@ def test_a_resumed_traffic_ppo_single_run_ends_bitwise_as_the_uninterrupted_one(
     assert_same_run(whole, _stopped_and_resumed(monkeypatch, ppo_single, tmp_path / "resumed", kwargs))
 
 
+def test_a_resume_from_a_checkpoint_between_evaluations_is_bitwise_too(tmp_path, monkeypatch):
+    """``--eval-every 0``: checkpoints alone between the start and the end (every 256 steps
+    here); the crash comes at the third, after training past the second."""
+    from ials_zoo.baselines import driver, ppo_single
+
+    monkeypatch.setattr(ppo_single, "CHECKPOINT_EVERY", 256)
+    kwargs = dict(SINGLE, simulator="gs", eval_every=0)
+    whole = ppo_single.main(ppo_single.Args(**kwargs, out_dir=str(tmp_path / "whole"))), tmp_path / "whole"
+    assert [p["env_steps"] for p in whole[0]["learning_curves"][0]["points"]] == [0, 1024]
+    real, calls = driver._checkpoint, []
+
+    def checkpoint(*args, **kw):
+        if len(calls) == 2:
+            raise Crash("stopped after checkpoint 2")
+        calls.append(args[2])
+        return real(*args, **kw)
+
+    monkeypatch.setattr(driver, "_checkpoint", checkpoint)
+    with pytest.raises(Crash):
+        ppo_single.main(ppo_single.Args(**kwargs, out_dir=str(tmp_path / "resumed")))
+    assert calls == [0, 256]
+    monkeypatch.setattr(driver, "_checkpoint", real)
+    resumed = ppo_single.main(ppo_single.Args(**kwargs, out_dir=str(tmp_path / "resumed"), resume=True))
+    assert_same_run(whole, (resumed, tmp_path / "resumed"))
+    assert _progress_rows(whole[1]) == _progress_rows(tmp_path / "resumed")
+
+
 def test_a_resumed_ppo_shared_run_ends_bitwise_as_the_uninterrupted_one(tmp_path, monkeypatch):
     from ials_zoo.baselines import ppo_shared
 
@@ -150,10 +177,11 @@ def test_a_resumed_ppo_shared_run_ends_bitwise_as_the_uninterrupted_one(tmp_path
     assert _progress_rows(whole[1]) == _progress_rows(resumed[1])
 
 
-def test_a_resumed_dials_run_with_sb3_learners_ends_bitwise_as_the_uninterrupted_one(tmp_path, monkeypatch):
+@pytest.mark.parametrize("workers", [0, 2])
+def test_a_resumed_dials_run_with_sb3_learners_ends_bitwise_as_the_uninterrupted_one(tmp_path, monkeypatch, workers):
     from ials_zoo.baselines import dials
 
-    kwargs = dict(DIALS, workers=2, backend="process", learner="sb3")
+    kwargs = dict(DIALS, workers=workers, backend="process", learner="sb3")
     whole = dials.main(dials.Args(**kwargs, out_dir=str(tmp_path / "whole"))), tmp_path / "whole"
     resumed = _stopped_and_resumed(monkeypatch, dials, tmp_path / "resumed", kwargs)
     assert_same_run(whole, resumed)
