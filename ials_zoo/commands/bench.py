@@ -38,6 +38,7 @@ from ials_zoo.core.domains import domain_ids, get_domain
 from ials_zoo.core.extras import bench_of, dials_of
 from ials_zoo.influence.ials import make_ials, make_ials_vec_env
 from ials_zoo.influence.multi import make_ials_parallel_env, make_multi_agent_ials, resolve_predictor_set
+from ials_zoo.influence.networks import untrained_predictor
 from ials_zoo.leaderboard import hardware_info
 from ials_zoo.learners.batched_ppo import BatchedPPO, PPOConfig
 from ials_zoo.utils import atomic_path, atomic_write_text
@@ -60,6 +61,11 @@ def configure(parser):
     parser.add_argument("--versus", default=None, metavar="AIP_SET",
                         help="instead: the multi-agent IALS (ParallelEnv and DIALS's batched core) with the "
                              "--predictor AIPs against this AIP set file (e.g. autoregressive ones), beside the GS")
+    parser.add_argument("--aip-archs", default=None, metavar="ARCH-HIDDEN[-ar],...",
+                        help="instead: the multi-agent IALS ParallelEnv with every agent's AIP of each of these "
+                             "architectures, e.g. gru-64-ar,gru-32-ar,mlp-128, beside the GS (untrained weights: the "
+                             "network's cost is a trained one's, but a local simulator whose cost follows the "
+                             "influence, SUMO's inserted vehicles, runs at untrained arrival rates)")
     parser.add_argument("--out", default=None, help="write the figures (and the machine) as JSON here")
     parser.add_argument("--plot", default="bench_scaling.png",
                         help="PNG for --scaling (default: bench_scaling.png)")
@@ -429,6 +435,45 @@ def bench_versus(env_id: str, steps: int | None, predictor, other: str, seed: in
     return row
 
 
+def parse_aip_archs(text: str) -> list[tuple[str, int, bool]]:
+    """``"gru-64-ar,mlp-128"`` -> ``[("gru", 64, True), ("mlp", 128, False)]``."""
+    archs = []
+    for item in str(text).split(","):
+        parts = item.strip().split("-")
+        if (len(parts) not in (2, 3) or parts[0] not in ("gru", "mlp") or not parts[1].isdigit()
+                or int(parts[1]) < 1 or (len(parts) == 3 and parts[2] != "ar")):
+            raise CommandError(f"--aip-archs {item.strip()!r}: expected ARCH-HIDDEN[-ar] with ARCH gru or mlp, "
+                               "e.g. gru-64-ar or mlp-128")
+        archs.append((parts[0], int(parts[1]), len(parts) == 3))
+    return archs
+
+
+def bench_aip_archs(env_id: str, steps: int | None, archs: list, seed: int, repeats: int) -> dict:
+    """Cost per agent-step of the multi-agent IALS ParallelEnv with every agent's AIP of each
+    architecture in ``archs`` (``parse_aip_archs``), interleaved with the GS in one run. Prints
+    and returns the medians [min, max] and the cost vs the GS. The AIPs are untrained: their
+    network costs what a trained one does, but a local simulator whose cost follows the
+    influence it is given (SUMO: the vehicles inserted) runs at untrained arrival rates."""
+    domain = get_domain(env_id)
+    agents = domain.agents()
+    steps = int(steps or 10 * domain.episode_length)
+    sets = {f"{arch}-{hidden}{'-ar' if ar else ''}": {
+        a: untrained_predictor(domain.region_spec(a), arch=arch, hidden=hidden, autoregressive=ar, seed=seed)
+        for a in agents} for arch, hidden, ar in archs}
+    times = {"gs": [], **{name: [] for name in sets}}
+    for r in range(repeats):
+        times["gs"].append(_gs_seconds(env_id, agents, steps, seed + r) / len(agents))
+        for name, aips in sets.items():
+            times[name].append(_parallel_env_seconds(env_id, steps, seed + r, aips))
+    row = {"domain": env_id, "repeats": repeats, **{k: summary(1e6 * np.asarray(v)) for k, v in times.items()}}
+    gs = row["gs"]["median"]
+    print(f"\n[{env_id}] ParallelEnv µs per agent-step by AIP architecture, median [min, max] of {repeats}")
+    for name in times:
+        cost = "" if name == "gs" else f"   cost vs GS {row[name]['median'] / gs:.2f}"
+        print(f"  {name:<12}{_fmt(row[name], ',.2f')}{cost}", flush=True)
+    return row
+
+
 def run(args) -> int:
 
     if args.steps is not None and args.steps < 1:
@@ -439,6 +484,7 @@ def run(args) -> int:
         raise CommandError(f"--repeats must be >= 1, got {args.repeats}")
     if args.ppo and args.ppo_steps < 1:
         raise CommandError(f"--ppo-steps must be >= 1, got {args.ppo_steps}")
+    archs = parse_aip_archs(args.aip_archs) if args.aip_archs else None
     env_ids = domain_ids() if args.domain == "all" else [args.domain]
     machine = machine_info()
     print(f"machine: {machine['cpu']}, {machine['cores']} cores; python {machine['python']}, torch {machine['torch']}, "
@@ -451,6 +497,8 @@ def run(args) -> int:
             print(f"{r['domain']:<16}{r['simulator']:<12}{r['steps_per_s']:>12,.0f}{r['time_per_step_vs_gs']:>17.2f}")
         print("'none' is PPO alone (a simulator that costs nothing): no IALS can train in less than that "
               "share of the GS's wall-clock.")
+    elif archs:
+        rows = [bench_aip_archs(env_id, args.steps, archs, args.seed, args.repeats) for env_id in env_ids]
     elif args.versus:
         if not os.path.isfile(args.versus):
             raise CommandError(f"--versus {args.versus!r}: no such AIP set file")
