@@ -106,10 +106,17 @@ def fill_update_size(args, domain) -> None:
         args.batch_size = int(settings.ppo_batch_size)
 
 
-def whole_updates(total: int, per_update: int) -> int:
+def whole_updates(total: int, per_update: int, round_up: bool = False) -> int:
     """The budget per agent as whole PPO updates: a budget below one update is refused, one
-    between updates is rounded down and said so (never silently changed)."""
+    between updates is rounded down and said so (never silently changed). ``round_up``: rounded
+    up instead, as SB3 itself trains (whole rollouts of every environment), also said so."""
     total = int(total)
+    if round_up:
+        rounded = -(-total // per_update) * per_update
+        if rounded != total:
+            print(f"note: --total-timesteps {total:,} rounded up to {rounded:,}, a whole number of PPO updates of "
+                  f"{per_update:,} samples", flush=True)
+        return rounded
     if total < per_update:
         raise BadInput(f"--total-timesteps {total:,} is less than one PPO update ({per_update:,} samples per agent: "
                          "--samples-per-update); give at least that")

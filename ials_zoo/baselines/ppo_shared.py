@@ -40,7 +40,7 @@ import numpy as np
 
 from ials_zoo.baselines.arguments import PPOSettings, arg, hidden_sizes, parse_env_options, run_cli
 from ials_zoo.baselines.driver import RunPlan, run
-from ials_zoo.baselines.multiagent import settings_of
+from ials_zoo.baselines.multiagent import settings_of, whole_updates
 from ials_zoo.baselines.ppo_single import check_ppo_args
 from ials_zoo.baselines.sb3_run import (
     CHECKPOINT_EVERY,
@@ -49,7 +49,6 @@ from ials_zoo.baselines.sb3_run import (
     SingleAgentScoring,
     ppo_speed,
     sb3_env,
-    whole_rollouts,
 )
 from ials_zoo.core.domains import domain_ids, get_domain
 from ials_zoo.errors import BadInput
@@ -177,7 +176,7 @@ def main(args: Args | None = None) -> list[dict]:
     hidden = hidden_sizes(args.net_arch)
     frame_stack = int(args.frame_stack or dom.frame_stack)
     per_update = args.n_steps * args.n_copies * len(learners)
-    total = args.total_timesteps = whole_rollouts(args.total_timesteps, per_update)
+    total = args.total_timesteps = whole_updates(args.total_timesteps, per_update, round_up=True)
     out = Path(args.out_dir or f"runs/{args.env_id}__shared__s{args.seed}")
     training = {"simulator": "gs", "aip": None, "seeds": [args.seed], "env_steps": 0,
                 "wall_clock_seconds": 0.0, "aip_seconds": 0.0,

@@ -70,7 +70,7 @@ from ials_zoo.baselines.arguments import (
     run_cli,
 )
 from ials_zoo.baselines.driver import RunPlan, run
-from ials_zoo.baselines.multiagent import settings_of
+from ials_zoo.baselines.multiagent import settings_of, whole_updates
 from ials_zoo.baselines.runs import DETERMINISTIC_RESULT
 from ials_zoo.baselines.sb3_run import (
     CHECKPOINT_EVERY,
@@ -79,7 +79,6 @@ from ials_zoo.baselines.sb3_run import (
     SingleAgentScoring,
     ppo_speed,
     sb3_env,
-    whole_rollouts,
 )
 from ials_zoo.core.domains import domain_ids, get_domain
 from ials_zoo.core.extras import dials_of, study_of
@@ -214,7 +213,7 @@ def main(args: Args | None = None) -> dict:
     agent = dom.check_agent(args.agent or dom.default_agents[0], **options)
     args.n_steps, args.batch_size = update_size(args, dom)
     per_update = args.n_steps * args.n_envs
-    total = whole_rollouts(args.total_timesteps or study_of(dom).budget, per_update)
+    total = whole_updates(args.total_timesteps or study_of(dom).budget, per_update, round_up=True)
     args.total_timesteps = total
     frame_stack = int(args.frame_stack or dials_of(dom).frame_stack or dom.frame_stack)
     out = Path(args.out_dir) if args.out_dir else default_out_dir(args, agent)

@@ -128,16 +128,6 @@ def make_ppo(venv, args, hidden: list[int], total: int | None = None):
     return model
 
 
-def whole_rollouts(total: int, per_update: int) -> int:
-    """The budget as whole PPO updates, rounded up as SB3 itself trains (whole rollouts of every
-    environment); said so when it changes."""
-    rounded = -(-int(total) // per_update) * per_update
-    if rounded != total:
-        print(f"note: --total-timesteps {int(total):,} rounded up to {rounded:,}, a whole number of PPO updates of "
-              f"{per_update:,} samples", flush=True)
-    return rounded
-
-
 def ppo_speed(domain, simulator: str) -> float:
     """The study's measured PPO steps per second on 2 cores (``study_of(domain)``), for the
     run's opening estimate."""
@@ -274,26 +264,18 @@ class SB3Learner:
         self.model = self._venv = None
 
 
-def _recorder_class():
+def _recorder(rows: list):
+    """An SB3 logger output that appends each dump (a dict) to ``rows``."""
     from stable_baselines3.common.logger import KVWriter
 
     class Recorder(KVWriter):
-        """SB3's logger output into a list (one dict per dump)."""
-
-        def __init__(self, rows: list):
-            self.rows = rows
-
         def write(self, key_values, key_excluded, step=0):
-            self.rows.append(dict(key_values))
+            rows.append(dict(key_values))
 
         def close(self):
             pass
 
-    return Recorder
-
-
-def _recorder(rows: list):
-    return _recorder_class()(rows)
+    return Recorder()
 
 
 class SingleAgentScoring:
