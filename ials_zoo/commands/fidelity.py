@@ -31,9 +31,11 @@ def configure(parser):
                         help="GS steps of each policy's AIP data with --predictor on-policy* (default: the domain's "
                              "DIALS collection)")
     parser.add_argument("--aip-lr", type=float, default=None,
-                        help="learning rate of the on-policy AIPs (default: the domain's DIALS AIP setting)")
+                        help="learning rate of the on-policy AIPs (default: the domain's fidelity_aip_lr, "
+                             "e.g. 3e-3: trained until their trajectories match the GS's, longer than DIALS does)")
     parser.add_argument("--aip-epochs", type=int, default=None,
-                        help="epochs of the on-policy AIPs (default: the domain's DIALS AIP setting)")
+                        help="epochs of the on-policy AIPs (default: the domain's fidelity_aip_epochs, e.g. 120 for "
+                             "the warehouse's GRUs, 30 for traffic's MLPs)")
     parser.add_argument("--tolerance", type=float, default=0.1, help="relative difference that holds anyway")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", default=None, help="also write the Markdown report here (atomic)")

@@ -32,7 +32,7 @@ STUDY = StudySettings(budget=300_000, ppo_steps_per_second={"gs": 1000.0, "ials"
 # agent (rollouts of 64 instead of 16): SUMO's cost per car grows with the cars in one
 # simulation (a worker's 13 lights x 8 copies cost 2.7x per copy-step what 13 x 2 do).
 DIALS = DIALSSettings(aip_arch="mlp", aip_hidden=128, aip_lr=1e-3, aip_epochs=10, aip_batch=256, copies=2,
-                     collect_steps=10_000, refresh=250_000)
+                     collect_steps=10_000, refresh=250_000, fidelity_aip_lr=3e-3, fidelity_aip_epochs=30)
 TOOLS = {"calibrate": ("ials_zoo.traffic.calibrate", "demand calibration under actuated lights"),
          "sumo-bench": ("ials_zoo.traffic.benchmark", "raw SUMO vs GS vs LS steps/s, LS step breakdown")}
 

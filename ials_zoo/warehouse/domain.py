@@ -55,7 +55,8 @@ STUDY = StudySettings(budget=2_000_000, ppo_steps_per_second={"gs": 4900.0, "ial
 # and 2,048 in 128s scored 11.9 (docs/ablation.md, "What holds robot_20 back")
 DIALS = DIALSSettings(aip_arch="gru", aip_hidden=64, aip_lr=1e-3, aip_epochs=10, aip_batch=8, copies=16,
                      collect_steps=10_000, refresh=0, frame_stack=1, aip_autoregressive=True,
-                     ppo_samples_per_update=2048, ppo_batch_size=256)
+                     ppo_samples_per_update=2048, ppo_batch_size=256, fidelity_aip_lr=3e-3,
+                     fidelity_aip_epochs=120)
 
 DOMAIN = Domain(
     env_id=R.DOMAIN_ID,
