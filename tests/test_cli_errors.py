@@ -26,6 +26,8 @@ CASES = [
     (["bench", "--domain", "warehouse_v0", "--aip-archs", "gru-64-ar,lstm-8"], "expected ARCH-HIDDEN"),
     (["bench", "--domain", "warehouse_v0", "--aip-archs", "gru-0"], "expected ARCH-HIDDEN"),
     (["fidelity", "--env", "warehouse_v0", "--predictor", "on-policy", "--aip-lr", "0"], "--aip-lr"),
+    (["fidelity", "--env", "warehouse_v0", "--predictor", "on-policy", "--aip-seeds", "0"], "--aip-seeds"),
+    (["fidelity", "--env", "warehouse_v0", "--aip-seeds", "2"], "--aip-seeds"),
     (["fidelity", "--env", "warehouse_v0", "--predictor", "on-policy", "--collect-steps", "0"], "--collect-steps"),
     (["evaluate", "--env", "warehouse_v0", "--policy", "random", "--out", "{d}/adir"], "is a folder"),
     (["evaluate", "--env", "warehouse_v0", "--policy", "random", "--frame-stack", "-1"], "--frame-stack"),

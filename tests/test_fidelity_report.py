@@ -79,3 +79,30 @@ def test_on_policy_aips_train_at_the_domains_fidelity_settings():
     report = {"env_id": "warehouse_v0", "episodes": 2, "tolerance": 0.1, "predictor": "on-policy-autoregressive",
               "aip_lr": 3e-3, "aip_epochs": 120, "policies": {}}
     assert "lr 0.003, 120 epochs" in markdown(report)
+
+
+def test_several_aip_trainings_count_the_rows_that_hold_under_each():
+    """With aip_seeds=2 the first training's comparison is exactly the single-training report's,
+    the second training differs (other data, other weights), and ``holds_in`` counts the
+    trainings under which each row holds."""
+    from ials_zoo.influence.fidelity import fidelity_report, markdown
+
+    kw = dict(episodes=3, watched=["robot_0"], progress=False, collect_steps=1000, aip_lr=1e-2, aip_epochs=2,
+              robots=(2, 2), predictor="on-policy-autoregressive")
+    one = fidelity_report("warehouse_v0", ["random"], **kw)["policies"]["random"]["robot_0"]
+    two = fidelity_report("warehouse_v0", ["random"], aip_seeds=2, **kw)
+    rows = two["policies"]["random"]["robot_0"]
+    for metric, row in rows.items():
+        assert {k: row[k] for k in ("gs", "ials", "low", "high", "holds")} == \
+            {k: one[metric][k] for k in ("gs", "ials", "low", "high", "holds")}, metric
+        assert row["per_training"][0] == row["holds"] and len(row["per_training"]) == 2
+        assert row["holds_in"] == sum(h for h in row["per_training"] if h is not None)
+    # the second training ran other AIPs (other data and seeds): its IALS side is not the first's
+    assert any(row["ials_per_training"][0] != row["ials_per_training"][1] for row in rows.values())
+    assert all(row["ials_per_training"][0] == row["ials"] or row["ials"] != row["ials"] for row in rows.values())
+    text = markdown(two)
+    assert "2 trainings" in text and any(f"| {n} / 2 |" in text or f"**{n} / 2**" in text for n in (0, 1, 2))
+    from ials_zoo.errors import BadInput
+
+    with pytest.raises(BadInput, match="aip_seeds"):
+        fidelity_report("warehouse_v0", ["random"], episodes=2, predictor="uniform", aip_seeds=2, robots=(2, 2))

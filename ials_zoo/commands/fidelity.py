@@ -4,7 +4,7 @@ trajectories, under several joint policies? (:mod:`ials_zoo.influence.fidelity`)
     ials-zoo fidelity --env warehouse_v0
     ials-zoo fidelity --env traffic_grid_v0 --episodes 20 --policies random,constant,scripted
     ials-zoo fidelity --env warehouse_v0 --policies random,leaderboard/policies/<sha>.safetensors --out f.md
-    ials-zoo fidelity --env warehouse_v0 --predictor on-policy-autoregressive
+    ials-zoo fidelity --env warehouse_v0 --predictor on-policy-autoregressive [--aip-seeds 3]
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import math
 
 from ials_zoo.core.domains import get_domain
 from ials_zoo.errors import BadInput
-from ials_zoo.influence.fidelity import fidelity_report, markdown
+from ials_zoo.influence.fidelity import ON_POLICY, fidelity_report, markdown
 from ials_zoo.utils import atomic_write_text, check_output_file, check_seed
 
 
@@ -36,6 +36,9 @@ def configure(parser):
     parser.add_argument("--aip-epochs", type=int, default=None,
                         help="epochs of the on-policy AIPs (default: the domain's fidelity_aip_epochs, e.g. 120 for "
                              "the warehouse's GRUs, 30 for traffic's MLPs)")
+    parser.add_argument("--aip-seeds", type=int, default=1,
+                        help="with --predictor on-policy*: train the AIPs this many times (other GS data and "
+                             "training seeds) and count per row under how many trainings it holds")
     parser.add_argument("--tolerance", type=float, default=0.1, help="relative difference that holds anyway")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", default=None, help="also write the Markdown report here (atomic)")
@@ -56,16 +59,19 @@ def run(args) -> int:
         if p not in ("random", "constant", "scripted") and not os.path.isfile(p):
             raise BadInput(f"--policies: {p!r} is neither random, constant, scripted nor a policy file")
     watched = None if args.agents is None else domain.check_agents(args.agents)
-    for name in ("collect_steps", "aip_epochs"):
+    for name in ("collect_steps", "aip_epochs", "aip_seeds"):
         if getattr(args, name) is not None and getattr(args, name) < 1:
             raise BadInput(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
     if args.aip_lr is not None and not (math.isfinite(args.aip_lr) and args.aip_lr > 0):
         raise BadInput(f"--aip-lr must be a finite number > 0, got {args.aip_lr}")
+    if args.aip_seeds > 1 and args.predictor not in ON_POLICY:
+        raise BadInput(f"--aip-seeds {args.aip_seeds} needs --predictor on-policy or on-policy-autoregressive "
+                       f"(AIPs trained per run), got {args.predictor!r}")
     if args.out:
         check_output_file(args.out)
     report = fidelity_report(args.env, policies, episodes=args.episodes, seed=args.seed, watched=watched,
                              predictor=args.predictor, tolerance=args.tolerance, collect_steps=args.collect_steps,
-                             aip_lr=args.aip_lr, aip_epochs=args.aip_epochs)
+                             aip_lr=args.aip_lr, aip_epochs=args.aip_epochs, aip_seeds=args.aip_seeds)
     text = markdown(report)
     print(text)
     if args.out:

@@ -55,6 +55,7 @@ import numpy as np
 
 from ials_zoo.core.domains import get_domain
 from ials_zoo.core.extras import dials_of
+from ials_zoo.errors import BadInput
 from ials_zoo.evaluation import FrameStack, load_model
 from ials_zoo.influence.dataset import collect_all
 from ials_zoo.influence.train import train_predictors
@@ -231,18 +232,27 @@ def default_watched(domain, agents: Sequence[str]) -> list[str]:
 def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: int = 0, watched=None,
                     predictor="trained", tolerance: float = 0.1, progress: bool = True,
                     collect_steps: int | None = None, aip_lr: float | None = None, aip_epochs: int | None = None,
-                    **options) -> dict:
+                    aip_seeds: int = 1, **options) -> dict:
     """Run every joint policy on the GS and on the multi-agent IALS; returns
     ``{policy name: {agent: {metric: compare(...)}}}``. ``predictor``: an AIP set for every
     policy, or ``on-policy[-autoregressive]`` (module docstring) with ``collect_steps`` GS
-    steps per policy (default: the domain's DIALS collection)."""
+    steps per policy (default: the domain's DIALS collection). ``aip_seeds`` > 1 (on-policy AIPs
+    only): train them that many times, from other GS data and training seeds, run the IALS with
+    each set, and count per row in how many the row holds (``holds_in`` of ``aip_seeds``; the
+    means and interval shown are the first set's): which rows fail moves from one training run
+    to the next."""
     from ials_zoo.influence.multi import make_ials_parallel_env  # lazy: SB3/torch
 
+    if isinstance(aip_seeds, bool) or not isinstance(aip_seeds, int) or aip_seeds < 1:
+        raise BadInput(f"aip_seeds must be an int >= 1, got {aip_seeds!r}")
+    if aip_seeds > 1 and predictor not in ON_POLICY:
+        raise BadInput(f"aip_seeds > 1 needs on-policy AIPs (trained per run); {predictor!r} is one fixed set")
     domain = get_domain(env_id)
     agents = domain.agents(**options)
     watched = list(watched or default_watched(domain, agents))
     report: dict = {"env_id": env_id, "episodes": episodes, "tolerance": tolerance, "watched": watched,
-                    "predictor": str(predictor), "aip_lr": aip_lr, "aip_epochs": aip_epochs, "policies": {}}
+                    "predictor": str(predictor), "aip_lr": aip_lr, "aip_epochs": aip_epochs,
+                    "aip_seeds": aip_seeds, "policies": {}}
     if predictor in ON_POLICY:
         report["aip_lr"], report["aip_epochs"] = on_policy_training(
             env_id, predictor == "on-policy-autoregressive", aip_lr, aip_epochs)
@@ -264,20 +274,36 @@ def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: i
             continue
         if progress:
             print(f"fidelity {env_id}: {name}: IALS ...", flush=True)
-        aips = predictor
-        if predictor in ON_POLICY:
-            if progress:
-                print(f"fidelity {env_id}: {name}: AIPs from {steps:,} GS steps of this policy ...", flush=True)
-            aips = on_policy_aips(env_id, agents, policy, steps, seed + DATA_SEED_OFFSET,
-                                  predictor == "on-policy-autoregressive", options, aip_lr, aip_epochs)
-        ials_env = make_ials_parallel_env(env_id, agents, predictor=aips, seed=seed, **options)
-        try:
-            ials = run(ials_env, agents, watched, policy, episodes, seed, domain.n_actions)
-        finally:
-            ials_env.close()
-        ials_m = summarise(ials, domain.null_influence)
-        report["policies"][name] = {a: {k: compare(gs_m[a][k], ials_m[a][k], tolerance) for k in METRICS}
-                                    for a in watched}
+        rows = None
+        for k in range(aip_seeds):
+            aips = predictor
+            if predictor in ON_POLICY:
+                if progress:
+                    print(f"fidelity {env_id}: {name}: AIPs from {steps:,} GS steps of this policy"
+                          f"{f' (training {k + 1} of {aip_seeds})' if aip_seeds > 1 else ''} ...", flush=True)
+                aips = on_policy_aips(env_id, agents, policy, steps, seed + DATA_SEED_OFFSET + k,
+                                      predictor == "on-policy-autoregressive", options, aip_lr, aip_epochs)
+            ials_env = make_ials_parallel_env(env_id, agents, predictor=aips, seed=seed, **options)
+            try:
+                ials = run(ials_env, agents, watched, policy, episodes, seed, domain.n_actions)
+            finally:
+                ials_env.close()
+            ials_m = summarise(ials, domain.null_influence)
+            this = {a: {m: compare(gs_m[a][m], ials_m[a][m], tolerance) for m in METRICS} for a in watched}
+            if rows is None:
+                rows = this
+                for a in watched:
+                    for m in METRICS:
+                        rows[a][m]["per_training"], rows[a][m]["ials_per_training"] = [], []
+            for a in watched:
+                for m in METRICS:
+                    rows[a][m]["per_training"].append(this[a][m]["holds"])
+                    rows[a][m]["ials_per_training"].append(this[a][m]["ials"])
+        for a in watched:
+            for m in METRICS:
+                votes = [h for h in rows[a][m]["per_training"] if h is not None]
+                rows[a][m]["holds_in"] = sum(votes) if votes else None
+        report["policies"][name] = rows
     return report
 
 
@@ -286,6 +312,10 @@ def markdown(report: dict) -> str:
     training = ""
     if report.get("predictor") in ON_POLICY:
         training = f", lr {report['aip_lr']:g}, {report['aip_epochs']} epochs"
+    n_trainings = int(report.get("aip_seeds", 1))
+    if n_trainings > 1:
+        training += (f"; {n_trainings} trainings of them, from other GS data: GS, IALS and the interval are the "
+                     f"first's, `holds` counts the trainings under which the row holds")
     lines = [f"Fidelity of the multi-agent IALS on `{report['env_id']}`: {report['episodes']} episodes per joint "
              f"policy, GS vs IALS (AIPs: {report.get('predictor', 'trained')}{training}), mean over episodes; a row holds "
              f"when the 95% Welch interval of GS - IALS contains 0 or |GS - IALS| <= {report['tolerance']:.0%} of the GS "
@@ -303,6 +333,9 @@ def markdown(report: dict) -> str:
         for a, metrics in rows.items():
             for k, c in metrics.items():
                 holds = {True: "yes", False: "**no**", None: "-"}[c["holds"]]
+                if n_trainings > 1 and c.get("holds_in") is not None:
+                    holds = f"{c['holds_in']} / {n_trainings}"
+                    holds = holds if c["holds_in"] == n_trainings else f"**{holds}**"
                 lines.append(f"| {a} | {k} | {c['gs']:.3f} | {c['ials']:.3f} | [{c['low']:.3f}, {c['high']:.3f}] | "
                              f"{holds} |")
         lines.append("")
