@@ -39,7 +39,10 @@ event, small in the loss, large over a trajectory).
 
 A row "holds" when the 95% interval of the GS - IALS difference (Welch, over episodes)
 contains 0, or when the difference is within ``--tolerance`` (relative, default 10%) of the
-GS value: the tolerance comes from the sampling error, stated in the report. Joint policies:
+GS value: the tolerance comes from the sampling error, stated in the report. The interval covers
+the episodes' sampling error, not the AIPs' training: ``--aip-seeds K`` trains the on-policy
+AIPs K times (other GS data, other seeds) and the report counts, per row, under how many of
+them it holds. Joint policies:
 ``random`` (uniform), ``constant`` (every agent always takes action 0: lights that keep their
 phase, robots that walk to a shelf and stay there, the lingering case), a joint policy file
 (e.g. the board's), ``scripted`` (the GS only: scripted controllers have no IALS form).
