@@ -42,7 +42,9 @@ contains 0, or when the difference is within ``--tolerance`` (relative, default 
 GS value: the tolerance comes from the sampling error, stated in the report. The interval covers
 the episodes' sampling error, not the AIPs' training: ``--aip-seeds K`` trains the on-policy
 AIPs K times (other GS data, other seeds) and the report counts, per row, under how many of
-them it holds. Joint policies:
+them it holds. Training ``k`` collects its data (and seeds its training) from
+``seed + 100000 + k``, so ``--seed 0``'s second training is ``--seed 1``'s first; the
+evaluation episodes differ. Joint policies:
 ``random`` (uniform), ``constant`` (every agent always takes action 0: lights that keep their
 phase, robots that walk to a shelf and stay there, the lingering case), a joint policy file
 (e.g. the board's), ``scripted`` (the GS only: scripted controllers have no IALS form).
@@ -51,6 +53,7 @@ phase, robots that walk to a shelf and stay there, the lingering case), a joint 
 from __future__ import annotations
 
 import math
+import numbers
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -202,8 +205,15 @@ def on_policy_training(env_id: str, autoregressive: bool, lr: float | None = Non
     """The learning rate and epochs of the on-policy AIPs: ``lr``/``epochs`` where given, else
     the domain's ``fidelity_aip_lr``/``fidelity_aip_epochs``, else its DIALS AIP training."""
     d = dials_of(env_id)
-    return (float(lr or d.fidelity_aip_lr or d.lr_for(autoregressive)),
-            int(epochs or d.fidelity_aip_epochs or d.aip_epochs))
+    if lr is not None and not (isinstance(lr, numbers.Real) and math.isfinite(lr) and lr > 0):
+        raise BadInput(f"aip_lr must be a finite number > 0 (or None: the domain's), got {lr!r}")
+    if epochs is not None and (isinstance(epochs, bool) or not isinstance(epochs, numbers.Integral) or epochs < 1):
+        raise BadInput(f"aip_epochs must be an int >= 1 (or None: the domain's), got {epochs!r}")
+    if lr is None:
+        lr = d.fidelity_aip_lr if d.fidelity_aip_lr is not None else d.lr_for(autoregressive)
+    if epochs is None:
+        epochs = d.fidelity_aip_epochs if d.fidelity_aip_epochs is not None else d.aip_epochs
+    return float(lr), int(epochs)
 
 
 def on_policy_aips(env_id: str, agents, policy, steps: int, seed: int, autoregressive: bool, options: dict,
@@ -246,8 +256,9 @@ def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: i
     to the next."""
     from ials_zoo.influence.multi import make_ials_parallel_env  # lazy: SB3/torch
 
-    if isinstance(aip_seeds, bool) or not isinstance(aip_seeds, int) or aip_seeds < 1:
+    if isinstance(aip_seeds, bool) or not isinstance(aip_seeds, numbers.Integral) or aip_seeds < 1:
         raise BadInput(f"aip_seeds must be an int >= 1, got {aip_seeds!r}")
+    aip_seeds = int(aip_seeds)
     if aip_seeds > 1 and predictor not in ON_POLICY:
         raise BadInput(f"aip_seeds > 1 needs on-policy AIPs (trained per run); {predictor!r} is one fixed set")
     domain = get_domain(env_id)
@@ -306,6 +317,7 @@ def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: i
             for m in METRICS:
                 votes = [h for h in rows[a][m]["per_training"] if h is not None]
                 rows[a][m]["holds_in"] = sum(votes) if votes else None
+                rows[a][m]["trainings_compared"] = len(votes)
         report["policies"][name] = rows
     return report
 
@@ -337,8 +349,9 @@ def markdown(report: dict) -> str:
             for k, c in metrics.items():
                 holds = {True: "yes", False: "**no**", None: "-"}[c["holds"]]
                 if n_trainings > 1 and c.get("holds_in") is not None:
-                    holds = f"{c['holds_in']} / {n_trainings}"
-                    holds = holds if c["holds_in"] == n_trainings else f"**{holds}**"
+                    compared = c.get("trainings_compared", n_trainings)
+                    holds = f"{c['holds_in']} / {compared}"
+                    holds = holds if c["holds_in"] == compared else f"**{holds}**"
                 lines.append(f"| {a} | {k} | {c['gs']:.3f} | {c['ials']:.3f} | [{c['low']:.3f}, {c['high']:.3f}] | "
                              f"{holds} |")
         lines.append("")
