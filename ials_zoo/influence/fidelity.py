@@ -288,7 +288,7 @@ def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: i
             continue
         if progress:
             print(f"fidelity {env_id}: {name}: IALS ...", flush=True)
-        rows = None
+        trainings = []
         for k in range(aip_seeds):
             aips = predictor
             if predictor in ON_POLICY:
@@ -303,21 +303,14 @@ def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: i
             finally:
                 ials_env.close()
             ials_m = summarise(ials, domain.null_influence)
-            this = {a: {m: compare(gs_m[a][m], ials_m[a][m], tolerance) for m in METRICS} for a in watched}
-            if rows is None:
-                rows = this
-                for a in watched:
-                    for m in METRICS:
-                        rows[a][m]["per_training"], rows[a][m]["ials_per_training"] = [], []
-            for a in watched:
-                for m in METRICS:
-                    rows[a][m]["per_training"].append(this[a][m]["holds"])
-                    rows[a][m]["ials_per_training"].append(this[a][m]["ials"])
+            trainings.append({a: {m: compare(gs_m[a][m], ials_m[a][m], tolerance) for m in METRICS} for a in watched})
+        rows = trainings[0]  # shown as the report's means and interval; the others add their votes
         for a in watched:
             for m in METRICS:
-                votes = [h for h in rows[a][m]["per_training"] if h is not None]
-                rows[a][m]["holds_in"] = sum(votes) if votes else None
-                rows[a][m]["trainings_compared"] = len(votes)
+                votes = [t[a][m]["holds"] for t in trainings]
+                counted = [h for h in votes if h is not None]
+                rows[a][m].update(per_training=votes, ials_per_training=[t[a][m]["ials"] for t in trainings],
+                                  holds_in=sum(counted) if counted else None, trainings_compared=len(counted))
         report["policies"][name] = rows
     return report
 
@@ -349,7 +342,7 @@ def markdown(report: dict) -> str:
             for k, c in metrics.items():
                 holds = {True: "yes", False: "**no**", None: "-"}[c["holds"]]
                 if n_trainings > 1 and c.get("holds_in") is not None:
-                    compared = c.get("trainings_compared", n_trainings)
+                    compared = c["trainings_compared"]
                     holds = f"{c['holds_in']} / {compared}"
                     holds = holds if c["holds_in"] == compared else f"**{holds}**"
                 lines.append(f"| {a} | {k} | {c['gs']:.3f} | {c['ials']:.3f} | [{c['low']:.3f}, {c['high']:.3f}] | "
