@@ -51,44 +51,48 @@ def test_the_report_runs_and_the_gs_lingers_under_a_constant_policy(tmp_path, ca
 def test_on_policy_autoregressive_aips_keep_a_random_neighbour_lingering():
     """Under uniformly random robots a neighbour on a shared cell stays there at the next step
     with probability about 0.75 on the GS. AIPs trained on that policy's GS data that read their
-    own last draw, trained long enough (30 epochs here), keep it (within 0.1) and arrive about as
-    often as the GS's neighbours; memoryless ones (the paper's) redraw every step, about 0.05."""
+    own last draw, trained long enough (60 epochs here, the rate decaying to zero; at 10 they
+    reach 0.42 against 0.73), keep it (within 0.1) and arrive about as often as the GS's
+    neighbours; memoryless ones (the paper's) redraw every step, about 0.05."""
     from ials_zoo.influence.fidelity import fidelity_report
 
     kw = dict(episodes=6, watched=["robot_0"], progress=False, collect_steps=5000, aip_lr=1e-2, robots=(2, 2))
-    ar = fidelity_report("warehouse_v0", ["random"], predictor="on-policy-autoregressive", aip_epochs=30, **kw)
+    ar = fidelity_report("warehouse_v0", ["random"], predictor="on-policy-autoregressive", aip_epochs=60, **kw)
     memoryless = fidelity_report("warehouse_v0", ["random"], predictor="on-policy", aip_epochs=10, **kw)
     ar_m, ml_p = ar["policies"]["random"]["robot_0"], memoryless["policies"]["random"]["robot_0"]["persistence"]
     assert 0.65 < ar_m["persistence"]["gs"] < 0.85, ar_m
     assert abs(ar_m["persistence"]["ials"] - ar_m["persistence"]["gs"]) < 0.1, ar_m
     assert 0.6 < ar_m["arrivals"]["ials"] / ar_m["arrivals"]["gs"] < 1.4, ar_m
     assert ml_p["ials"] < 0.2, ml_p
-    assert (ar["predictor"], ar["aip_lr"], ar["aip_epochs"]) == ("on-policy-autoregressive", 1e-2, 30)
+    assert (ar["predictor"], ar["aip_lr"], ar["aip_epochs"], ar["aip_lr_schedule"]) == (
+        "on-policy-autoregressive", 1e-2, 60, "linear")
 
 
 def test_on_policy_aips_train_at_the_domains_fidelity_settings(monkeypatch):
-    """Without --aip-lr/--aip-epochs the on-policy AIPs train at the domain's fidelity
-    settings (longer than DIALS's budget), and the report says so."""
+    """Without --aip-lr/--aip-epochs/--aip-lr-schedule the on-policy AIPs train at the domain's
+    fidelity settings (longer than DIALS's budget), and the report says so."""
     from ials_zoo.core.extras import dials_of
     from ials_zoo.errors import BadInput
     from ials_zoo.influence import fidelity
     from ials_zoo.influence.fidelity import markdown, on_policy_training
 
     d = dials_of("warehouse_v0")
-    assert on_policy_training("warehouse_v0", True) == (d.fidelity_aip_lr, d.fidelity_aip_epochs)
+    assert on_policy_training("warehouse_v0", True) == (d.fidelity_aip_lr, d.fidelity_aip_epochs,
+                                                        d.fidelity_aip_lr_schedule)
     assert d.fidelity_aip_epochs > d.aip_epochs
-    assert on_policy_training("warehouse_v0", True, 1e-2, 7) == (1e-2, 7)
-    for bad in (dict(lr=0.0), dict(lr=float("nan")), dict(epochs=0), dict(epochs=True)):
+    assert on_policy_training("warehouse_v0", True, 1e-2, 7, "constant") == (1e-2, 7, "constant")
+    for bad in (dict(lr=0.0), dict(lr=float("nan")), dict(epochs=0), dict(epochs=True), dict(lr_schedule="cosine")):
         with pytest.raises(BadInput):
             on_policy_training("warehouse_v0", True, **bad)
     # a domain without fidelity settings falls back to DIALS's own AIP training
-    toy = dials_of("traffic_grid_v0").__class__(aip_lr=5e-4, aip_epochs=3, aip_autoregressive_lr=2e-2)
+    toy = dials_of("traffic_grid_v0").__class__(aip_lr=5e-4, aip_epochs=3, aip_autoregressive_lr=2e-2,
+                                                fidelity_aip_lr_schedule=None)
     monkeypatch.setattr(fidelity, "dials_of", lambda env_id: toy)
-    assert fidelity.on_policy_training("any", True) == (2e-2, 3)
-    assert fidelity.on_policy_training("any", False) == (5e-4, 3)
+    assert fidelity.on_policy_training("any", True) == (2e-2, 3, "constant")
+    assert fidelity.on_policy_training("any", False) == (5e-4, 3, "constant")
     report = {"env_id": "warehouse_v0", "episodes": 2, "tolerance": 0.1, "predictor": "on-policy-autoregressive",
-              "aip_lr": 3e-3, "aip_epochs": 120, "policies": {}}
-    assert "lr 0.003, 120 epochs" in markdown(report)
+              "aip_lr": 3e-3, "aip_epochs": 120, "aip_lr_schedule": "linear", "policies": {}}
+    assert "lr 0.003 decayed linearly to 0, 120 epochs" in markdown(report)
 
 
 def test_several_aip_trainings_count_the_rows_that_hold_under_each():

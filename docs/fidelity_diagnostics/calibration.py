@@ -1,4 +1,11 @@
-"""Diagnostic: on held-out GS episodes (teacher forcing), does the traffic AIP's mean entry probability match the GS's entry rate?"""
+"""Diagnostic: does a traffic AIP's mean entry probability match the GS's entry rate, lane by lane,
+on the GS data it was trained on and on held-out GS episodes (teacher forcing)?
+
+    python docs/fidelity_diagnostics/calibration.py linear     # the default lr schedule
+    python docs/fidelity_diagnostics/calibration.py constant   # the constant rate used before
+"""
+
+import sys
 
 import numpy as np
 import torch
@@ -7,27 +14,38 @@ torch.set_num_threads(1)
 from ials_zoo.core.domains import get_domain
 from ials_zoo.influence import fidelity as F
 from ials_zoo.influence.dataset import collect_all
-from ials_zoo.influence.stacked import StackedPredictor
+from ials_zoo.influence.metrics import evaluate_cross_entropy
 
+schedule = sys.argv[1] if len(sys.argv) > 1 else "linear"
 env = "traffic_grid_v0"
 agents = get_domain(env).agents()
-aips = F.on_policy_aips(env, agents, "random", 10_000, 100_001, True, {})
+# the same data and seed as on_policy_aips uses for `ials-zoo fidelity --seed 1`'s first training
+train = collect_all(env, agents, steps=10_000, seed=100_001, progress=False)
+aips = F.on_policy_aips(env, agents, "random", 10_000, 100_001, True, {}, lr_schedule=schedule)
 test = collect_all(env, agents, steps=3000, seed=7, progress=False)
-sp = StackedPredictor([aips[a] for a in agents], 1)
-E, T = test[agents[0]].influences.shape[:2]
-p_sum = np.zeros((25, 4))
-u_sum = np.zeros((25, 4))
-for e in range(E):
-    sp.reset()
+
+
+def mean_probability(pred, data):
+    """Per lane: the AIP's mean entry probability and the GS's entry rate (teacher forcing)."""
+    d, u = data.dsets["dset"], data.influences
+    E, T, M = u.shape
+    pred.reset(E)
+    p_sum = np.zeros(M)
     for t in range(T):
-        d = np.stack([test[a].dsets["dset"][e, t] for a in agents])
-        probs = sp.probs_padded(d)  # [25, 4, 2]
-        u = np.stack([test[a].influences[e, t] for a in agents])
-        sp.observe(u)
-        p_sum += probs[:, :, 1]
-        u_sum += u
-for i in (0, 1, 12):
-    print(
-        f"tls_{i} per lane N,E,S,W: mean predicted {np.round(p_sum[i] / (E * T), 4)}  GS rate {np.round(u_sum[i] / (E * T), 4)}"
-    )
-print("all lights: predicted", round(p_sum.sum() / (E * T * 100), 4), "GS", round(u_sum.sum() / (E * T * 100), 4))
+        p_sum += pred.probs_padded(d[:, t])[:, :, 1].sum(axis=0)
+        pred.observe(u[:, t])
+    return p_sum / (E * T), u.mean(axis=(0, 1))
+
+
+print(f"lr schedule {schedule}")
+for name, data in (("training data", train), ("held-out", test)):
+    err = []
+    for a in agents:
+        p, g = mean_probability(aips[a], data[a])
+        err.append(np.abs(np.log(p / g)))
+        if a in ("tls_0", "tls_1", "tls_12"):
+            print(f"  {name}: {a} per lane N,E,S,W: mean predicted {np.round(p, 4)}  GS rate {np.round(g, 4)}")
+    err = np.array(err)
+    print(f"  {name}: |log(predicted / GS rate)| over the 100 lanes: mean {err.mean():.3f}, max {err.max():.3f}")
+ce = np.mean([evaluate_cross_entropy(aips[a], test[a]) for a in agents])
+print(f"  held-out cross-entropy, mean over the 25 AIPs: {ce:.4f}")

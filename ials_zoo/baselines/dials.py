@@ -225,7 +225,7 @@ def refresh_aips(env_id, agents, options, net, seed, steps, domain, epochs, old,
     preds, report = train_predictors(data, d.aip_arch, hidden=d.aip_hidden, lr=lr or d.lr_for(autoregressive),
                                      epochs=epochs,
                                      batch_size=d.aip_batch, seed=seed, init=warm or None, progress=progress,
-                                     autoregressive=autoregressive)
+                                     autoregressive=autoregressive, lr_schedule=d.aip_lr_schedule)
     train_seconds = time.perf_counter() - t0
     return preds, {"collect_seconds": collect_seconds, "train_seconds": train_seconds,
                    "mean_test_cross_entropy": report["mean_test_cross_entropy"], "warm_start": bool(warm)}

@@ -14,6 +14,7 @@ import math
 from ials_zoo.core.domains import get_domain
 from ials_zoo.errors import BadInput
 from ials_zoo.influence.fidelity import ON_POLICY, fidelity_report, markdown
+from ials_zoo.influence.train import LR_SCHEDULES
 from ials_zoo.utils import atomic_write_text, check_output_file, check_seed
 
 
@@ -36,6 +37,9 @@ def configure(parser):
     parser.add_argument("--aip-epochs", type=int, default=None,
                         help="epochs of the on-policy AIPs (default: the domain's fidelity_aip_epochs, e.g. 120 for "
                              "the warehouse's GRUs, 30 for traffic's MLPs)")
+    parser.add_argument("--aip-lr-schedule", default=None,
+                        help="linear or constant: the learning rate of the on-policy AIPs over their training "
+                             "(default: the domain's fidelity_aip_lr_schedule, linear decay to 0)")
     parser.add_argument("--aip-seeds", type=int, default=1,
                         help="with --predictor on-policy*: train the AIPs this many times (other GS data and "
                              "training seeds) and count per row under how many trainings it holds")
@@ -64,6 +68,8 @@ def run(args) -> int:
             raise BadInput(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
     if args.aip_lr is not None and not (math.isfinite(args.aip_lr) and args.aip_lr > 0):
         raise BadInput(f"--aip-lr must be a finite number > 0, got {args.aip_lr}")
+    if args.aip_lr_schedule is not None and args.aip_lr_schedule not in LR_SCHEDULES:
+        raise BadInput(f"--aip-lr-schedule must be one of {', '.join(LR_SCHEDULES)}, got {args.aip_lr_schedule!r}")
     if args.aip_seeds > 1 and args.predictor not in ON_POLICY:
         raise BadInput(f"--aip-seeds {args.aip_seeds} needs --predictor on-policy or on-policy-autoregressive "
                        f"(AIPs trained per run), got {args.predictor!r}")
@@ -71,7 +77,8 @@ def run(args) -> int:
         check_output_file(args.out)
     report = fidelity_report(args.env, policies, episodes=args.episodes, seed=args.seed, watched=watched,
                              predictor=args.predictor, tolerance=args.tolerance, collect_steps=args.collect_steps,
-                             aip_lr=args.aip_lr, aip_epochs=args.aip_epochs, aip_seeds=args.aip_seeds)
+                             aip_lr=args.aip_lr, aip_epochs=args.aip_epochs, aip_seeds=args.aip_seeds,
+                             aip_lr_schedule=args.aip_lr_schedule)
     text = markdown(report)
     print(text)
     if args.out:

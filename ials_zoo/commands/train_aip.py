@@ -28,7 +28,7 @@ from ials_zoo.core.domains import get_domain
 from ials_zoo.core.extras import dials_of
 from ials_zoo.influence.dataset import InfluenceDataset, collect, collect_all
 from ials_zoo.influence.files import save_predictor, save_predictor_set
-from ials_zoo.influence.train import format_report, train_predictor, train_predictors
+from ials_zoo.influence.train import LR_SCHEDULES, format_report, train_predictor, train_predictors
 from ials_zoo.utils import atomic_write_text, check_output_file
 
 
@@ -41,6 +41,9 @@ def configure(parser):
                         help="d-set the AIP reads: the paper's minimal d-set or the full observation")
     parser.add_argument("--epochs", type=int, default=None)
     parser.add_argument("--lr", type=float, default=None)
+    parser.add_argument("--lr-schedule", default=None,
+                        help="linear or constant: the learning rate over training, linear decay to 0 (default for one agent) or "
+                             "constant (the default of a set with the domain's DIALS architecture, as DIALS trains)")
     parser.add_argument("--hidden", type=int, default=None, help="hidden units of the AIP network")
     parser.add_argument("--batch-size", type=int, default=None,
                         help="episodes per batch (gru) or steps per batch (mlp)")
@@ -59,6 +62,8 @@ def check_training_arguments(args) -> None:
         raise CommandError(f"--lr must be a finite number > 0, got {args.lr}")
     if args.batch_size is not None and args.batch_size < 1:
         raise CommandError(f"--batch-size must be >= 1, got {args.batch_size}")
+    if args.lr_schedule is not None and args.lr_schedule not in LR_SCHEDULES:
+        raise CommandError(f"--lr-schedule must be one of {', '.join(LR_SCHEDULES)}, got {args.lr_schedule!r}")
     if args.hidden is not None and args.hidden < 1:
         raise CommandError(f"--hidden must be >= 1, got {args.hidden}")
 
@@ -89,7 +94,8 @@ def run(args) -> int:
     arch = args.arch or get_domain(data.region.domain).default_predictor
     pred, report = train_predictor(data, arch=arch, dset_kind=args.dset_kind, epochs=args.epochs,
                                    seed=args.seed, progress=progress, lr=args.lr, hidden=args.hidden,
-                                   batch_size=args.batch_size, autoregressive=args.autoregressive)
+                                   batch_size=args.batch_size, autoregressive=args.autoregressive,
+                                   lr_schedule=args.lr_schedule or "linear")
     save_predictor(pred, args.out)
     if args.report:
         atomic_write_text(args.report, json.dumps(report, indent=2) + "\n")
@@ -118,7 +124,8 @@ def _train_set(args, progress: bool) -> int:
         lr=args.lr or (d.aip_lr if arch == d.aip_arch else None),
         epochs=args.epochs or (d.aip_epochs if arch == d.aip_arch else None),
         batch_size=args.batch_size or (d.aip_batch if arch == d.aip_arch else None),
-        seed=args.seed, dset_kind=args.dset_kind, progress=progress, autoregressive=args.autoregressive)
+        seed=args.seed, dset_kind=args.dset_kind, progress=progress, autoregressive=args.autoregressive,
+        lr_schedule=args.lr_schedule or (d.aip_lr_schedule if arch == d.aip_arch else "linear"))
     collect_seconds = next(iter(data.values())).metadata["collect_seconds"]
     save_predictor_set(preds.values(), args.out, metadata={
         "steps": next(iter(data.values())).n_steps, "policy": "uniform_random (every listed agent)",

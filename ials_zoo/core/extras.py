@@ -72,10 +72,16 @@ class DIALSSettings:
             (:mod:`ials_zoo.influence.base`) by default.
         aip_autoregressive_lr: the learning rate of autoregressive AIPs (at ``aip_lr`` for
             ``aip_epochs`` the dependence on ``u_{t-1}`` is barely learned from one collection).
-        fidelity_aip_lr, fidelity_aip_epochs: the on-policy AIPs of ``ials-zoo fidelity``
-            (:mod:`ials_zoo.influence.fidelity`), trained from scratch until the influence they
-            sample over whole trajectories matches the GS's; DIALS's own AIP training above is a
-            cheaper budget that stops earlier (None: DIALS's settings).
+        aip_lr_schedule: how DIALS's AIP learning rate moves over a training
+            (:data:`ials_zoo.influence.train.LR_SCHEDULES`): ``"constant"``, the setting of the
+            DIALS studies in ``leaderboard/writeup.md`` (at its few epochs a decaying rate would
+            halve the training).
+        fidelity_aip_lr, fidelity_aip_epochs, fidelity_aip_lr_schedule: the on-policy AIPs of
+            ``ials-zoo fidelity`` (:mod:`ials_zoo.influence.fidelity`), trained from scratch until
+            the influence they sample over whole trajectories matches the GS's; DIALS's own AIP
+            training above is a cheaper budget that stops earlier (None: DIALS's settings). The
+            rate decays linearly to zero by default: a constant rate leaves rare classes
+            miscalibrated (:func:`ials_zoo.influence.train._scheduler`).
     """
 
     aip_arch: str = "mlp"
@@ -91,8 +97,10 @@ class DIALSSettings:
     ppo_batch_size: int = 128
     aip_autoregressive: bool = False
     aip_autoregressive_lr: float = 1e-2
+    aip_lr_schedule: str = "constant"
     fidelity_aip_lr: float | None = None
     fidelity_aip_epochs: int | None = None
+    fidelity_aip_lr_schedule: str = "linear"
 
     def lr_for(self, autoregressive: bool) -> float:
         """The AIP learning rate of a memoryless or an autoregressive AIP."""

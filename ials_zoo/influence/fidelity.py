@@ -30,7 +30,9 @@ its policy, which no d-set shows), or ``on-policy`` / ``on-policy-autoregressive
 joint policy, AIPs trained on GS data of that very policy (``--collect-steps`` steps, the
 domain's DIALS AIP architecture, data seeds apart from the evaluation's), what DIALS retrains
 its AIPs on; the latter with autoregressive AIPs (:mod:`ials_zoo.influence.base`). They train
-at the domain's ``DIALSSettings.fidelity_aip_lr`` for ``fidelity_aip_epochs``: an
+at the domain's ``DIALSSettings.fidelity_aip_lr`` for ``fidelity_aip_epochs``, the rate
+decaying linearly to zero (``fidelity_aip_lr_schedule``: at a constant rate the last iterate
+leaves rare classes miscalibrated, e.g. a lane's entry rate 30% low; :mod:`ials_zoo.influence.train`): an
 autoregressive AIP must learn how long a source stays active and when it comes back, which
 DIALS's cheaper training budget only partly does (``--aip-lr``/``--aip-epochs`` measure that).
 Early stopping on the held-out cross-entropy does not help: it stops traffic's AIPs after 4-16
@@ -64,7 +66,7 @@ from ials_zoo.core.extras import dials_of
 from ials_zoo.errors import BadInput
 from ials_zoo.evaluation import FrameStack, load_model
 from ials_zoo.influence.dataset import collect_all
-from ials_zoo.influence.train import train_predictors
+from ials_zoo.influence.train import LR_SCHEDULES, train_predictors
 
 METRICS = ("active", "persistence", "arrivals", "run_length", "gap", "return")
 
@@ -201,10 +203,14 @@ class _PolicyActor:
 
 
 def on_policy_training(env_id: str, autoregressive: bool, lr: float | None = None,
-                       epochs: int | None = None) -> tuple[float, int]:
-    """The learning rate and epochs of the on-policy AIPs: ``lr``/``epochs`` where given, else
-    the domain's ``fidelity_aip_lr``/``fidelity_aip_epochs``, else its DIALS AIP training."""
+                       epochs: int | None = None, lr_schedule: str | None = None) -> tuple[float, int, str]:
+    """The learning rate, epochs and learning-rate schedule of the on-policy AIPs:
+    ``lr``/``epochs``/``lr_schedule`` where given, else the domain's ``fidelity_aip_lr`` /
+    ``fidelity_aip_epochs`` / ``fidelity_aip_lr_schedule``, else its DIALS AIP training."""
     d = dials_of(env_id)
+    if lr_schedule is not None and lr_schedule not in LR_SCHEDULES:
+        raise BadInput(f"aip_lr_schedule must be one of {list(LR_SCHEDULES)} (or None: the domain's), "
+                       f"got {lr_schedule!r}")
     if lr is not None and not (isinstance(lr, numbers.Real) and math.isfinite(lr) and lr > 0):
         raise BadInput(f"aip_lr must be a finite number > 0 (or None: the domain's), got {lr!r}")
     if epochs is not None and (isinstance(epochs, bool) or not isinstance(epochs, numbers.Integral) or epochs < 1):
@@ -213,15 +219,17 @@ def on_policy_training(env_id: str, autoregressive: bool, lr: float | None = Non
         lr = d.fidelity_aip_lr if d.fidelity_aip_lr is not None else d.lr_for(autoregressive)
     if epochs is None:
         epochs = d.fidelity_aip_epochs if d.fidelity_aip_epochs is not None else d.aip_epochs
-    return float(lr), int(epochs)
+    if lr_schedule is None:
+        lr_schedule = d.fidelity_aip_lr_schedule if d.fidelity_aip_lr_schedule is not None else d.aip_lr_schedule
+    return float(lr), int(epochs), str(lr_schedule)
 
 
 def on_policy_aips(env_id: str, agents, policy, steps: int, seed: int, autoregressive: bool, options: dict,
-                   lr: float | None = None, epochs: int | None = None) -> dict:
+                   lr: float | None = None, epochs: int | None = None, lr_schedule: str | None = None) -> dict:
     """``{agent: AIP}`` trained on ``steps`` GS steps of the joint ``policy`` (every agent
-    acting), with the domain's DIALS AIP architecture, at its ``fidelity_aip_lr`` and
-    ``fidelity_aip_epochs`` (:class:`~ials_zoo.core.extras.DIALSSettings`; ``lr``, ``epochs``:
-    others)."""
+    acting), with the domain's DIALS AIP architecture, at its ``fidelity_aip_lr``,
+    ``fidelity_aip_epochs`` and ``fidelity_aip_lr_schedule``
+    (:class:`~ials_zoo.core.extras.DIALSSettings`; ``lr``, ``epochs``, ``lr_schedule``: others)."""
     d = dials_of(env_id)
     if policy == "random":
         actor = None
@@ -230,9 +238,10 @@ def on_policy_aips(env_id: str, agents, policy, steps: int, seed: int, autoregre
     else:
         actor = _PolicyActor(policy, agents, seed)
     data = collect_all(env_id, agents, steps=steps, policy=actor, seed=seed, gs_options=options, progress=False)
-    lr, epochs = on_policy_training(env_id, autoregressive, lr, epochs)
+    lr, epochs, lr_schedule = on_policy_training(env_id, autoregressive, lr, epochs, lr_schedule)
     preds, _ = train_predictors(data, d.aip_arch, hidden=d.aip_hidden, lr=lr, epochs=epochs,
-                                batch_size=d.aip_batch, seed=seed, autoregressive=autoregressive)
+                                batch_size=d.aip_batch, seed=seed, autoregressive=autoregressive,
+                                lr_schedule=lr_schedule)
     return preds
 
 
@@ -245,7 +254,7 @@ def default_watched(domain, agents: Sequence[str]) -> list[str]:
 def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: int = 0, watched=None,
                     predictor="trained", tolerance: float = 0.1, progress: bool = True,
                     collect_steps: int | None = None, aip_lr: float | None = None, aip_epochs: int | None = None,
-                    aip_seeds: int = 1, **options) -> dict:
+                    aip_seeds: int = 1, aip_lr_schedule: str | None = None, **options) -> dict:
     """Run every joint policy on the GS and on the multi-agent IALS; returns
     ``{policy name: {agent: {metric: compare(...)}}}``. ``predictor``: an AIP set for every
     policy, or ``on-policy[-autoregressive]`` (module docstring) with ``collect_steps`` GS
@@ -266,10 +275,10 @@ def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: i
     watched = list(watched or default_watched(domain, agents))
     report: dict = {"env_id": env_id, "episodes": episodes, "tolerance": tolerance, "watched": watched,
                     "predictor": str(predictor), "aip_lr": aip_lr, "aip_epochs": aip_epochs,
-                    "aip_seeds": aip_seeds, "policies": {}}
+                    "aip_lr_schedule": aip_lr_schedule, "aip_seeds": aip_seeds, "policies": {}}
     if predictor in ON_POLICY:
-        report["aip_lr"], report["aip_epochs"] = on_policy_training(
-            env_id, predictor == "on-policy-autoregressive", aip_lr, aip_epochs)
+        report["aip_lr"], report["aip_epochs"], report["aip_lr_schedule"] = on_policy_training(
+            env_id, predictor == "on-policy-autoregressive", aip_lr, aip_epochs, aip_lr_schedule)
     steps = int(collect_steps or dials_of(domain).collect_steps)
     for spec in policies:
         name = str(spec)
@@ -296,7 +305,8 @@ def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: i
                     print(f"fidelity {env_id}: {name}: AIPs from {steps:,} GS steps of this policy"
                           f"{f' (training {k + 1} of {aip_seeds})' if aip_seeds > 1 else ''} ...", flush=True)
                 aips = on_policy_aips(env_id, agents, policy, steps, seed + DATA_SEED_OFFSET + k,
-                                      predictor == "on-policy-autoregressive", options, aip_lr, aip_epochs)
+                                      predictor == "on-policy-autoregressive", options, aip_lr, aip_epochs,
+                                      aip_lr_schedule)
             ials_env = make_ials_parallel_env(env_id, agents, predictor=aips, seed=seed, **options)
             try:
                 ials = run(ials_env, agents, watched, policy, episodes, seed, domain.n_actions)
@@ -319,7 +329,8 @@ def markdown(report: dict) -> str:
     """The report as Markdown tables, one per joint policy."""
     training = ""
     if report.get("predictor") in ON_POLICY:
-        training = f", lr {report['aip_lr']:g}, {report['aip_epochs']} epochs"
+        schedule = {"linear": " decayed linearly to 0", "constant": " (constant)"}.get(report.get("aip_lr_schedule"), "")
+        training = f", lr {report['aip_lr']:g}{schedule}, {report['aip_epochs']} epochs"
     n_trainings = int(report.get("aip_seeds", 1))
     if n_trainings > 1:
         training += (f"; {n_trainings} trainings of them, from other GS data: GS, IALS and the interval are the "

@@ -88,7 +88,7 @@ def trained_predictor_set(env_id: str, agents=None, dset_kind: str = "dset", opt
     everyone = domain.agents(**options)
     data = dataset.collect_all(env_id, everyone, steps=steps, gs_options=options, progress=progress)
     preds, _ = train_predictors(data, arch, hidden=d.aip_hidden, lr=d.aip_lr, epochs=d.aip_epochs, batch_size=d.aip_batch,
-                                dset_kind=dset_kind, progress=progress)
+                                dset_kind=dset_kind, progress=progress, lr_schedule=d.aip_lr_schedule)
     save_predictor_set(preds.values(), _set_cache_path(env_id, [regions.get(a) or domain.region_spec(a, **options)
                                                                 for a in everyone], arch, dset_kind),
                        metadata={"steps": steps, "policy": "uniform_random (every agent)"})
