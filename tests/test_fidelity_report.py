@@ -84,6 +84,8 @@ def test_on_policy_aips_train_at_the_domains_fidelity_settings(monkeypatch):
     for bad in (dict(lr=0.0), dict(lr=float("nan")), dict(epochs=0), dict(epochs=True), dict(lr_schedule="cosine")):
         with pytest.raises(BadInput):
             on_policy_training("warehouse_v0", True, **bad)
+    with pytest.raises(BadInput, match="aip_lr_schedule"):
+        d.__class__(aip_lr_schedule="step")
     # a domain without fidelity settings falls back to DIALS's own AIP training
     toy = dials_of("traffic_grid_v0").__class__(aip_lr=5e-4, aip_epochs=3, aip_autoregressive_lr=2e-2,
                                                 fidelity_aip_lr_schedule=None)
@@ -93,6 +95,10 @@ def test_on_policy_aips_train_at_the_domains_fidelity_settings(monkeypatch):
     report = {"env_id": "warehouse_v0", "episodes": 2, "tolerance": 0.1, "predictor": "on-policy-autoregressive",
               "aip_lr": 3e-3, "aip_epochs": 120, "aip_lr_schedule": "linear", "policies": {}}
     assert "lr 0.003 decayed linearly to 0, 120 epochs" in markdown(report)
+    assert "lr 0.01 (constant), 10 epochs" in markdown(dict(report, aip_lr=1e-2, aip_epochs=10,
+                                                           aip_lr_schedule="constant"))
+    with pytest.raises(BadInput, match="aip_lr_schedule"):
+        fidelity.fidelity_report("warehouse_v0", ["random"], episodes=2, aip_lr_schedule="cosine")
 
 
 def test_several_aip_trainings_count_the_rows_that_hold_under_each():

@@ -315,11 +315,11 @@ def test_decaying_learning_rate_calibrates_rare_classes():
     assert np.mean(errors["constant"]) > 2 * np.mean(errors["linear"]), errors
 
 
-def test_lr_schedule_ends_at_zero_and_rejects_unknown_names():
+def test_lr_schedule_ends_at_zero_and_rejects_unknown_names(monkeypatch):
     import torch
 
     from ials_zoo.errors import BadInput
-    from ials_zoo.influence.train import _scheduler, train_predictor
+    from ials_zoo.influence.train import _scheduler, train_predictor, train_predictors
 
     w = torch.nn.Parameter(torch.zeros(1))
     opt = torch.optim.Adam([w], lr=0.5)
@@ -331,5 +331,20 @@ def test_lr_schedule_ends_at_zero_and_rejects_unknown_names():
         sched.step()
     assert rates == pytest.approx([0.5, 0.375, 0.25, 0.125])
     assert opt.param_groups[0]["lr"] == 0.0
+    # the trainers count their updates right: the last update runs at lr / updates
+    seen = []
+    step = torch.optim.Adam.step
+
+    def recording_step(self, *args, **kwargs):
+        seen.append(self.param_groups[0]["lr"])
+        return step(self, *args, **kwargs)
+
+    monkeypatch.setattr(torch.optim.Adam, "step", recording_step)
+    data = synthetic(E=20, T=10)  # 18 training episodes x 10 steps
+    train_predictor(data, arch="mlp", epochs=3, lr=0.3, batch_size=64, progress=False)  # 3 x ceil(180 / 64)
+    assert len(seen) == 9 and seen[0] == pytest.approx(0.3) and seen[-1] == pytest.approx(0.3 / 9)
+    seen.clear()
+    train_predictors({"a0": data}, "gru", lr=0.3, epochs=2, batch_size=4)  # 2 x ceil(18 / 4)
+    assert len(seen) == 10 and seen[-1] == pytest.approx(0.3 / 10)
     with pytest.raises(BadInput, match="lr schedule 'cosine'"):
         train_predictor(synthetic(E=4, T=5), arch="mlp", epochs=1, progress=False, lr_schedule="cosine")

@@ -19,7 +19,10 @@ t = time.perf_counter()
 data = collect_all(env, agents, steps=10_000, seed=100_000, progress=False)
 tc = time.perf_counter() - t
 print(env, f"collect 10,000 GS steps: {tc:.1f} s")
-for lr, ep in ((d.lr_for(True), d.aip_epochs), (d.fidelity_aip_lr, d.fidelity_aip_epochs)):
+for lr, ep, schedule in (
+    (d.lr_for(True), d.aip_epochs, d.aip_lr_schedule),
+    (d.fidelity_aip_lr, d.fidelity_aip_epochs, d.fidelity_aip_lr_schedule),
+):
     t = time.perf_counter()
     _, r = train_predictors(
         data,
@@ -30,6 +33,7 @@ for lr, ep in ((d.lr_for(True), d.aip_epochs), (d.fidelity_aip_lr, d.fidelity_ai
         batch_size=d.aip_batch,
         seed=100_000,
         autoregressive=True,
+        lr_schedule=schedule,
     )
     print(
         env,

@@ -22,6 +22,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from ials_zoo.core.domains import Domain, get_domain
+from ials_zoo.errors import BadInput
+
+LR_SCHEDULES = ("linear", "constant")  # how an AIP's learning rate moves over its training
 
 
 @dataclass(frozen=True)
@@ -100,7 +103,13 @@ class DIALSSettings:
     aip_lr_schedule: str = "constant"
     fidelity_aip_lr: float | None = None
     fidelity_aip_epochs: int | None = None
-    fidelity_aip_lr_schedule: str = "linear"
+    fidelity_aip_lr_schedule: str | None = "linear"
+
+    def __post_init__(self):
+        for name in ("aip_lr_schedule", "fidelity_aip_lr_schedule"):
+            value = getattr(self, name)
+            if value not in LR_SCHEDULES and not (value is None and name.startswith("fidelity")):
+                raise BadInput(f"DIALSSettings.{name} must be one of {list(LR_SCHEDULES)}, got {value!r}")
 
     def lr_for(self, autoregressive: bool) -> float:
         """The AIP learning rate of a memoryless or an autoregressive AIP."""

@@ -237,8 +237,8 @@ def on_policy_aips(env_id: str, agents, policy, steps: int, seed: int, autoregre
         actor = {a: (lambda obs: 0) for a in agents}
     else:
         actor = _PolicyActor(policy, agents, seed)
-    data = collect_all(env_id, agents, steps=steps, policy=actor, seed=seed, gs_options=options, progress=False)
     lr, epochs, lr_schedule = on_policy_training(env_id, autoregressive, lr, epochs, lr_schedule)
+    data = collect_all(env_id, agents, steps=steps, policy=actor, seed=seed, gs_options=options, progress=False)
     preds, _ = train_predictors(data, d.aip_arch, hidden=d.aip_hidden, lr=lr, epochs=epochs,
                                 batch_size=d.aip_batch, seed=seed, autoregressive=autoregressive,
                                 lr_schedule=lr_schedule)
@@ -268,6 +268,9 @@ def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: i
     if isinstance(aip_seeds, bool) or not isinstance(aip_seeds, numbers.Integral) or aip_seeds < 1:
         raise BadInput(f"aip_seeds must be an int >= 1, got {aip_seeds!r}")
     aip_seeds = int(aip_seeds)
+    if aip_lr_schedule is not None and aip_lr_schedule not in LR_SCHEDULES:
+        raise BadInput(f"aip_lr_schedule must be one of {list(LR_SCHEDULES)} (or None: the domain's), "
+                       f"got {aip_lr_schedule!r}")
     if aip_seeds > 1 and predictor not in ON_POLICY:
         raise BadInput(f"aip_seeds > 1 needs on-policy AIPs (trained per run); {predictor!r} is one fixed set")
     domain = get_domain(env_id)

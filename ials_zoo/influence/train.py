@@ -28,6 +28,7 @@ import time
 import numpy as np
 
 from ials_zoo.core.domains import get_domain
+from ials_zoo.core.extras import LR_SCHEDULES
 from ials_zoo.core.region import check_dset_kind
 from ials_zoo.core.streams import agent_key
 from ials_zoo.errors import BadInput
@@ -46,7 +47,6 @@ DEFAULTS = {
     "mlp": {"epochs": 30, "lr": 2e-3, "batch_size": 256, "hidden": 64},
 }
 
-LR_SCHEDULES = ("linear", "constant")
 
 
 def _scheduler(opt, schedule: str, updates: int):
@@ -302,7 +302,8 @@ def format_report(report: dict) -> str:
     cs = report["dataset"].get("collect_seconds")
     lines.append(
         f"collection: {cs if cs is not None else '-'} s   training: {report['train_seconds']} s "
-        f"({report['hyperparameters']['epochs']} epochs, lr {report['hyperparameters']['lr']})"
+        f"({report['hyperparameters']['epochs']} epochs, lr {report['hyperparameters']['lr']}, "
+        f"{report['hyperparameters'].get('lr_schedule', 'constant')})"
     )
     return "\n".join(lines)
 
@@ -446,4 +447,4 @@ def train_predictors(datasets: dict, arch: str, hidden: int | None = None, lr: f
                  "warm_start": bool(init)}
 
 
-__all__ = ["DEFAULTS", "format_report", "train_predictor", "train_predictors"]
+__all__ = ["DEFAULTS", "LR_SCHEDULES", "format_report", "train_predictor", "train_predictors"]
