@@ -2,7 +2,8 @@
 whose influence persists (a neighbour that lingers) and whose d-sets say nothing, an
 autoregressive AIP samples the chain's own persistence and a memoryless one cannot; the
 stacked (multi-agent) AIPs compute what the single ones compute, and remember their draws;
-the variant survives a save and a load."""
+the variant survives a save and a load. AIPs that read several past draws (``influence_lags``)
+learn arrivals that come two steps apart, which one past draw cannot show."""
 
 from __future__ import annotations
 
@@ -64,14 +65,14 @@ def test_an_autoregressive_aip_samples_the_persistence_a_memoryless_one_loses(ar
     assert evaluate_cross_entropy(remembering, data) < 0.6 * evaluate_cross_entropy(memoryless, data)
 
 
-@pytest.mark.parametrize("arch", ["mlp", "gru"])
-def test_stacked_autoregressive_aips_compute_what_each_one_computes(arch):
+@pytest.mark.parametrize("arch,lags", [("mlp", 1), ("gru", 1), ("mlp", 3), ("gru", 3)])
+def test_stacked_autoregressive_aips_compute_what_each_one_computes(arch, lags):
     from ials_zoo.influence.networks import untrained_predictor
     from ials_zoo.influence.stacked import StackedPredictor
 
-    preds = [untrained_predictor(_region(a), arch, hidden=8, seed=i, autoregressive=True)
+    preds = [untrained_predictor(_region(a), arch, hidden=8, seed=i, autoregressive=True, influence_lags=lags)
              for i, a in enumerate(AGENTS)]
-    singles = [untrained_predictor(_region(a), arch, hidden=8, seed=i, autoregressive=True)
+    singles = [untrained_predictor(_region(a), arch, hidden=8, seed=i, autoregressive=True, influence_lags=lags)
                for i, a in enumerate(AGENTS)]
     n = 2
     stacked = StackedPredictor(preds, n_envs=n)
@@ -89,8 +90,8 @@ def test_stacked_autoregressive_aips_compute_what_each_one_computes(arch):
             p.observe(u[rows])
         stacked.observe(u)
     # sample() remembers its own draws: the next step reads them as observe() would make it
-    twin = StackedPredictor([untrained_predictor(_region(a), arch, hidden=8, seed=i, autoregressive=True)
-                             for i, a in enumerate(AGENTS)], n_envs=n)
+    twin = StackedPredictor([untrained_predictor(_region(a), arch, hidden=8, seed=i, autoregressive=True,
+                                                 influence_lags=lags) for i, a in enumerate(AGENTS)], n_envs=n)
     d0 = np.zeros((len(AGENTS) * n, D), np.uint8)
     stacked.reset()
     twin.reset()
@@ -109,3 +110,83 @@ def test_the_variant_survives_a_save_and_a_load(tmp_path):
     assert back.autoregressive and back.input_size == pred.dset_size + int(np.sum(pred.n_classes))
     plain = load_predictor(save_predictor(untrained_predictor(_region(), "gru", hidden=8), tmp_path / "p.pt"))
     assert not plain.autoregressive and plain.input_size == plain.dset_size
+
+
+def test_several_lags_survive_a_save_and_a_load_and_older_files_read_one(tmp_path):
+    from ials_zoo.influence.files import load_predictor, save_predictor
+    from ials_zoo.influence.networks import untrained_predictor
+
+    pred = untrained_predictor(_region(), "mlp", hidden=8, autoregressive=True, influence_lags=3)
+    back = load_predictor(save_predictor(pred, tmp_path / "aip.pt"))
+    assert back.influence_lags == 3 and back.input_size == pred.dset_size + 3 * int(np.sum(pred.n_classes))
+    one = untrained_predictor(_region(), "mlp", hidden=8, autoregressive=True)
+    assert "influence_lags" not in one._config()  # the files of one-lag AIPs are what they were
+    assert load_predictor(save_predictor(one, tmp_path / "one.pt")).influence_lags == 1
+
+
+@pytest.mark.parametrize("bad", [0, -1, 1.5, True, "2"])
+def test_influence_lags_must_be_a_positive_int(bad):
+    from ials_zoo.errors import BadInput
+    from ials_zoo.influence.networks import untrained_predictor
+
+    with pytest.raises(BadInput, match="influence_lags"):
+        untrained_predictor(_region(), "mlp", hidden=8, autoregressive=True, influence_lags=bad)
+
+
+def test_previous_influences_holds_each_lag_latest_first():
+    from ials_zoo.influence.base import one_hot_influences, previous_influences
+
+    K = np.array([2, 3])
+    offsets = np.concatenate([[0], np.cumsum(K)])
+    u = np.random.default_rng(0).integers(K, size=(2, 5, 2))
+    lagged = previous_influences(u, offsets, lags=3)
+    onehot = one_hot_influences(u, offsets)
+    assert lagged.shape == (2, 5, 15)
+    for t in range(5):
+        for k in range(1, 4):
+            want = onehot[:, t - k] if t - k >= 0 else np.zeros((2, 5))
+            np.testing.assert_array_equal(lagged[:, t, (k - 1) * 5:k * 5], want)
+
+
+def _pairs_data(region, episodes=80, steps=60, start=0.06, follow=0.9, seed=0) -> InfluenceDataset:
+    """Binary sources whose arrivals come in pairs two steps apart (a platoon): a pair starts
+    with probability ``start`` at a quiet step, and its second arrival follows two steps later
+    with probability ``follow``; nothing arrives in between. The d-sets carry no information."""
+    rng = np.random.default_rng(seed)
+    M = region.n_sources
+    u = np.zeros((episodes, steps, M), np.int64)
+    second = np.zeros((episodes, M), bool)  # a pair's second arrival is due at this step
+    pending = np.zeros((episodes, M), bool)  # ... at the next step
+    for t in range(steps):
+        busy = (u[:, t - 1] == 1) if t else np.zeros((episodes, M), bool)
+        new = ~busy & ~second & ~pending & (rng.random((episodes, M)) < start)
+        u[:, t] = second | new
+        second, pending = pending, new & (rng.random((episodes, M)) < follow)
+    dsets = {k: np.zeros((episodes, steps, region.dset_size(k)), np.uint8) for k in DSET_KINDS}
+    return InfluenceDataset(region, dsets, u)
+
+
+def _share_of_gaps_of_two(u: np.ndarray) -> float:
+    gaps = [np.diff(np.flatnonzero(u[e, :, m])) for e in range(u.shape[0]) for m in range(u.shape[2])]
+    gaps = np.concatenate(gaps)
+    return float(np.mean(gaps == 2))
+
+
+def test_aips_that_read_three_lags_make_the_pairs_one_lag_cannot():
+    from ials_zoo.influence.train import train_predictor
+
+    region = get_domain("traffic_grid_v0").region_spec("tls_0")
+    data = _pairs_data(region)
+    truth = _share_of_gaps_of_two(data.influences)
+    assert truth > 0.4  # the data is made of pairs
+    shares = {}
+    for lags in (1, 3):
+        pred, report = train_predictor(data, "mlp", hidden=16, epochs=30, lr=1e-2, progress=False,
+                                       autoregressive=True, influence_lags=lags)
+        assert report["influence_lags"] == lags and pred.influence_lags == lags
+        rng = np.random.default_rng(1)
+        pred.reset(300)
+        d = np.zeros((300, region.dset_size("dset")), np.uint8)
+        shares[lags] = _share_of_gaps_of_two(np.stack([pred.sample(d, rng) for _ in range(60)], axis=1))
+    assert abs(shares[3] - truth) < 0.05, (shares, truth)
+    assert shares[1] < truth - 0.2, (shares, truth)  # one lag: the second arrival is a fresh draw

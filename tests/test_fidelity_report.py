@@ -78,25 +78,34 @@ def test_on_policy_aips_train_at_the_domains_fidelity_settings(monkeypatch):
 
     d = dials_of("warehouse_v0")
     assert on_policy_training("warehouse_v0", True) == (d.fidelity_aip_lr, d.fidelity_aip_epochs,
-                                                        d.fidelity_aip_lr_schedule)
+                                                        d.fidelity_aip_lr_schedule, d.fidelity_aip_influence_lags)
     assert d.fidelity_aip_epochs > d.aip_epochs
-    assert on_policy_training("warehouse_v0", True, 1e-2, 7, "constant") == (1e-2, 7, "constant")
-    for bad in (dict(lr=0.0), dict(lr=float("nan")), dict(epochs=0), dict(epochs=True), dict(lr_schedule="cosine")):
+    assert on_policy_training("warehouse_v0", True, 1e-2, 7, "constant", 2) == (1e-2, 7, "constant", 2)
+    assert on_policy_training("warehouse_v0", False)[3] == 0  # memoryless AIPs read no lags
+    for bad in (dict(lr=0.0), dict(lr=float("nan")), dict(epochs=0), dict(epochs=True), dict(lr_schedule="cosine"),
+                dict(influence_lags=0), dict(influence_lags=1.5)):
         with pytest.raises(BadInput):
             on_policy_training("warehouse_v0", True, **bad)
+    with pytest.raises(BadInput, match="autoregressive"):
+        on_policy_training("warehouse_v0", False, influence_lags=2)
     with pytest.raises(BadInput, match="aip_lr_schedule"):
         d.__class__(aip_lr_schedule="step")
+    for bad in (dict(fidelity_aip_influence_lags=0), dict(fidelity_collect_steps=0)):
+        with pytest.raises(BadInput, match=next(iter(bad))):
+            d.__class__(**bad)
     # a domain without fidelity settings falls back to DIALS's own AIP training
     toy = dials_of("traffic_grid_v0").__class__(aip_lr=5e-4, aip_epochs=3, aip_autoregressive_lr=2e-2,
                                                 fidelity_aip_lr_schedule=None)
     monkeypatch.setattr(fidelity, "dials_of", lambda env_id: toy)
-    assert fidelity.on_policy_training("any", True) == (2e-2, 3, "constant")
-    assert fidelity.on_policy_training("any", False) == (5e-4, 3, "constant")
+    assert fidelity.on_policy_training("any", True) == (2e-2, 3, "constant", 1)
+    assert fidelity.on_policy_training("any", False) == (5e-4, 3, "constant", 0)
     report = {"env_id": "warehouse_v0", "episodes": 2, "tolerance": 0.1, "predictor": "on-policy-autoregressive",
               "aip_lr": 3e-3, "aip_epochs": 120, "aip_lr_schedule": "linear", "policies": {}}
     assert "lr 0.003 decayed linearly to 0, 120 epochs" in markdown(report)
     assert "lr 0.01 (constant), 10 epochs" in markdown(dict(report, aip_lr=1e-2, aip_epochs=10,
                                                            aip_lr_schedule="constant"))
+    assert "reading their last 3 draws, trained on 100,000 GS steps of each policy" in markdown(
+        dict(report, aip_influence_lags=3, collect_steps=100_000))
     with pytest.raises(BadInput, match="aip_lr_schedule"):
         fidelity.fidelity_report("warehouse_v0", ["random"], episodes=2, aip_lr_schedule="cosine")
 

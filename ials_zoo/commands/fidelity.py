@@ -30,7 +30,7 @@ def configure(parser):
                              "on-policy / on-policy-autoregressive (AIPs trained on GS data of each policy)")
     parser.add_argument("--collect-steps", type=int, default=None,
                         help="GS steps of each policy's AIP data with --predictor on-policy* (default: the domain's "
-                             "DIALS collection)")
+                             "fidelity_collect_steps, e.g. 100,000 for traffic, else its DIALS collection)")
     parser.add_argument("--aip-lr", type=float, default=None,
                         help="learning rate of the on-policy AIPs (default: the domain's fidelity_aip_lr, "
                              "e.g. 3e-3: trained until their trajectories match the GS's, longer than DIALS does)")
@@ -40,6 +40,9 @@ def configure(parser):
     parser.add_argument("--aip-lr-schedule", default=None,
                         help="linear or constant: the learning rate of the on-policy AIPs over their training "
                              "(default: the domain's fidelity_aip_lr_schedule, linear decay to 0)")
+    parser.add_argument("--aip-influence-lags", type=int, default=None,
+                        help="with --predictor on-policy-autoregressive: how many past steps of their own draws "
+                             "the AIPs read (default: the domain's fidelity_aip_influence_lags, e.g. 3 for traffic)")
     parser.add_argument("--aip-seeds", type=int, default=1,
                         help="with --predictor on-policy*: train the AIPs this many times (other GS data and "
                              "training seeds) and count per row under how many trainings it holds")
@@ -63,7 +66,7 @@ def run(args) -> int:
         if p not in ("random", "constant", "scripted") and not os.path.isfile(p):
             raise BadInput(f"--policies: {p!r} is neither random, constant, scripted nor a policy file")
     watched = None if args.agents is None else domain.check_agents(args.agents)
-    for name in ("collect_steps", "aip_epochs", "aip_seeds"):
+    for name in ("collect_steps", "aip_epochs", "aip_seeds", "aip_influence_lags"):
         if getattr(args, name) is not None and getattr(args, name) < 1:
             raise BadInput(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
     if args.aip_lr is not None and not (math.isfinite(args.aip_lr) and args.aip_lr > 0):
@@ -73,12 +76,14 @@ def run(args) -> int:
     if args.aip_seeds > 1 and args.predictor not in ON_POLICY:
         raise BadInput(f"--aip-seeds {args.aip_seeds} needs --predictor on-policy or on-policy-autoregressive "
                        f"(AIPs trained per run), got {args.predictor!r}")
+    if args.aip_influence_lags is not None and args.predictor != "on-policy-autoregressive":
+        raise BadInput(f"--aip-influence-lags needs --predictor on-policy-autoregressive, got {args.predictor!r}")
     if args.out:
         check_output_file(args.out)
     report = fidelity_report(args.env, policies, episodes=args.episodes, seed=args.seed, watched=watched,
                              predictor=args.predictor, tolerance=args.tolerance, collect_steps=args.collect_steps,
                              aip_lr=args.aip_lr, aip_epochs=args.aip_epochs, aip_seeds=args.aip_seeds,
-                             aip_lr_schedule=args.aip_lr_schedule)
+                             aip_lr_schedule=args.aip_lr_schedule, aip_influence_lags=args.aip_influence_lags)
     text = markdown(report)
     print(text)
     if args.out:

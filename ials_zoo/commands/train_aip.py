@@ -49,6 +49,8 @@ def configure(parser):
                         help="episodes per batch (gru) or steps per batch (mlp)")
     parser.add_argument("--autoregressive", action="store_true",
                         help="an AIP that also reads the influence of the previous step, P(u_t | d_<=t, u_<t)")
+    parser.add_argument("--influence-lags", type=int, default=None,
+                        help="with --autoregressive: how many past steps of its influence the AIP reads (default 1)")
     parser.add_argument("--save-data", default=None, help="also save the collected data here")
     parser.add_argument("--report", default=None, help="write the training report as JSON here")
     parser.add_argument("--out", required=True, help="output predictor file (.pt)")
@@ -66,6 +68,10 @@ def check_training_arguments(args) -> None:
         raise CommandError(f"--lr-schedule must be one of {', '.join(LR_SCHEDULES)}, got {args.lr_schedule!r}")
     if args.hidden is not None and args.hidden < 1:
         raise CommandError(f"--hidden must be >= 1, got {args.hidden}")
+    lags = getattr(args, "influence_lags", None)
+    if lags is not None and (lags < 1 or not args.autoregressive):
+        raise CommandError(f"--influence-lags must be >= 1 and needs --autoregressive, got {lags}"
+                           f"{'' if args.autoregressive else ' without --autoregressive'}")
 
 
 def run(args) -> int:
@@ -95,7 +101,7 @@ def run(args) -> int:
     pred, report = train_predictor(data, arch=arch, dset_kind=args.dset_kind, epochs=args.epochs,
                                    seed=args.seed, progress=progress, lr=args.lr, hidden=args.hidden,
                                    batch_size=args.batch_size, autoregressive=args.autoregressive,
-                                   lr_schedule=args.lr_schedule or "linear")
+                                   lr_schedule=args.lr_schedule or "linear", influence_lags=args.influence_lags or 1)
     save_predictor(pred, args.out)
     if args.report:
         atomic_write_text(args.report, json.dumps(report, indent=2) + "\n")
@@ -125,7 +131,8 @@ def _train_set(args, progress: bool) -> int:
         epochs=args.epochs or (d.aip_epochs if arch == d.aip_arch else None),
         batch_size=args.batch_size or (d.aip_batch if arch == d.aip_arch else None),
         seed=args.seed, dset_kind=args.dset_kind, progress=progress, autoregressive=args.autoregressive,
-        lr_schedule=args.lr_schedule or (d.aip_lr_schedule if arch == d.aip_arch else "linear"))
+        lr_schedule=args.lr_schedule or (d.aip_lr_schedule if arch == d.aip_arch else "linear"),
+        influence_lags=args.influence_lags or 1)
     collect_seconds = next(iter(data.values())).metadata["collect_seconds"]
     save_predictor_set(preds.values(), args.out, metadata={
         "steps": next(iter(data.values())).n_steps, "policy": "uniform_random (every listed agent)",

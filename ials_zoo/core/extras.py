@@ -85,6 +85,12 @@ class DIALSSettings:
             training above is a cheaper budget that stops earlier (None: DIALS's settings). The
             rate decays linearly to zero by default: a constant rate leaves rare classes
             miscalibrated (:func:`ials_zoo.influence.train._scheduler`).
+        fidelity_aip_influence_lags: how many past steps of their own influence the
+            autoregressive on-policy AIPs read (1: ``u_{t-1}``). Traffic reads 3: a neighbouring
+            light releases its cars in platoons, 2-3 steps apart, and an AIP that does not see
+            them coming makes arrivals too smooth, which flatters the light (``docs/fidelity.md``).
+        fidelity_collect_steps: GS steps of each joint policy's AIP data in ``ials-zoo fidelity``
+            (None: ``collect_steps``).
     """
 
     aip_arch: str = "mlp"
@@ -104,8 +110,16 @@ class DIALSSettings:
     fidelity_aip_lr: float | None = None
     fidelity_aip_epochs: int | None = None
     fidelity_aip_lr_schedule: str | None = "linear"
+    fidelity_aip_influence_lags: int = 1
+    fidelity_collect_steps: int | None = None
 
     def __post_init__(self):
+        lags = self.fidelity_aip_influence_lags
+        if isinstance(lags, bool) or not isinstance(lags, int) or lags < 1:
+            raise BadInput(f"DIALSSettings.fidelity_aip_influence_lags must be an int >= 1, got {lags!r}")
+        steps = self.fidelity_collect_steps
+        if steps is not None and (isinstance(steps, bool) or not isinstance(steps, int) or steps < 1):
+            raise BadInput(f"DIALSSettings.fidelity_collect_steps must be an int >= 1 or None, got {steps!r}")
         for name in ("aip_lr_schedule", "fidelity_aip_lr_schedule"):
             value = getattr(self, name)
             if value not in LR_SCHEDULES and not (value is None and name.startswith("fidelity")):

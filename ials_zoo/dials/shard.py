@@ -152,7 +152,7 @@ class AgentShard:
                 if getattr(old, "h", None) is not None and getattr(new, "h", None) is not None \
                         and old.h.shape == new.h.shape:
                     new.h = old.h.copy()
-                if new.autoregressive and old.autoregressive:
+                if new.autoregressive and old.autoregressive and new._previous.shape == old._previous.shape:
                     new._previous = old._previous.copy()
                 venv.predictor = new
 

@@ -11,14 +11,17 @@ Every predictor implements :class:`InfluencePredictor`, the interface the IALS u
 The sources are independent given the history (one softmax head per source, paper §4.2).
 
 An autoregressive predictor (``autoregressive=True``, :mod:`ials_zoo.influence.networks`) also
-reads the influence of the previous step, one-hot per source, beside ``d_t``: what it sampled
-itself (``sample`` remembers its draw) or, under teacher forcing, the recorded ``u_{t-1}``
-(:meth:`InfluencePredictor.observe`, what the cross-entropy on data does). A predictor that
+reads the influence of the previous ``influence_lags`` steps (1 by default), one-hot per source,
+beside ``d_t``, the latest first: what it sampled itself (``sample`` remembers its draws) or,
+under teacher forcing, the recorded ``u_{t-1} .. u_{t-L}`` (:meth:`InfluencePredictor.observe`,
+what the cross-entropy on data does; zeros before the episode's start). A predictor that
 forgets its own samples turns one neighbour that lingers into a string of fresh arrivals (the
 warehouse, ``ials-zoo fidelity``); conditioning on ``u_{<t}`` is how it remembers. The sources
 of a region are still factored into independent heads given that input: each head sees every
 source's previous class, so a neighbour moving from one shared cell to the next is visible to
-both cells' heads.
+both cells' heads. More than one lag is for arrivals whose timing carries over a few steps: the
+cars a neighbouring light releases in a platoon enter a traffic lane 2-3 steps apart, which
+``u_{t-1}`` alone does not show (``docs/fidelity.md``).
 Sampling from logits is shared here (:meth:`InfluencePredictor._sample_logits`, and a
 single-history path, :meth:`InfluencePredictor._sample_logits1`, bitwise the same draws).
 """
@@ -57,6 +60,7 @@ class InfluencePredictor:
 
     name = "base"
     autoregressive = False
+    influence_lags = 0  # past steps of its own influence an autoregressive predictor reads
 
     def __init__(self, region: RegionSpec, dset_kind: str = "dset", metadata: dict | None = None):
         if not isinstance(region, RegionSpec):
@@ -84,8 +88,8 @@ class InfluencePredictor:
         self._same_k = bool((classes == classes[0]).all())
         self._sample_bufs = None
         self.n = 0
-        self.input_size = self.dset_size + (int(self._offsets[-1]) if self.autoregressive else 0)
-        self._previous = np.zeros((0, int(self._offsets[-1])), np.float32)
+        self.input_size = self.dset_size + self.influence_lags * int(self._offsets[-1])
+        self._previous = np.zeros((0, self.influence_lags * int(self._offsets[-1])), np.float32)
 
     # Scratch state of the n=1 fast paths: buffers holding views of each other, which a copy
     # or pickle would turn into unrelated arrays, and memo tables. Rebuilt on demand.
@@ -106,7 +110,7 @@ class InfluencePredictor:
             raise BadInput(f"n must be >= 1, got {n}")
         self.n = n
         if self.autoregressive:
-            self._previous = np.zeros((n, int(self._offsets[-1])), np.float32)
+            self._previous = np.zeros((n, self.influence_lags * int(self._offsets[-1])), np.float32)
 
     def observe(self, influences: np.ndarray) -> None:
         """Tell an autoregressive predictor the influence ``u_t`` (int ``[n, M]``) that the next
@@ -117,7 +121,7 @@ class InfluencePredictor:
         u = np.asarray(influences)
         if u.shape != (self.n, self.n_sources):
             raise BadInput(f"expected influences of shape {(self.n, self.n_sources)}, got {u.shape}")
-        self._previous = one_hot_influences(u, self._offsets)
+        self._previous = shift_in(self._previous, one_hot_influences(u, self._offsets))
 
     def probs_padded(self, dsets: np.ndarray) -> np.ndarray:
         """Class probabilities ``[n, M, Kmax]`` (0 beyond a source's own classes)."""
@@ -155,7 +159,7 @@ class InfluencePredictor:
 
     def _input(self, d: np.ndarray) -> np.ndarray:
         """The network's input: ``d_t``, and for an autoregressive predictor the one-hot
-        ``u_{t-1}`` beside it (float32)."""
+        ``u_{t-1} .. u_{t-L}`` beside it (float32)."""
         if not self.autoregressive:
             return d
         return np.concatenate([d.astype(np.float32, copy=False), self._previous], axis=1)
@@ -237,13 +241,32 @@ def one_hot_influences(u: np.ndarray, offsets) -> np.ndarray:
     return out
 
 
-def previous_influences(u: np.ndarray, offsets) -> np.ndarray:
+def shift_in(previous: np.ndarray, latest: np.ndarray) -> np.ndarray:
+    """The autoregressive input one step on: ``latest`` (``[..., sum K]``) in front of
+    ``previous`` (``[..., L * sum K]``, the latest lag first), the oldest lag dropped."""
+    width = latest.shape[-1]
+    if previous.shape[-1] == width:
+        return latest
+    return np.concatenate([latest, previous[..., :-width]], axis=-1)
+
+
+def previous_influences(u: np.ndarray, offsets, lags: int = 1) -> np.ndarray:
     """The autoregressive input of recorded episodes ``u`` (``[E, T, M]``): at step ``t`` the
-    one-hot ``u_{t-1}``, zeros at ``t = 0`` (teacher forcing), ``[E, T, sum K]``."""
+    one-hot ``u_{t-1} .. u_{t-lags}`` side by side, the latest first, zeros before the episode's
+    start (teacher forcing), ``[E, T, lags * sum K]``."""
     onehot = one_hot_influences(u, offsets)
-    out = np.zeros_like(onehot)
-    out[:, 1:] = onehot[:, :-1]
+    T, width = onehot.shape[1], onehot.shape[2]
+    out = np.zeros(onehot.shape[:2] + (lags * width,), np.float32)
+    for k in range(1, min(lags, T - 1) + 1):
+        out[:, k:, (k - 1) * width:k * width] = onehot[:, :-k]
     return out
+
+
+def check_influence_lags(lags) -> int:
+    """``lags`` as an int >= 1, else :class:`BadInput` naming it."""
+    if isinstance(lags, bool) or not isinstance(lags, (int, np.integer)) or lags < 1:
+        raise BadInput(f"influence_lags must be an int >= 1, got {lags!r}")
+    return int(lags)
 
 
 def _check_shapes(arrays, shapes, who):

@@ -65,6 +65,7 @@ from ials_zoo.core.domains import get_domain
 from ials_zoo.core.extras import dials_of
 from ials_zoo.errors import BadInput
 from ials_zoo.evaluation import FrameStack, load_model
+from ials_zoo.influence.base import check_influence_lags
 from ials_zoo.influence.dataset import collect_all
 from ials_zoo.influence.train import LR_SCHEDULES, train_predictors
 
@@ -203,11 +204,18 @@ class _PolicyActor:
 
 
 def on_policy_training(env_id: str, autoregressive: bool, lr: float | None = None,
-                       epochs: int | None = None, lr_schedule: str | None = None) -> tuple[float, int, str]:
-    """The learning rate, epochs and learning-rate schedule of the on-policy AIPs:
-    ``lr``/``epochs``/``lr_schedule`` where given, else the domain's ``fidelity_aip_lr`` /
-    ``fidelity_aip_epochs`` / ``fidelity_aip_lr_schedule``, else its DIALS AIP training."""
+                       epochs: int | None = None, lr_schedule: str | None = None,
+                       influence_lags: int | None = None) -> tuple[float, int, str, int]:
+    """The learning rate, epochs, learning-rate schedule and influence lags (0 for memoryless
+    AIPs) of the on-policy AIPs: ``lr``/``epochs``/``lr_schedule``/``influence_lags`` where
+    given, else the domain's ``fidelity_aip_lr`` / ``fidelity_aip_epochs`` /
+    ``fidelity_aip_lr_schedule`` / ``fidelity_aip_influence_lags``, else its DIALS AIP
+    training."""
     d = dials_of(env_id)
+    if influence_lags is not None:
+        influence_lags = check_influence_lags(influence_lags)
+        if not autoregressive:
+            raise BadInput("influence lags need autoregressive AIPs (--predictor on-policy-autoregressive)")
     if lr_schedule is not None and lr_schedule not in LR_SCHEDULES:
         raise BadInput(f"aip_lr_schedule must be one of {list(LR_SCHEDULES)} (or None: the domain's), "
                        f"got {lr_schedule!r}")
@@ -221,15 +229,19 @@ def on_policy_training(env_id: str, autoregressive: bool, lr: float | None = Non
         epochs = d.fidelity_aip_epochs if d.fidelity_aip_epochs is not None else d.aip_epochs
     if lr_schedule is None:
         lr_schedule = d.fidelity_aip_lr_schedule if d.fidelity_aip_lr_schedule is not None else d.aip_lr_schedule
-    return float(lr), int(epochs), str(lr_schedule)
+    if influence_lags is None:
+        influence_lags = d.fidelity_aip_influence_lags
+    return float(lr), int(epochs), str(lr_schedule), int(influence_lags) if autoregressive else 0
 
 
 def on_policy_aips(env_id: str, agents, policy, steps: int, seed: int, autoregressive: bool, options: dict,
-                   lr: float | None = None, epochs: int | None = None, lr_schedule: str | None = None) -> dict:
+                   lr: float | None = None, epochs: int | None = None, lr_schedule: str | None = None,
+                   influence_lags: int | None = None) -> dict:
     """``{agent: AIP}`` trained on ``steps`` GS steps of the joint ``policy`` (every agent
     acting), with the domain's DIALS AIP architecture, at its ``fidelity_aip_lr``,
-    ``fidelity_aip_epochs`` and ``fidelity_aip_lr_schedule``
-    (:class:`~ials_zoo.core.extras.DIALSSettings`; ``lr``, ``epochs``, ``lr_schedule``: others)."""
+    ``fidelity_aip_epochs``, ``fidelity_aip_lr_schedule`` and (autoregressive)
+    ``fidelity_aip_influence_lags`` (:class:`~ials_zoo.core.extras.DIALSSettings`; ``lr``,
+    ``epochs``, ``lr_schedule``, ``influence_lags``: others)."""
     d = dials_of(env_id)
     if policy == "random":
         actor = None
@@ -237,11 +249,12 @@ def on_policy_aips(env_id: str, agents, policy, steps: int, seed: int, autoregre
         actor = {a: (lambda obs: 0) for a in agents}
     else:
         actor = _PolicyActor(policy, agents, seed)
-    lr, epochs, lr_schedule = on_policy_training(env_id, autoregressive, lr, epochs, lr_schedule)
+    lr, epochs, lr_schedule, lags = on_policy_training(env_id, autoregressive, lr, epochs, lr_schedule,
+                                                       influence_lags)
     data = collect_all(env_id, agents, steps=steps, policy=actor, seed=seed, gs_options=options, progress=False)
     preds, _ = train_predictors(data, d.aip_arch, hidden=d.aip_hidden, lr=lr, epochs=epochs,
                                 batch_size=d.aip_batch, seed=seed, autoregressive=autoregressive,
-                                lr_schedule=lr_schedule)
+                                lr_schedule=lr_schedule, influence_lags=max(lags, 1))
     return preds
 
 
@@ -254,11 +267,13 @@ def default_watched(domain, agents: Sequence[str]) -> list[str]:
 def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: int = 0, watched=None,
                     predictor="trained", tolerance: float = 0.1, progress: bool = True,
                     collect_steps: int | None = None, aip_lr: float | None = None, aip_epochs: int | None = None,
-                    aip_seeds: int = 1, aip_lr_schedule: str | None = None, **options) -> dict:
+                    aip_seeds: int = 1, aip_lr_schedule: str | None = None,
+                    aip_influence_lags: int | None = None, **options) -> dict:
     """Run every joint policy on the GS and on the multi-agent IALS; returns
     ``{policy name: {agent: {metric: compare(...)}}}``. ``predictor``: an AIP set for every
     policy, or ``on-policy[-autoregressive]`` (module docstring) with ``collect_steps`` GS
-    steps per policy (default: the domain's DIALS collection). ``aip_seeds`` > 1 (on-policy AIPs
+    steps per policy (default: the domain's ``fidelity_collect_steps``, else its DIALS
+    collection) and ``aip_influence_lags`` (autoregressive only; default: the domain's). ``aip_seeds`` > 1 (on-policy AIPs
     only): train them that many times, from other GS data and training seeds, run the IALS with
     each set, and count per row in how many the row holds (``holds_in`` of ``aip_seeds``; the
     means and interval shown are the first set's): which rows fail moves from one training run
@@ -278,11 +293,17 @@ def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: i
     watched = list(watched or default_watched(domain, agents))
     report: dict = {"env_id": env_id, "episodes": episodes, "tolerance": tolerance, "watched": watched,
                     "predictor": str(predictor), "aip_lr": aip_lr, "aip_epochs": aip_epochs,
-                    "aip_lr_schedule": aip_lr_schedule, "aip_seeds": aip_seeds, "policies": {}}
+                    "aip_lr_schedule": aip_lr_schedule, "aip_influence_lags": aip_influence_lags,
+                    "aip_seeds": aip_seeds, "policies": {}}
+    if aip_influence_lags is not None and predictor not in ON_POLICY:
+        raise BadInput(f"aip_influence_lags needs on-policy AIPs (trained per run); {predictor!r} is one fixed set")
     if predictor in ON_POLICY:
-        report["aip_lr"], report["aip_epochs"], report["aip_lr_schedule"] = on_policy_training(
-            env_id, predictor == "on-policy-autoregressive", aip_lr, aip_epochs, aip_lr_schedule)
-    steps = int(collect_steps or dials_of(domain).collect_steps)
+        (report["aip_lr"], report["aip_epochs"], report["aip_lr_schedule"],
+         report["aip_influence_lags"]) = on_policy_training(env_id, predictor == "on-policy-autoregressive", aip_lr,
+                                                            aip_epochs, aip_lr_schedule, aip_influence_lags)
+    d = dials_of(domain)
+    steps = int(collect_steps or d.fidelity_collect_steps or d.collect_steps)
+    report["collect_steps"] = steps if predictor in ON_POLICY else None
     for spec in policies:
         name = str(spec)
         policy = spec if spec in ("random", "constant", "scripted") else load_model(spec)
@@ -309,7 +330,7 @@ def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: i
                           f"{f' (training {k + 1} of {aip_seeds})' if aip_seeds > 1 else ''} ...", flush=True)
                 aips = on_policy_aips(env_id, agents, policy, steps, seed + DATA_SEED_OFFSET + k,
                                       predictor == "on-policy-autoregressive", options, aip_lr, aip_epochs,
-                                      aip_lr_schedule)
+                                      aip_lr_schedule, aip_influence_lags)
             ials_env = make_ials_parallel_env(env_id, agents, predictor=aips, seed=seed, **options)
             try:
                 ials = run(ials_env, agents, watched, policy, episodes, seed, domain.n_actions)
@@ -334,6 +355,11 @@ def markdown(report: dict) -> str:
     if report.get("predictor") in ON_POLICY:
         schedule = {"linear": " decayed linearly to 0", "constant": " (constant)"}.get(report.get("aip_lr_schedule"), "")
         training = f", lr {report['aip_lr']:g}{schedule}, {report['aip_epochs']} epochs"
+        lags = report.get("aip_influence_lags") or 0
+        if lags:
+            training += f", reading their last {lags} draw{'s' if lags > 1 else ''}"
+        if report.get("collect_steps"):
+            training += f", trained on {report['collect_steps']:,} GS steps of each policy"
     n_trainings = int(report.get("aip_seeds", 1))
     if n_trainings > 1:
         training += (f"; {n_trainings} trainings of them, from other GS data: GS, IALS and the interval are the "

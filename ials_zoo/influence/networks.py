@@ -1,8 +1,8 @@
 """Neural influence predictors with numpy inference: :class:`MLPPredictor` (no memory, the
 traffic AIP) and :class:`GRUPredictor` (memory, the warehouse AIP). Either can be
-*autoregressive* (``autoregressive=True``): its input is ``d_t`` and the one-hot ``u_{t-1}``
-(:mod:`ials_zoo.influence.base`), so an MLP then models ``P(u_t | d_t, u_{t-1})`` and a GRU
-``P(u_t | d_<=t, u_<t)``.
+*autoregressive* (``autoregressive=True``): its input is ``d_t`` and the one-hot ``u_{t-1}``,
+or ``u_{t-1} .. u_{t-L}`` with ``influence_lags=L`` (:mod:`ials_zoo.influence.base`), so an MLP
+then models ``P(u_t | d_t, u_{t-L} .. u_{t-1})`` and a GRU ``P(u_t | d_<=t, u_<t)``.
 
 Inference is plain numpy (weights copied out of torch after training): a torch call at batch
 1 costs more than a whole local-simulator step. A single history (``reset(1)``, the
@@ -22,7 +22,19 @@ from ials_zoo.influence.base import (
     InfluencePredictor,
     _check_shapes,
     _sigmoid,
+    check_influence_lags,
 )
+
+
+def _config(p) -> dict:
+    """The constructor keywords saved with a network AIP (one lag, the first autoregressive
+    AIPs' only kind, is left implicit so that their files stay as they were)."""
+    out = {"hidden": p.hidden}
+    if p.autoregressive:
+        out["autoregressive"] = True
+        if p.influence_lags != 1:
+            out["influence_lags"] = p.influence_lags
+    return out
 
 
 class MLPPredictor(InfluencePredictor):
@@ -36,8 +48,9 @@ class MLPPredictor(InfluencePredictor):
     arch = "mlp"
 
     def __init__(self, region, dset_kind="dset", hidden=64, arrays=None, seed=0, metadata=None,
-                 autoregressive=False):
+                 autoregressive=False, influence_lags=1):
         self.autoregressive = bool(autoregressive)
+        self.influence_lags = check_influence_lags(influence_lags) if self.autoregressive else 0
         super().__init__(region, dset_kind, metadata)
         self.hidden = int(hidden)
         if arrays is None:
@@ -81,7 +94,7 @@ class MLPPredictor(InfluencePredictor):
         return {"w1": self.w1, "b1": self.b1, "w_out": self.w_out, "b_out": self.b_out}
 
     def _config(self):
-        return {"hidden": self.hidden, **({"autoregressive": True} if self.autoregressive else {})}
+        return _config(self)
 
 
 class GRUPredictor(InfluencePredictor):
@@ -97,8 +110,9 @@ class GRUPredictor(InfluencePredictor):
     arch = "gru"
 
     def __init__(self, region, dset_kind="dset", hidden=64, arrays=None, seed=0, metadata=None,
-                 autoregressive=False):
+                 autoregressive=False, influence_lags=1):
         self.autoregressive = bool(autoregressive)
+        self.influence_lags = check_influence_lags(influence_lags) if self.autoregressive else 0
         super().__init__(region, dset_kind, metadata)
         self.hidden = int(hidden)
         if arrays is None:
@@ -233,7 +247,7 @@ class GRUPredictor(InfluencePredictor):
         }
 
     def _config(self):
-        return {"hidden": self.hidden, **({"autoregressive": True} if self.autoregressive else {})}
+        return _config(self)
 
 
 ARCHS = {"mlp": MLPPredictor, "gru": GRUPredictor}
@@ -271,10 +285,12 @@ def init_arrays(arch: str, d: int, hidden: int, n_logits: int, seed: int = 0) ->
     raise BadInput(f"unknown AIP architecture {arch!r}; expected one of {sorted(ARCHS)}")
 
 
-def untrained_predictor(region, arch="gru", dset_kind="dset", hidden=64, seed=0, autoregressive=False):
+def untrained_predictor(region, arch="gru", dset_kind="dset", hidden=64, seed=0, autoregressive=False,
+                        influence_lags=1):
     """A randomly initialised network AIP: the paper's untrained-IALS (SPEC §3)."""
     if arch not in ARCHS:
         raise BadInput(f"unknown AIP architecture {arch!r}; expected one of {sorted(ARCHS)}")
-    pred = ARCHS[arch](region, dset_kind=dset_kind, hidden=hidden, seed=seed, autoregressive=autoregressive)
+    pred = ARCHS[arch](region, dset_kind=dset_kind, hidden=hidden, seed=seed, autoregressive=autoregressive,
+                       influence_lags=influence_lags)
     pred.metadata.update({"variant": "untrained", "seed": int(seed)})
     return pred

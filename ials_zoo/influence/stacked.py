@@ -13,7 +13,8 @@ Sampling draws, per row, one uniform number per source from that row's own strea
 (:class:`ials_zoo.core.streams.CopyStreams`), so an agent's influence sources never depend on
 which other agents share the batch. Replacing predictors (:meth:`StackedPredictor.replace`,
 what DIALS does after retraining) restacks only the groups concerned. An autoregressive group
-(:mod:`ials_zoo.influence.base`) keeps each row's last draw and reads it at the next step.
+(:mod:`ials_zoo.influence.base`) keeps each row's last draws (``influence_lags`` of them) and
+reads them at the next step.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ import numpy as np
 
 from ials_zoo.core.streams import CopyStreams
 from ials_zoo.errors import BadInput, BadInputType
-from ials_zoo.influence.base import InfluencePredictor, _sigmoid, one_hot_influences
+from ials_zoo.influence.base import InfluencePredictor, _sigmoid, one_hot_influences, shift_in
 from ials_zoo.influence.constant import _ConstantPredictor
 from ials_zoo.influence.networks import GRUPredictor, MLPPredictor
 
@@ -31,9 +32,9 @@ STREAM_SALT = 1  # separates the AIP's streams from the local simulator's (same 
 
 def _group_key(p: InfluencePredictor) -> tuple:
     if isinstance(p, MLPPredictor):
-        return ("mlp", p.hidden, p.autoregressive)
+        return ("mlp", p.hidden, p.autoregressive, p.influence_lags)
     if isinstance(p, GRUPredictor):
-        return ("gru", p.hidden, p.autoregressive)
+        return ("gru", p.hidden, p.autoregressive, p.influence_lags)
     if isinstance(p, _ConstantPredictor):
         return ("table",)
     raise BadInputType(f"cannot stack a {type(p).__name__}")
@@ -44,8 +45,9 @@ class _Group:
         self.kind, self.members = kind, np.array(members)
         ps = [predictors[i] for i in members]
         self.autoregressive = bool(ps[0].autoregressive)
+        self.lags = ps[0].influence_lags
         self.offsets = ps[0]._offsets
-        self.previous = None  # [G, n, sum K]: the one-hot u_{t-1} of an autoregressive group
+        self.previous = None  # [G, n, L * sum K]: the one-hot u_{t-1} .. u_{t-L} of an autoregressive group
         if kind == "mlp":
             self.w = [np.stack([getattr(p, k) for p in ps]) for k in ("w1", "b1", "w_out", "b_out")]
         elif kind == "gru":
@@ -71,11 +73,11 @@ class _Group:
         if self.kind == "gru":
             self.h = np.zeros((len(self.members), n, self.hidden), np.float32)
         if self.autoregressive:
-            self.previous = np.zeros((len(self.members), n, int(self.offsets[-1])), np.float32)
+            self.previous = np.zeros((len(self.members), n, self.lags * int(self.offsets[-1])), np.float32)
 
     def remember(self, u):  # u: [G, n, M], what an autoregressive group reads at the next step
         if self.autoregressive:
-            self.previous = one_hot_influences(u, self.offsets)
+            self.previous = shift_in(self.previous, one_hot_influences(u, self.offsets))
 
     def logits(self, d):  # d: [G, n, D] float32
         if self.autoregressive:
@@ -178,7 +180,7 @@ class StackedPredictor:
                     continue
                 if h is not None and g.h is not None and h.shape == g.h.shape:
                     g.h = h
-                if previous is not None and g.previous is not None:
+                if previous is not None and g.previous is not None and previous.shape == g.previous.shape:
                     g.previous = previous
 
     def probs_padded(self, dsets: np.ndarray) -> np.ndarray:

@@ -32,7 +32,7 @@ from ials_zoo.core.extras import LR_SCHEDULES
 from ials_zoo.core.region import check_dset_kind
 from ials_zoo.core.streams import agent_key
 from ials_zoo.errors import BadInput
-from ials_zoo.influence.base import previous_influences
+from ials_zoo.influence.base import check_influence_lags, previous_influences
 from ials_zoo.influence.predictors import (
     ARCHS,
     MarginalPredictor,
@@ -132,9 +132,11 @@ def train_predictor(
     test_fraction: float = 0.1,
     autoregressive: bool = False,
     lr_schedule: str = "linear",
+    influence_lags: int = 1,
 ):
     """Train an AIP of architecture ``arch`` (``"gru"`` or ``"mlp"``) on ``dataset``;
-    ``autoregressive``: it also reads ``u_{t-1}`` (the recorded one: teacher forcing).
+    ``autoregressive``: it also reads ``u_{t-1}`` (the recorded one: teacher forcing), or
+    ``u_{t-1} .. u_{t-L}`` with ``influence_lags=L``.
     ``lr_schedule``: ``"linear"`` (to zero at the last update, the default) or ``"constant"``.
 
     Returns:
@@ -159,7 +161,7 @@ def train_predictor(
     torch.set_num_threads(1)
     try:
         return _train(dataset, arch, dset_kind, epochs, seed, progress, lr, hidden, batch_size, test_fraction,
-                      autoregressive, lr_schedule)
+                      autoregressive, lr_schedule, influence_lags)
     finally:
         torch.set_num_threads(threads)
 
@@ -180,30 +182,32 @@ def hyperparameters(arch: str, epochs, lr, hidden, batch_size, min_epochs: int, 
     return hp
 
 
-def network_inputs(dataset, dset_kind: str, autoregressive: bool) -> np.ndarray:
+def network_inputs(dataset, dset_kind: str, autoregressive: bool, influence_lags: int = 1) -> np.ndarray:
     """A data set's network inputs ``[E, T, D]`` (float32): the d-sets, and for an
-    autoregressive AIP the one-hot ``u_{t-1}`` beside them (zeros at an episode's start)."""
+    autoregressive AIP the one-hot ``u_{t-1} .. u_{t-influence_lags}`` beside them (zeros
+    before an episode's start)."""
     d = dataset.dsets[dset_kind].astype(np.float32)
     if not autoregressive:
         return d
     offsets = np.concatenate([[0], np.cumsum(dataset.region.influence_classes)])
-    return np.concatenate([d, previous_influences(dataset.influences, offsets)], axis=2)
+    return np.concatenate([d, previous_influences(dataset.influences, offsets, influence_lags)], axis=2)
 
 
 def _train(dataset, arch, dset_kind, epochs, seed, progress, lr, hidden, batch_size, test_fraction, autoregressive,
-           lr_schedule):
+           lr_schedule, influence_lags):
     import torch
 
     if arch not in ARCHS:
         raise BadInput(f"unknown AIP architecture {arch!r}; expected one of {sorted(ARCHS)}")
     check_dset_kind(dset_kind)
+    influence_lags = check_influence_lags(influence_lags)
     hp = hyperparameters(arch, epochs, lr, hidden, batch_size, min_epochs=0, lr_schedule=lr_schedule)
     if dataset.n_episodes < 2:
         raise BadInput(f"need at least 2 episodes to split train/test, got {dataset.n_episodes}")
 
     region = dataset.region
     train_idx, test_idx = dataset.split(test_fraction, seed=seed)
-    d_all = network_inputs(dataset, dset_kind, autoregressive)
+    d_all = network_inputs(dataset, dset_kind, autoregressive, influence_lags)
     u_all = dataset.influences
     D = d_all.shape[2]
     offsets = [int(x) for x in np.concatenate([[0], np.cumsum(region.influence_classes)])]
@@ -235,9 +239,9 @@ def _train(dataset, arch, dset_kind, epochs, seed, progress, lr, hidden, batch_s
     train_seconds = time.perf_counter() - t0
 
     trained = ARCHS[arch](region, dset_kind=dset_kind, hidden=int(hp["hidden"]), arrays=net.to_numpy(),
-                          autoregressive=autoregressive)
+                          autoregressive=autoregressive, influence_lags=influence_lags)
     untrained = ARCHS[arch](region, dset_kind=dset_kind, hidden=int(hp["hidden"]), arrays=init,
-                            autoregressive=autoregressive)
+                            autoregressive=autoregressive, influence_lags=influence_lags)
     uniform = UniformPredictor(region, dset_kind=dset_kind, probs=untrained_probs(region))
     marginal = MarginalPredictor.fit(dataset, dset_kind=dset_kind, episodes=train_idx)
     ce = _cross_entropies({"trained": trained, "untrained": untrained, "uniform": uniform, "marginal": marginal},
@@ -248,6 +252,7 @@ def _train(dataset, arch, dset_kind, epochs, seed, progress, lr, hidden, batch_s
         "agent": region.agent,
         "arch": arch,
         "autoregressive": bool(autoregressive),
+        **({"influence_lags": influence_lags} if autoregressive else {}),
         "dset_kind": dset_kind,
         "hyperparameters": {**hp, "optimizer": "Adam", "seed": int(seed), "test_fraction": test_fraction},
         "dataset": {
@@ -321,14 +326,16 @@ def _stacked_modules():
 
 
 def _initial_arrays(agent: str, old, arch: str, D: int, H: int, n_logits: int, dset_kind: str, autoregressive: bool,
-                    seed: int) -> dict:
+                    seed: int, influence_lags: int = 1) -> dict:
     """The starting weights of ``agent``'s network: ``old``'s (a warm start, which must have the
     same shape and kind), else ``init_arrays`` seeded from ``seed`` and the agent's name."""
     if old is None:
         return init_arrays(arch, D, H, n_logits, seed=(seed * 1_000_003 + agent_key(agent)) % 2**32)
-    if old.name != arch or old.hidden != H or old.dset_kind != dset_kind or old.autoregressive != bool(autoregressive):
-        raise BadInput(f"cannot warm-start a {arch} AIP (hidden {H}, autoregressive {bool(autoregressive)}) "
-                         f"from {old!r}")
+    lags = influence_lags if autoregressive else 0
+    if (old.name != arch or old.hidden != H or old.dset_kind != dset_kind or old.autoregressive != bool(autoregressive)
+            or old.influence_lags != lags):
+        raise BadInput(f"cannot warm-start a {arch} AIP (hidden {H}, autoregressive {bool(autoregressive)}, "
+                       f"influence lags {lags}) from {old!r} (influence lags {old.influence_lags})")
     return {k: np.asarray(v, np.float32) for k, v in old._arrays().items()}
 
 
@@ -369,7 +376,7 @@ def train_predictors(datasets: dict, arch: str, hidden: int | None = None, lr: f
                      epochs: int | None = None, batch_size: int | None = None, seed: int = 0,
                      init: dict | None = None, dset_kind: str = "dset", test_fraction: float = 0.1,
                      progress: bool = False, autoregressive: bool = False,
-                     lr_schedule: str = "linear") -> tuple[dict, dict]:
+                     lr_schedule: str = "linear", influence_lags: int = 1) -> tuple[dict, dict]:
     """Train one AIP per agent on its own data, all in one stacked torch program.
 
     Every agent's network is a slice of stacked weights; the loss is the sum of the agents'
@@ -378,7 +385,7 @@ def train_predictors(datasets: dict, arch: str, hidden: int | None = None, lr: f
     run: same episodes, same length). ``init`` (``{agent: predictor}``) warm-starts from those
     networks (DIALS retrains its AIPs), else each starts from ``init_arrays`` seeded from
     ``seed`` and the agent's name. ``autoregressive``: every AIP also reads ``u_{t-1}`` (teacher
-    forcing). ``lr_schedule`` as for :func:`train_predictor`. Returns
+    forcing), or ``u_{t-1} .. u_{t-L}`` with ``influence_lags=L``. ``lr_schedule`` as for :func:`train_predictor`. Returns
     ``({agent: predictor}, report)`` with each agent's train/test
     cross-entropy and the training seconds.
     """
@@ -395,14 +402,15 @@ def train_predictors(datasets: dict, arch: str, hidden: int | None = None, lr: f
             raise BadInput(f"the data sets differ in shape ({a}: {datasets[a].influences.shape} vs "
                              f"{first.influences.shape}); collect them in one GS run")
     hp = hyperparameters(arch, epochs, lr, hidden, batch_size, min_epochs=1, lr_schedule=lr_schedule)
+    influence_lags = check_influence_lags(influence_lags)
     region = first.region
     offsets = [int(x) for x in np.concatenate([[0], np.cumsum(region.influence_classes)])]
     n_logits, H = offsets[-1], int(hp["hidden"])
-    inputs = {a: network_inputs(datasets[a], dset_kind, autoregressive) for a in agents}
+    inputs = {a: network_inputs(datasets[a], dset_kind, autoregressive, influence_lags) for a in agents}
     D = inputs[agents[0]].shape[2]
     train_idx, test_idx = first.split(test_fraction, seed=seed)
-    arrays = [_initial_arrays(a, (init or {}).get(a), arch, D, H, n_logits, dset_kind, autoregressive, seed)
-              for a in agents]
+    arrays = [_initial_arrays(a, (init or {}).get(a), arch, D, H, n_logits, dset_kind, autoregressive, seed,
+                              influence_lags) for a in agents]
     keep_freed_memory()
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
@@ -432,9 +440,10 @@ def train_predictors(datasets: dict, arch: str, hidden: int | None = None, lr: f
     out, ce = {}, {}
     for g, a in enumerate(agents):
         pred = ARCHS[arch](datasets[a].region, dset_kind=dset_kind, hidden=H, arrays=net.arrays(g),
-                           autoregressive=autoregressive)
+                           autoregressive=autoregressive, influence_lags=influence_lags)
         test = cross_entropy_per_source(pred, datasets[a], test_idx if len(test_idx) else train_idx)
         pred.metadata.update({"variant": "trained", "arch": arch, "autoregressive": bool(autoregressive),
+                              **({"influence_lags": influence_lags} if autoregressive else {}),
                               "hyperparameters": {**hp, "seed": int(seed)},
                               "dataset": {"steps": datasets[a].n_steps,
                                           "collect_seconds": datasets[a].metadata.get("collect_seconds"),
@@ -442,7 +451,8 @@ def train_predictors(datasets: dict, arch: str, hidden: int | None = None, lr: f
                               "train_seconds": round(seconds, 3), "test_cross_entropy": float(np.mean(test))})
         out[a] = pred
         ce[a] = float(np.mean(test))
-    return out, {"arch": arch, "autoregressive": bool(autoregressive), "hyperparameters": hp, "agents": len(agents), "train_seconds": round(seconds, 3),
+    return out, {"arch": arch, "autoregressive": bool(autoregressive),
+                 **({"influence_lags": influence_lags} if autoregressive else {}), "hyperparameters": hp, "agents": len(agents), "train_seconds": round(seconds, 3),
                  "test_cross_entropy": ce, "mean_test_cross_entropy": float(np.mean(list(ce.values()))),
                  "warm_start": bool(init)}
 
