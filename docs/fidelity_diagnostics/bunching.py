@@ -1,5 +1,8 @@
 """Burstiness of arrivals per lane (tls_0, tls_1, tls_12): variance/mean of counts in 10-step windows,
-and the share of arrivals within 3 steps of the previous one on the same lane; GS vs IALS."""
+and the share of arrivals within 3 steps of the previous one on the same lane; GS vs IALS.
+
+    python docs/fidelity_diagnostics/bunching.py POLICY SEED EPISODES [STEPS LAGS]
+"""
 
 import sys
 
@@ -15,6 +18,8 @@ from ials_zoo.influence.multi import make_ials_parallel_env
 pol = sys.argv[1]
 seed = int(sys.argv[2])
 episodes = int(sys.argv[3])
+# the AIPs' GS steps and lags: 10000 1 (the figures of the previous default) or 100000 3 (the default)
+steps, lags = (int(sys.argv[4]), int(sys.argv[5])) if len(sys.argv) > 5 else (10_000, 1)
 dom = get_domain("traffic_grid_v0")
 agents = dom.agents()
 policy = pol if pol in ("random", "constant") else load_model(pol)
@@ -41,7 +46,7 @@ def stats(env):
 gs_env = dom.parallel_env(learners=agents)
 g = stats(gs_env)
 gs_env.close()
-aips = F.on_policy_aips("traffic_grid_v0", agents, policy, 10000, seed + 100_000, True, {})
+aips = F.on_policy_aips("traffic_grid_v0", agents, policy, steps, seed + 100_000, True, {}, influence_lags=lags)
 ie = make_ials_parallel_env("traffic_grid_v0", agents, predictor=aips, seed=seed)
 s = stats(ie)
 ie.close()

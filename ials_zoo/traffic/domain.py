@@ -31,8 +31,13 @@ STUDY = StudySettings(budget=300_000, ppo_steps_per_second={"gs": 1000.0, "ials"
 # reaches 0.219 in 30 epochs (11.6 s) and 0.198 in 60 (10,000 steps of data). 2 copies per
 # agent (rollouts of 64 instead of 16): SUMO's cost per car grows with the cars in one
 # simulation (a worker's 13 lights x 8 copies cost 2.7x per copy-step what 13 x 2 do).
+# The fidelity report's AIPs read their last 3 draws and learn from 100,000 GS steps: under the
+# board's IPPO lights the neighbours release platoons (arrivals 2-3 steps apart), and AIPs that
+# read one draw, or learn from 10,000 steps, made arrivals too smooth and the corner and edge
+# lights' return 15% too high (docs/fidelity.md).
 DIALS = DIALSSettings(aip_arch="mlp", aip_hidden=128, aip_lr=1e-3, aip_epochs=10, aip_batch=256, copies=2,
-                     collect_steps=10_000, refresh=250_000, fidelity_aip_lr=3e-3, fidelity_aip_epochs=30)
+                     collect_steps=10_000, refresh=250_000, fidelity_aip_lr=3e-3, fidelity_aip_epochs=30,
+                     fidelity_aip_influence_lags=3, fidelity_collect_steps=100_000)
 TOOLS = {"calibrate": ("ials_zoo.traffic.calibrate", "demand calibration under actuated lights"),
          "sumo-bench": ("ials_zoo.traffic.benchmark", "raw SUMO vs GS vs LS steps/s, LS step breakdown")}
 
