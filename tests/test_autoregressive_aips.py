@@ -133,6 +133,19 @@ def test_influence_lags_must_be_a_positive_int(bad):
         untrained_predictor(_region(), "mlp", hidden=8, autoregressive=True, influence_lags=bad)
 
 
+def test_a_memoryless_aip_takes_no_lags():
+    from ials_zoo.errors import BadInput
+    from ials_zoo.influence.networks import untrained_predictor
+    from ials_zoo.influence.train import train_predictor
+
+    assert untrained_predictor(_region(), "mlp", hidden=8).influence_lags == 0
+    with pytest.raises(BadInput, match="needs an autoregressive AIP"):
+        untrained_predictor(_region(), "gru", hidden=8, influence_lags=3)
+    with pytest.raises(BadInput, match="needs an autoregressive AIP"):
+        train_predictor(_lingering_data(_region(), episodes=4, steps=5), "mlp", epochs=1, progress=False,
+                        influence_lags=2)
+
+
 def test_previous_influences_holds_each_lag_latest_first():
     from ials_zoo.influence.base import one_hot_influences, previous_influences
 
@@ -173,7 +186,7 @@ def _share_of_gaps_of_two(u: np.ndarray) -> float:
 
 
 def test_aips_that_read_three_lags_make_the_pairs_one_lag_cannot():
-    from ials_zoo.influence.train import train_predictor
+    from ials_zoo.influence.train import format_report, train_predictor
 
     region = get_domain("traffic_grid_v0").region_spec("tls_0")
     data = _pairs_data(region)
@@ -184,6 +197,7 @@ def test_aips_that_read_three_lags_make_the_pairs_one_lag_cannot():
         pred, report = train_predictor(data, "mlp", hidden=16, epochs=30, lr=1e-2, progress=False,
                                        autoregressive=True, influence_lags=lags)
         assert report["influence_lags"] == lags and pred.influence_lags == lags
+        assert ("reading its last draw" if lags == 1 else f"reading its last {lags} draws") in format_report(report)
         rng = np.random.default_rng(1)
         pred.reset(300)
         d = np.zeros((300, region.dset_size("dset")), np.uint8)

@@ -7,8 +7,9 @@ from another GS episode: platoons kept, their timing against this episode lost),
 (independent arrivals at each lane's rate in this episode: platoons lost), and, with STEPS > 0
 (GS steps of the IPPO lights to learn from): ``ngramK`` (arrivals drawn from their own last K
 arrivals and the time of the episode, counted on that data; no d-set) and ``mlp_lagsK`` (an MLP
-AIP reading the d-set and its last K draws, trained on the first TRAIN_STEPS of that data: what
-``ials-zoo fidelity --aip-influence-lags K`` trains), each with its mean arrivals per episode.
+AIP reading the d-set and its last K draws, trained on the first TRAIN_STEPS of that data; like
+the one ``ials-zoo fidelity --aip-influence-lags K`` trains, with one sigmoid per lane instead of
+a two-class softmax), each with its mean arrivals per episode.
 
     python docs/fidelity_diagnostics/closed_loop.py POLICY EPISODES [STEPS TRAIN_STEPS]
 

@@ -1,5 +1,6 @@
 """Diagnostic: traffic on-policy AIP variants in the fidelity report (architecture, hidden units,
-d-set kind, GS steps), all autoregressive, lr 3e-3 decayed linearly to zero.
+d-set kind, GS steps), all autoregressive reading their last draw only (the variants were
+measured before traffic's AIPs read 3), lr 3e-3 decayed linearly to zero.
 
     python docs/fidelity_diagnostics/traffic_aip_variants.py POLICIES SEED ARCH HIDDEN DSET_KIND STEPS EPOCHS BATCH
 

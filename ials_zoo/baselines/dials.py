@@ -219,14 +219,16 @@ def refresh_aips(env_id, agents, options, net, seed, steps, domain, epochs, old,
     data = collect_all(env_id, agents, steps=steps, policy=policy, seed=seed, gs_options=options, progress=progress,
                        workers=collect_workers)
     collect_seconds = time.perf_counter() - t0
+    lags = 1 if autoregressive else 0  # DIALS's autoregressive AIPs read their last draw only
     warm = {a: p for a, p in old.items() if isinstance(p, ARCHS[d.aip_arch]) and p.hidden == d.aip_hidden
-            and p.autoregressive == autoregressive and p.influence_lags == (1 if autoregressive else 0)
+            and p.autoregressive == autoregressive and p.influence_lags == lags
             and p.metadata.get("variant") == "trained"}
     t0 = time.perf_counter()
     preds, report = train_predictors(data, d.aip_arch, hidden=d.aip_hidden, lr=lr or d.lr_for(autoregressive),
                                      epochs=epochs,
                                      batch_size=d.aip_batch, seed=seed, init=warm or None, progress=progress,
-                                     autoregressive=autoregressive, lr_schedule=d.aip_lr_schedule)
+                                     autoregressive=autoregressive, lr_schedule=d.aip_lr_schedule,
+                                     influence_lags=lags)
     train_seconds = time.perf_counter() - t0
     return preds, {"collect_seconds": collect_seconds, "train_seconds": train_seconds,
                    "mean_test_cross_entropy": report["mean_test_cross_entropy"], "warm_start": bool(warm)}

@@ -101,7 +101,7 @@ def run(args) -> int:
     pred, report = train_predictor(data, arch=arch, dset_kind=args.dset_kind, epochs=args.epochs,
                                    seed=args.seed, progress=progress, lr=args.lr, hidden=args.hidden,
                                    batch_size=args.batch_size, autoregressive=args.autoregressive,
-                                   lr_schedule=args.lr_schedule or "linear", influence_lags=args.influence_lags or 1)
+                                   lr_schedule=args.lr_schedule or "linear", influence_lags=args.influence_lags)
     save_predictor(pred, args.out)
     if args.report:
         atomic_write_text(args.report, json.dumps(report, indent=2) + "\n")
@@ -132,7 +132,7 @@ def _train_set(args, progress: bool) -> int:
         batch_size=args.batch_size or (d.aip_batch if arch == d.aip_arch else None),
         seed=args.seed, dset_kind=args.dset_kind, progress=progress, autoregressive=args.autoregressive,
         lr_schedule=args.lr_schedule or (d.aip_lr_schedule if arch == d.aip_arch else "linear"),
-        influence_lags=args.influence_lags or 1)
+        influence_lags=args.influence_lags)
     collect_seconds = next(iter(data.values())).metadata["collect_seconds"]
     save_predictor_set(preds.values(), args.out, metadata={
         "steps": next(iter(data.values())).n_steps, "policy": "uniform_random (every listed agent)",
@@ -141,7 +141,8 @@ def _train_set(args, progress: bool) -> int:
     if args.report:
         atomic_write_text(args.report, json.dumps(report, indent=2) + "\n")
     ce = report["test_cross_entropy"]
-    kind = f"autoregressive {arch}" if args.autoregressive else arch
+    lags = report.get("influence_lags", 1)
+    kind = (f"autoregressive {arch}{f' ({lags} lags)' if lags > 1 else ''}" if args.autoregressive else arch)
     print(f"{len(agents)} {kind} AIPs of {args.env}: test cross-entropy mean {report['mean_test_cross_entropy']:.4f} "
           f"(min {min(ce.values()):.4f}, max {max(ce.values()):.4f}); collection {collect_seconds:.1f} s, training "
           f"{report['train_seconds']:.1f} s")

@@ -269,6 +269,16 @@ def check_influence_lags(lags) -> int:
     return int(lags)
 
 
+def resolve_influence_lags(autoregressive: bool, lags) -> int:
+    """The past draws an AIP reads: ``lags`` (None: 1) for an autoregressive AIP, 0 for a
+    memoryless one, which must not be given any (None or 0), else :class:`BadInput`."""
+    if autoregressive:
+        return 1 if lags is None else check_influence_lags(lags)
+    if lags is None or (not isinstance(lags, bool) and isinstance(lags, (int, np.integer)) and lags == 0):
+        return 0
+    raise BadInput(f"influence_lags={lags!r} needs an autoregressive AIP (autoregressive=True)")
+
+
 def _check_shapes(arrays, shapes, who):
     missing = set(shapes) - set(arrays)
     if missing:

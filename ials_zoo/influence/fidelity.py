@@ -254,7 +254,7 @@ def on_policy_aips(env_id: str, agents, policy, steps: int, seed: int, autoregre
     data = collect_all(env_id, agents, steps=steps, policy=actor, seed=seed, gs_options=options, progress=False)
     preds, _ = train_predictors(data, d.aip_arch, hidden=d.aip_hidden, lr=lr, epochs=epochs,
                                 batch_size=d.aip_batch, seed=seed, autoregressive=autoregressive,
-                                lr_schedule=lr_schedule, influence_lags=max(lags, 1))
+                                lr_schedule=lr_schedule, influence_lags=lags)
     return preds
 
 

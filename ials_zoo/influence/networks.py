@@ -22,7 +22,7 @@ from ials_zoo.influence.base import (
     InfluencePredictor,
     _check_shapes,
     _sigmoid,
-    check_influence_lags,
+    resolve_influence_lags,
 )
 
 
@@ -48,9 +48,9 @@ class MLPPredictor(InfluencePredictor):
     arch = "mlp"
 
     def __init__(self, region, dset_kind="dset", hidden=64, arrays=None, seed=0, metadata=None,
-                 autoregressive=False, influence_lags=1):
+                 autoregressive=False, influence_lags=None):
         self.autoregressive = bool(autoregressive)
-        self.influence_lags = check_influence_lags(influence_lags) if self.autoregressive else 0
+        self.influence_lags = resolve_influence_lags(self.autoregressive, influence_lags)
         super().__init__(region, dset_kind, metadata)
         self.hidden = int(hidden)
         if arrays is None:
@@ -110,9 +110,9 @@ class GRUPredictor(InfluencePredictor):
     arch = "gru"
 
     def __init__(self, region, dset_kind="dset", hidden=64, arrays=None, seed=0, metadata=None,
-                 autoregressive=False, influence_lags=1):
+                 autoregressive=False, influence_lags=None):
         self.autoregressive = bool(autoregressive)
-        self.influence_lags = check_influence_lags(influence_lags) if self.autoregressive else 0
+        self.influence_lags = resolve_influence_lags(self.autoregressive, influence_lags)
         super().__init__(region, dset_kind, metadata)
         self.hidden = int(hidden)
         if arrays is None:
@@ -286,7 +286,7 @@ def init_arrays(arch: str, d: int, hidden: int, n_logits: int, seed: int = 0) ->
 
 
 def untrained_predictor(region, arch="gru", dset_kind="dset", hidden=64, seed=0, autoregressive=False,
-                        influence_lags=1):
+                        influence_lags=None):
     """A randomly initialised network AIP: the paper's untrained-IALS (SPEC §3)."""
     if arch not in ARCHS:
         raise BadInput(f"unknown AIP architecture {arch!r}; expected one of {sorted(ARCHS)}")

@@ -32,7 +32,7 @@ from ials_zoo.core.extras import LR_SCHEDULES
 from ials_zoo.core.region import check_dset_kind
 from ials_zoo.core.streams import agent_key
 from ials_zoo.errors import BadInput
-from ials_zoo.influence.base import check_influence_lags, previous_influences
+from ials_zoo.influence.base import previous_influences, resolve_influence_lags
 from ials_zoo.influence.predictors import (
     ARCHS,
     MarginalPredictor,
@@ -132,11 +132,11 @@ def train_predictor(
     test_fraction: float = 0.1,
     autoregressive: bool = False,
     lr_schedule: str = "linear",
-    influence_lags: int = 1,
+    influence_lags: int | None = None,
 ):
     """Train an AIP of architecture ``arch`` (``"gru"`` or ``"mlp"``) on ``dataset``;
     ``autoregressive``: it also reads ``u_{t-1}`` (the recorded one: teacher forcing), or
-    ``u_{t-1} .. u_{t-L}`` with ``influence_lags=L``.
+    ``u_{t-1} .. u_{t-L}`` with ``influence_lags=L`` (None: 1; only for an autoregressive AIP).
     ``lr_schedule``: ``"linear"`` (to zero at the last update, the default) or ``"constant"``.
 
     Returns:
@@ -182,7 +182,7 @@ def hyperparameters(arch: str, epochs, lr, hidden, batch_size, min_epochs: int, 
     return hp
 
 
-def network_inputs(dataset, dset_kind: str, autoregressive: bool, influence_lags: int = 1) -> np.ndarray:
+def network_inputs(dataset, dset_kind: str, autoregressive: bool, influence_lags: int | None = None) -> np.ndarray:
     """A data set's network inputs ``[E, T, D]`` (float32): the d-sets, and for an
     autoregressive AIP the one-hot ``u_{t-1} .. u_{t-influence_lags}`` beside them (zeros
     before an episode's start)."""
@@ -190,7 +190,8 @@ def network_inputs(dataset, dset_kind: str, autoregressive: bool, influence_lags
     if not autoregressive:
         return d
     offsets = np.concatenate([[0], np.cumsum(dataset.region.influence_classes)])
-    return np.concatenate([d, previous_influences(dataset.influences, offsets, influence_lags)], axis=2)
+    lags = resolve_influence_lags(True, influence_lags)
+    return np.concatenate([d, previous_influences(dataset.influences, offsets, lags)], axis=2)
 
 
 def _train(dataset, arch, dset_kind, epochs, seed, progress, lr, hidden, batch_size, test_fraction, autoregressive,
@@ -200,7 +201,7 @@ def _train(dataset, arch, dset_kind, epochs, seed, progress, lr, hidden, batch_s
     if arch not in ARCHS:
         raise BadInput(f"unknown AIP architecture {arch!r}; expected one of {sorted(ARCHS)}")
     check_dset_kind(dset_kind)
-    influence_lags = check_influence_lags(influence_lags)
+    influence_lags = resolve_influence_lags(autoregressive, influence_lags)
     hp = hyperparameters(arch, epochs, lr, hidden, batch_size, min_epochs=0, lr_schedule=lr_schedule)
     if dataset.n_episodes < 2:
         raise BadInput(f"need at least 2 episodes to split train/test, got {dataset.n_episodes}")
@@ -291,11 +292,20 @@ def untrained_probs(region):
         return None
 
 
+def _reading(report: dict) -> str:
+    """What an autoregressive AIP of a report reads besides the d-set ("" for a memoryless one)."""
+    if not report.get("autoregressive"):
+        return ""
+    lags = int(report.get("influence_lags", 1))
+    return ", reading its last draw" if lags == 1 else f", reading its last {lags} draws"
+
+
 def format_report(report: dict) -> str:
     """A small text table of a :func:`train_predictor` report."""
     ce = report["cross_entropy"]
     lines = [
-        f"AIP {report['arch']} ({report['dset_kind']!r} d-set) for {report['env_id']}/{report['agent']}: "
+        f"AIP {report['arch']}{_reading(report)} ({report['dset_kind']!r} d-set) for "
+        f"{report['env_id']}/{report['agent']}: "
         f"{report['dataset']['steps']} steps ({report['dataset']['train_episodes']} train / "
         f"{report['dataset']['test_episodes']} test episodes)",
         f"{'predictor':<12}{'train CE':>10}{'test CE':>10}   (nats, mean over sources)",
@@ -326,12 +336,12 @@ def _stacked_modules():
 
 
 def _initial_arrays(agent: str, old, arch: str, D: int, H: int, n_logits: int, dset_kind: str, autoregressive: bool,
-                    seed: int, influence_lags: int = 1) -> dict:
+                    seed: int, influence_lags: int = 0) -> dict:
     """The starting weights of ``agent``'s network: ``old``'s (a warm start, which must have the
     same shape and kind), else ``init_arrays`` seeded from ``seed`` and the agent's name."""
     if old is None:
         return init_arrays(arch, D, H, n_logits, seed=(seed * 1_000_003 + agent_key(agent)) % 2**32)
-    lags = influence_lags if autoregressive else 0
+    lags = influence_lags
     if (old.name != arch or old.hidden != H or old.dset_kind != dset_kind or old.autoregressive != bool(autoregressive)
             or old.influence_lags != lags):
         raise BadInput(f"cannot warm-start a {arch} AIP (hidden {H}, autoregressive {bool(autoregressive)}, "
@@ -376,7 +386,7 @@ def train_predictors(datasets: dict, arch: str, hidden: int | None = None, lr: f
                      epochs: int | None = None, batch_size: int | None = None, seed: int = 0,
                      init: dict | None = None, dset_kind: str = "dset", test_fraction: float = 0.1,
                      progress: bool = False, autoregressive: bool = False,
-                     lr_schedule: str = "linear", influence_lags: int = 1) -> tuple[dict, dict]:
+                     lr_schedule: str = "linear", influence_lags: int | None = None) -> tuple[dict, dict]:
     """Train one AIP per agent on its own data, all in one stacked torch program.
 
     Every agent's network is a slice of stacked weights; the loss is the sum of the agents'
@@ -402,7 +412,7 @@ def train_predictors(datasets: dict, arch: str, hidden: int | None = None, lr: f
             raise BadInput(f"the data sets differ in shape ({a}: {datasets[a].influences.shape} vs "
                              f"{first.influences.shape}); collect them in one GS run")
     hp = hyperparameters(arch, epochs, lr, hidden, batch_size, min_epochs=1, lr_schedule=lr_schedule)
-    influence_lags = check_influence_lags(influence_lags)
+    influence_lags = resolve_influence_lags(autoregressive, influence_lags)
     region = first.region
     offsets = [int(x) for x in np.concatenate([[0], np.cumsum(region.influence_classes)])]
     n_logits, H = offsets[-1], int(hp["hidden"])
