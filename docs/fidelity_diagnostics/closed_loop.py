@@ -53,14 +53,27 @@ for ep in range(episodes):
     records.append(rec)
 gs.close()
 ls = dom.local_simulator(watch, n_envs=1)
-def closed_loop(ep, u):
-    """The policy acting on the LS's own observations, the LS fed the influence ``u`` [T, 3, 4]."""
-    obs, _ = ls.reset(seed=ep)
-    policy.reset(ep)
-    fs = FrameStack(getattr(policy, "frame_stack", 1))
+
+
+def joint(obs):
+    """The watched lights' observations in the joint policy's 25 rows (the others zero)."""
     full = np.zeros((25, obs.shape[1]), np.float32)
     full[idx] = obs
-    x = fs.reset(full)
+    return full
+
+
+def start(ep):
+    """Reset the LS and the policy for episode ``ep``: the frame stack, the policy's first input
+    and the LS's info."""
+    obs, info = ls.reset(seed=ep)
+    policy.reset(ep)
+    fs = FrameStack(getattr(policy, "frame_stack", 1))
+    return fs, fs.reset(joint(obs)), info
+
+
+def closed_loop(ep, u):
+    """The policy acting on the LS's own observations, the LS fed the influence ``u`` [T, 3, 4]."""
+    fs, x, _ = start(ep)
     ret = np.zeros(3)
     sw = np.zeros(3)
     for t in range(len(u)):
@@ -68,9 +81,7 @@ def closed_loop(ep, u):
         obs, r, _ = ls.step(np.asarray(acts, np.int64), u[t].astype(np.int64))
         ret += r
         sw += acts
-        full = np.zeros((25, obs.shape[1]), np.float32)
-        full[idx] = obs
-        x = fs.step(full)
+        x = fs.step(joint(obs))
     return ret, sw
 
 
@@ -157,12 +168,7 @@ def train(a, K, seed=0):
 
 
 def ials_episode(ep, nets, K, rng):
-    obs, info = ls.reset(seed=ep)
-    policy.reset(ep)
-    fs = FrameStack(getattr(policy, "frame_stack", 1))
-    full = np.zeros((25, obs.shape[1]), np.float32)
-    full[idx] = obs
-    x = fs.reset(full)
+    fs, x, info = start(ep)
     hist = np.zeros((3, 4 * K), np.float32)
     ret, arr = np.zeros(3), np.zeros(3)
     for t in range(300):
@@ -176,9 +182,7 @@ def ials_episode(ep, nets, K, rng):
         obs, r, info = ls.step(np.asarray(acts, np.int64), u)
         ret += r
         arr += u.sum(1)
-        full = np.zeros((25, obs.shape[1]), np.float32)
-        full[idx] = obs
-        x = fs.step(full)
+        x = fs.step(joint(obs))
     return ret, arr
 
 
