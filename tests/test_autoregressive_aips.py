@@ -65,15 +65,15 @@ def test_an_autoregressive_aip_samples_the_persistence_a_memoryless_one_loses(ar
     assert evaluate_cross_entropy(remembering, data) < 0.6 * evaluate_cross_entropy(memoryless, data)
 
 
-@pytest.mark.parametrize("arch,lags", [("mlp", 1), ("gru", 1), ("mlp", 3), ("gru", 3)])
-def test_stacked_autoregressive_aips_compute_what_each_one_computes(arch, lags):
+@pytest.mark.parametrize("arch,lags,clock", [("mlp", 1, 0), ("gru", 1, 0), ("mlp", 3, 0), ("gru", 3, 0),
+                                             ("mlp", 1, 4), ("gru", 3, 4)])
+def test_stacked_autoregressive_aips_compute_what_each_one_computes(arch, lags, clock):
     from ials_zoo.influence.networks import untrained_predictor
     from ials_zoo.influence.stacked import StackedPredictor
 
-    preds = [untrained_predictor(_region(a), arch, hidden=8, seed=i, autoregressive=True, influence_lags=lags)
-             for i, a in enumerate(AGENTS)]
-    singles = [untrained_predictor(_region(a), arch, hidden=8, seed=i, autoregressive=True, influence_lags=lags)
-               for i, a in enumerate(AGENTS)]
+    kw = dict(hidden=8, autoregressive=True, influence_lags=lags, clock_horizon=clock)
+    preds = [untrained_predictor(_region(a), arch, seed=i, **kw) for i, a in enumerate(AGENTS)]
+    singles = [untrained_predictor(_region(a), arch, seed=i, **kw) for i, a in enumerate(AGENTS)]
     n = 2
     stacked = StackedPredictor(preds, n_envs=n)
     rng = np.random.default_rng(0)
@@ -90,8 +90,8 @@ def test_stacked_autoregressive_aips_compute_what_each_one_computes(arch, lags):
             p.observe(u[rows])
         stacked.observe(u)
     # sample() remembers its own draws: the next step reads them as observe() would make it
-    twin = StackedPredictor([untrained_predictor(_region(a), arch, hidden=8, seed=i, autoregressive=True,
-                                                 influence_lags=lags) for i, a in enumerate(AGENTS)], n_envs=n)
+    twin = StackedPredictor([untrained_predictor(_region(a), arch, seed=i, **kw) for i, a in enumerate(AGENTS)],
+                            n_envs=n)
     d0 = np.zeros((len(AGENTS) * n, D), np.uint8)
     stacked.reset()
     twin.reset()
@@ -204,3 +204,54 @@ def test_aips_that_read_three_lags_make_the_pairs_one_lag_cannot():
         shares[lags] = _share_of_gaps_of_two(np.stack([pred.sample(d, rng) for _ in range(60)], axis=1))
     assert abs(shares[3] - truth) < 0.05, (shares, truth)
     assert shares[1] < truth - 0.2, (shares, truth)  # one lag: the second arrival is a fresh draw
+
+
+def _late_data(region, episodes=80, steps=60, start=20, rate=0.3, seed=0) -> InfluenceDataset:
+    """Binary sources that never fire before step ``start`` of an episode (the grid is still
+    empty) and fire with probability ``rate`` after; the d-sets carry no information."""
+    rng = np.random.default_rng(seed)
+    u = (rng.random((episodes, steps, region.n_sources)) < rate).astype(np.int64)
+    u[:, :start] = 0
+    dsets = {k: np.zeros((episodes, steps, region.dset_size(k)), np.uint8) for k in DSET_KINDS}
+    return InfluenceDataset(region, dsets, u)
+
+
+def test_an_aip_with_a_clock_waits_for_the_first_arrivals_one_without_cannot(tmp_path):
+    from ials_zoo.influence.files import load_predictor, save_predictor
+    from ials_zoo.influence.stacked import StackedPredictor
+    from ials_zoo.influence.train import train_predictor, train_predictors
+
+    region = get_domain("traffic_grid_v0").region_spec("tls_0")
+    data = _late_data(region)
+    early = {}
+    for clock in (0, 40):
+        pred, report = train_predictor(data, "mlp", hidden=16, epochs=30, lr=1e-2, progress=False,
+                                       clock_horizon=clock)
+        assert report.get("clock_horizon", 0) == clock and pred.clock_horizon == clock
+        if clock:
+            pred = load_predictor(save_predictor(pred, tmp_path / "clock.pt"))
+            assert pred.clock_horizon == clock and pred.input_size == region.dset_size("dset") + 1
+        rng = np.random.default_rng(1)
+        pred.reset(300)
+        d = np.zeros((300, region.dset_size("dset")), np.uint8)
+        u = np.stack([pred.sample(d, rng) for _ in range(60)], axis=1)
+        early[clock] = (u[:, :10].mean(), u[:, 40:].mean())
+    # waits, then the rate (a small network learns a ramp around step 20, not a step: the test
+    # looks at steps 0-9 and 40-59)
+    assert early[40][0] < 0.04 and abs(early[40][1] - 0.3) < 0.05, early
+    assert early[0][0] > 0.1, early  # without a clock every step looks alike
+    # the stacked (multi-agent) path reads the same clock
+    sets, _ = train_predictors({"tls_0": data}, "mlp", hidden=16, epochs=30, lr=1e-2, clock_horizon=40)
+    stacked = StackedPredictor(list(sets.values()), n_envs=300)
+    stacked.seed(2)
+    u = np.stack([stacked.sample(np.zeros((300, region.dset_size("dset")), np.uint8)) for _ in range(60)], axis=1)
+    assert u[:, :10].mean() < 0.04 and abs(u[:, 40:].mean() - 0.3) < 0.05, (u[:, :10].mean(), u[:, 40:].mean())
+
+
+@pytest.mark.parametrize("bad", [-1, 1.5, True, "40"])
+def test_clock_horizon_must_be_a_whole_number_of_steps(bad):
+    from ials_zoo.errors import BadInput
+    from ials_zoo.influence.networks import untrained_predictor
+
+    with pytest.raises(BadInput, match="clock_horizon"):
+        untrained_predictor(_region(), "mlp", hidden=8, clock_horizon=bad)

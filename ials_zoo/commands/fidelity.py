@@ -43,6 +43,9 @@ def configure(parser):
     parser.add_argument("--aip-influence-lags", type=int, default=None,
                         help="with --predictor on-policy-autoregressive: how many past steps of their own draws "
                              "the AIPs read (default: the domain's fidelity_aip_influence_lags, e.g. 3 for traffic)")
+    parser.add_argument("--aip-clock-horizon", type=int, default=None,
+                        help="with --predictor on-policy*: H > 0 makes the AIPs also read the time since the episode's "
+                             "start, min(t, H) / H (0: no clock; default: the domain's fidelity_aip_clock_horizon)")
     parser.add_argument("--aip-seeds", type=int, default=1,
                         help="with --predictor on-policy*: train the AIPs this many times (other GS data and "
                              "training seeds) and count per row under how many trainings it holds")
@@ -78,12 +81,16 @@ def run(args) -> int:
                        f"(AIPs trained per run), got {args.predictor!r}")
     if args.aip_influence_lags is not None and args.predictor != "on-policy-autoregressive":
         raise BadInput(f"--aip-influence-lags needs --predictor on-policy-autoregressive, got {args.predictor!r}")
+    if args.aip_clock_horizon is not None and (args.aip_clock_horizon < 0 or args.predictor not in ON_POLICY):
+        raise BadInput(f"--aip-clock-horizon must be >= 0 and needs --predictor on-policy or "
+                       f"on-policy-autoregressive, got {args.aip_clock_horizon} with {args.predictor!r}")
     if args.out:
         check_output_file(args.out)
     report = fidelity_report(args.env, policies, episodes=args.episodes, seed=args.seed, watched=watched,
                              predictor=args.predictor, tolerance=args.tolerance, collect_steps=args.collect_steps,
                              aip_lr=args.aip_lr, aip_epochs=args.aip_epochs, aip_seeds=args.aip_seeds,
-                             aip_lr_schedule=args.aip_lr_schedule, aip_influence_lags=args.aip_influence_lags)
+                             aip_lr_schedule=args.aip_lr_schedule, aip_influence_lags=args.aip_influence_lags,
+                             aip_clock_horizon=args.aip_clock_horizon)
     text = markdown(report)
     print(text)
     if args.out:

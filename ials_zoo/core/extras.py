@@ -91,6 +91,8 @@ class DIALSSettings:
             them coming makes arrivals too smooth, which flatters the light (``docs/fidelity.md``).
         fidelity_collect_steps: GS steps of each joint policy's AIP data in ``ials-zoo fidelity``
             (None: ``collect_steps``).
+        fidelity_aip_clock_horizon: H > 0: the on-policy AIPs also read the time since the
+            episode's start, ``min(t, H) / H`` (0: they do not; not yet a default anywhere).
     """
 
     aip_arch: str = "mlp"
@@ -112,8 +114,12 @@ class DIALSSettings:
     fidelity_aip_lr_schedule: str | None = "linear"
     fidelity_aip_influence_lags: int = 1
     fidelity_collect_steps: int | None = None
+    fidelity_aip_clock_horizon: int = 0
 
     def __post_init__(self):
+        clock = self.fidelity_aip_clock_horizon
+        if isinstance(clock, bool) or not isinstance(clock, int) or clock < 0:
+            raise BadInput(f"DIALSSettings.fidelity_aip_clock_horizon must be an int >= 0, got {clock!r}")
         lags = self.fidelity_aip_influence_lags
         if isinstance(lags, bool) or not isinstance(lags, int) or lags < 1:
             raise BadInput(f"DIALSSettings.fidelity_aip_influence_lags must be an int >= 1, got {lags!r}")

@@ -154,6 +154,7 @@ class AgentShard:
                     new.h = old.h.copy()
                 if new.autoregressive and old.autoregressive and new._previous.shape == old._previous.shape:
                     new._previous = old._previous.copy()
+                new._t = old._t
                 venv.predictor = new
 
     def where(self) -> tuple[int, str]:

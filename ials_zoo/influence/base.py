@@ -61,6 +61,7 @@ class InfluencePredictor:
     name = "base"
     autoregressive = False
     influence_lags = 0  # past steps of its own influence an autoregressive predictor reads
+    clock_horizon = 0  # > 0: the predictor also reads min(t, clock_horizon) / clock_horizon
 
     def __init__(self, region: RegionSpec, dset_kind: str = "dset", metadata: dict | None = None):
         if not isinstance(region, RegionSpec):
@@ -88,7 +89,9 @@ class InfluencePredictor:
         self._same_k = bool((classes == classes[0]).all())
         self._sample_bufs = None
         self.n = 0
-        self.input_size = self.dset_size + self.influence_lags * int(self._offsets[-1])
+        self.input_size = (self.dset_size + self.influence_lags * int(self._offsets[-1])
+                           + (1 if self.clock_horizon else 0))
+        self._t = 0  # steps since reset(): every history of a predictor starts together
         self._previous = np.zeros((0, self.influence_lags * int(self._offsets[-1])), np.float32)
 
     # Scratch state of the n=1 fast paths: buffers holding views of each other, which a copy
@@ -109,6 +112,7 @@ class InfluencePredictor:
         if n < 1:
             raise BadInput(f"n must be >= 1, got {n}")
         self.n = n
+        self._t = 0
         if self.autoregressive:
             self._previous = np.zeros((n, self.influence_lags * int(self._offsets[-1])), np.float32)
 
@@ -158,11 +162,18 @@ class InfluencePredictor:
         return d
 
     def _input(self, d: np.ndarray) -> np.ndarray:
-        """The network's input: ``d_t``, and for an autoregressive predictor the one-hot
-        ``u_{t-1} .. u_{t-L}`` beside it (float32)."""
-        if not self.autoregressive:
+        """The network's input: ``d_t``, for an autoregressive predictor the one-hot
+        ``u_{t-1} .. u_{t-L}`` beside it, and for one with a clock ``min(t, H) / H`` (float32);
+        a call is a step (the clock advances)."""
+        if not (self.autoregressive or self.clock_horizon):
             return d
-        return np.concatenate([d.astype(np.float32, copy=False), self._previous], axis=1)
+        parts = [d.astype(np.float32, copy=False)]
+        if self.autoregressive:
+            parts.append(self._previous)
+        if self.clock_horizon:
+            parts.append(np.full((d.shape[0], 1), clock_value(self._t, self.clock_horizon), np.float32))
+            self._t += 1
+        return np.concatenate(parts, axis=1)
 
     def _sample_logits(self, logits: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Draw ``u`` from the per-source softmax of ``logits`` ``[n, sum K]``.
@@ -267,6 +278,18 @@ def check_influence_lags(lags) -> int:
     if isinstance(lags, bool) or not isinstance(lags, (int, np.integer)) or lags < 1:
         raise BadInput(f"influence_lags must be an int >= 1, got {lags!r}")
     return int(lags)
+
+
+def check_clock_horizon(horizon) -> int:
+    """``horizon`` as an int >= 0 (0: no clock), else :class:`BadInput` naming it."""
+    if isinstance(horizon, bool) or not isinstance(horizon, (int, np.integer)) or horizon < 0:
+        raise BadInput(f"clock_horizon must be an int >= 0 (0: no clock), got {horizon!r}")
+    return int(horizon)
+
+
+def clock_value(t, horizon: int):
+    """The clock input at step ``t`` (int or int array) of an episode: ``min(t, horizon) / horizon``."""
+    return np.minimum(t, horizon) / horizon
 
 
 def resolve_influence_lags(autoregressive: bool, lags) -> int:

@@ -65,7 +65,7 @@ from ials_zoo.core.domains import get_domain
 from ials_zoo.core.extras import dials_of
 from ials_zoo.errors import BadInput
 from ials_zoo.evaluation import FrameStack, load_model
-from ials_zoo.influence.base import check_influence_lags
+from ials_zoo.influence.base import check_clock_horizon, check_influence_lags
 from ials_zoo.influence.dataset import collect_all
 from ials_zoo.influence.train import LR_SCHEDULES, train_predictors
 
@@ -236,12 +236,13 @@ def on_policy_training(env_id: str, autoregressive: bool, lr: float | None = Non
 
 def on_policy_aips(env_id: str, agents, policy, steps: int, seed: int, autoregressive: bool, options: dict,
                    lr: float | None = None, epochs: int | None = None, lr_schedule: str | None = None,
-                   influence_lags: int | None = None) -> dict:
+                   influence_lags: int | None = None, clock_horizon: int | None = None) -> dict:
     """``{agent: AIP}`` trained on ``steps`` GS steps of the joint ``policy`` (every agent
     acting), with the domain's DIALS AIP architecture, at its ``fidelity_aip_lr``,
     ``fidelity_aip_epochs``, ``fidelity_aip_lr_schedule`` and (autoregressive)
     ``fidelity_aip_influence_lags`` (:class:`~ials_zoo.core.extras.DIALSSettings`; ``lr``,
-    ``epochs``, ``lr_schedule``, ``influence_lags``: others)."""
+    ``epochs``, ``lr_schedule``, ``influence_lags``: others), reading a clock of horizon
+    ``clock_horizon`` (None: the domain's ``fidelity_aip_clock_horizon``)."""
     d = dials_of(env_id)
     if policy == "random":
         actor = None
@@ -254,7 +255,8 @@ def on_policy_aips(env_id: str, agents, policy, steps: int, seed: int, autoregre
     data = collect_all(env_id, agents, steps=steps, policy=actor, seed=seed, gs_options=options, progress=False)
     preds, _ = train_predictors(data, d.aip_arch, hidden=d.aip_hidden, lr=lr, epochs=epochs,
                                 batch_size=d.aip_batch, seed=seed, autoregressive=autoregressive,
-                                lr_schedule=lr_schedule, influence_lags=lags)
+                                lr_schedule=lr_schedule, influence_lags=lags,
+                                clock_horizon=d.fidelity_aip_clock_horizon if clock_horizon is None else clock_horizon)
     return preds
 
 
@@ -268,12 +270,14 @@ def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: i
                     predictor="trained", tolerance: float = 0.1, progress: bool = True,
                     collect_steps: int | None = None, aip_lr: float | None = None, aip_epochs: int | None = None,
                     aip_seeds: int = 1, aip_lr_schedule: str | None = None,
-                    aip_influence_lags: int | None = None, **options) -> dict:
+                    aip_influence_lags: int | None = None, aip_clock_horizon: int | None = None,
+                    **options) -> dict:
     """Run every joint policy on the GS and on the multi-agent IALS; returns
     ``{policy name: {agent: {metric: compare(...)}}}``. ``predictor``: an AIP set for every
     policy, or ``on-policy[-autoregressive]`` (module docstring) with ``collect_steps`` GS
     steps per policy (default: the domain's ``fidelity_collect_steps``, else its DIALS
-    collection) and ``aip_influence_lags`` (autoregressive only; default: the domain's). ``aip_seeds`` > 1 (on-policy AIPs
+    collection), ``aip_influence_lags`` (autoregressive only) and ``aip_clock_horizon``
+    (default: the domain's). ``aip_seeds`` > 1 (on-policy AIPs
     only): train them that many times, from other GS data and training seeds, run the IALS with
     each set, and count per row in how many the row holds (``holds_in`` of ``aip_seeds``; the
     means and interval shown are the first set's): which rows fail moves from one training run
@@ -295,8 +299,11 @@ def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: i
                     "predictor": str(predictor), "aip_lr": aip_lr, "aip_epochs": aip_epochs,
                     "aip_lr_schedule": aip_lr_schedule, "aip_influence_lags": aip_influence_lags,
                     "aip_seeds": aip_seeds, "policies": {}}
-    if aip_influence_lags is not None and predictor not in ON_POLICY:
-        raise BadInput(f"aip_influence_lags needs on-policy AIPs (trained per run); {predictor!r} is one fixed set")
+    if aip_clock_horizon is not None:
+        check_clock_horizon(aip_clock_horizon)
+    if (aip_influence_lags is not None or aip_clock_horizon is not None) and predictor not in ON_POLICY:
+        raise BadInput(f"aip_influence_lags and aip_clock_horizon need on-policy AIPs (trained per run); "
+                       f"{predictor!r} is one fixed set")
     if predictor in ON_POLICY:
         (report["aip_lr"], report["aip_epochs"], report["aip_lr_schedule"],
          report["aip_influence_lags"]) = on_policy_training(env_id, predictor == "on-policy-autoregressive", aip_lr,
@@ -304,6 +311,8 @@ def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: i
     d = dials_of(domain)
     steps = int(collect_steps or d.fidelity_collect_steps or d.collect_steps)
     report["collect_steps"] = steps if predictor in ON_POLICY else None
+    report["aip_clock_horizon"] = (d.fidelity_aip_clock_horizon if aip_clock_horizon is None else aip_clock_horizon) \
+        if predictor in ON_POLICY else None
     for spec in policies:
         name = str(spec)
         policy = spec if spec in ("random", "constant", "scripted") else load_model(spec)
@@ -330,7 +339,7 @@ def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: i
                           f"{f' (training {k + 1} of {aip_seeds})' if aip_seeds > 1 else ''} ...", flush=True)
                 aips = on_policy_aips(env_id, agents, policy, steps, seed + DATA_SEED_OFFSET + k,
                                       predictor == "on-policy-autoregressive", options, aip_lr, aip_epochs,
-                                      aip_lr_schedule, aip_influence_lags)
+                                      aip_lr_schedule, aip_influence_lags, aip_clock_horizon)
             ials_env = make_ials_parallel_env(env_id, agents, predictor=aips, seed=seed, **options)
             try:
                 ials = run(ials_env, agents, watched, policy, episodes, seed, domain.n_actions)
@@ -358,6 +367,8 @@ def markdown(report: dict) -> str:
         lags = report.get("aip_influence_lags") or 0
         if lags:
             training += f", reading their last {lags} draw{'s' if lags > 1 else ''}"
+        if report.get("aip_clock_horizon"):
+            training += f", reading a clock (min(t, {report['aip_clock_horizon']}) / {report['aip_clock_horizon']})"
         if report.get("collect_steps"):
             training += f", trained on {report['collect_steps']:,} GS steps of each policy"
     n_trainings = int(report.get("aip_seeds", 1))

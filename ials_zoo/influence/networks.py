@@ -22,6 +22,7 @@ from ials_zoo.influence.base import (
     InfluencePredictor,
     _check_shapes,
     _sigmoid,
+    check_clock_horizon,
     resolve_influence_lags,
 )
 
@@ -34,6 +35,8 @@ def _config(p) -> dict:
         out["autoregressive"] = True
         if p.influence_lags != 1:
             out["influence_lags"] = p.influence_lags
+    if p.clock_horizon:
+        out["clock_horizon"] = p.clock_horizon
     return out
 
 
@@ -48,9 +51,10 @@ class MLPPredictor(InfluencePredictor):
     arch = "mlp"
 
     def __init__(self, region, dset_kind="dset", hidden=64, arrays=None, seed=0, metadata=None,
-                 autoregressive=False, influence_lags=None):
+                 autoregressive=False, influence_lags=None, clock_horizon=0):
         self.autoregressive = bool(autoregressive)
         self.influence_lags = resolve_influence_lags(self.autoregressive, influence_lags)
+        self.clock_horizon = check_clock_horizon(clock_horizon)
         super().__init__(region, dset_kind, metadata)
         self.hidden = int(hidden)
         if arrays is None:
@@ -110,9 +114,10 @@ class GRUPredictor(InfluencePredictor):
     arch = "gru"
 
     def __init__(self, region, dset_kind="dset", hidden=64, arrays=None, seed=0, metadata=None,
-                 autoregressive=False, influence_lags=None):
+                 autoregressive=False, influence_lags=None, clock_horizon=0):
         self.autoregressive = bool(autoregressive)
         self.influence_lags = resolve_influence_lags(self.autoregressive, influence_lags)
+        self.clock_horizon = check_clock_horizon(clock_horizon)
         super().__init__(region, dset_kind, metadata)
         self.hidden = int(hidden)
         if arrays is None:
@@ -148,7 +153,7 @@ class GRUPredictor(InfluencePredictor):
     def sample(self, dsets, rng):
         if self.n == 1:
             d = self._check_dsets(dsets)
-            logits = self._logits1(self._input(d) if self.autoregressive else d)
+            logits = self._logits1(self._input(d) if (self.autoregressive or self.clock_horizon) else d)
             u = self._sample_logits1(logits, rng) if self._same_k else self._sample_logits(logits, rng)
         else:
             u = self._sample_logits(self._logits(dsets), rng)
@@ -286,11 +291,11 @@ def init_arrays(arch: str, d: int, hidden: int, n_logits: int, seed: int = 0) ->
 
 
 def untrained_predictor(region, arch="gru", dset_kind="dset", hidden=64, seed=0, autoregressive=False,
-                        influence_lags=None):
+                        influence_lags=None, clock_horizon=0):
     """A randomly initialised network AIP: the paper's untrained-IALS (SPEC §3)."""
     if arch not in ARCHS:
         raise BadInput(f"unknown AIP architecture {arch!r}; expected one of {sorted(ARCHS)}")
     pred = ARCHS[arch](region, dset_kind=dset_kind, hidden=hidden, seed=seed, autoregressive=autoregressive,
-                       influence_lags=influence_lags)
+                       influence_lags=influence_lags, clock_horizon=clock_horizon)
     pred.metadata.update({"variant": "untrained", "seed": int(seed)})
     return pred

@@ -23,7 +23,7 @@ import numpy as np
 
 from ials_zoo.core.streams import CopyStreams
 from ials_zoo.errors import BadInput, BadInputType
-from ials_zoo.influence.base import InfluencePredictor, _sigmoid, one_hot_influences, shift_in
+from ials_zoo.influence.base import InfluencePredictor, _sigmoid, clock_value, one_hot_influences, shift_in
 from ials_zoo.influence.constant import _ConstantPredictor
 from ials_zoo.influence.networks import GRUPredictor, MLPPredictor
 
@@ -32,9 +32,9 @@ STREAM_SALT = 1  # separates the AIP's streams from the local simulator's (same 
 
 def _group_key(p: InfluencePredictor) -> tuple:
     if isinstance(p, MLPPredictor):
-        return ("mlp", p.hidden, p.autoregressive, p.influence_lags)
+        return ("mlp", p.hidden, p.autoregressive, p.influence_lags, p.clock_horizon)
     if isinstance(p, GRUPredictor):
-        return ("gru", p.hidden, p.autoregressive, p.influence_lags)
+        return ("gru", p.hidden, p.autoregressive, p.influence_lags, p.clock_horizon)
     if isinstance(p, _ConstantPredictor):
         return ("table",)
     raise BadInputType(f"cannot stack a {type(p).__name__}")
@@ -46,6 +46,7 @@ class _Group:
         ps = [predictors[i] for i in members]
         self.autoregressive = bool(ps[0].autoregressive)
         self.lags = ps[0].influence_lags
+        self.clock = ps[0].clock_horizon if kind != "table" else 0
         self.offsets = ps[0]._offsets
         self.previous = None  # [G, n, L * sum K]: the one-hot u_{t-1} .. u_{t-L} of an autoregressive group
         if kind == "mlp":
@@ -79,9 +80,12 @@ class _Group:
         if self.autoregressive:
             self.previous = shift_in(self.previous, one_hot_influences(u, self.offsets))
 
-    def logits(self, d):  # d: [G, n, D] float32
+    def logits(self, d, t: int):  # d: [G, n, D] float32; t: steps since the histories started
         if self.autoregressive:
             d = np.concatenate([d, self.previous], axis=-1)
+        if self.clock:
+            tick = np.full(d.shape[:-1] + (1,), clock_value(t, self.clock), np.float32)
+            d = np.concatenate([d, tick], axis=-1)
         if self.kind == "mlp":
             w1, b1, w_out, b_out = self.w
             h = np.matmul(d, w1)
@@ -159,7 +163,8 @@ class StackedPredictor:
         self.streams.seed(seed)
 
     def reset(self) -> None:
-        """Start new histories (zero recurrent states) in every row."""
+        """Start new histories (zero recurrent states and the clock) in every row."""
+        self.t = 0  # steps since the histories started (they all start together)
         for g in self.groups:
             g.reset(self.n_envs)
 
@@ -196,9 +201,10 @@ class StackedPredictor:
             if g.kind == "table":
                 view[g.members] = g.table[:, None]
                 continue
-            logits = g.logits(dg[g.members].astype(np.float32))
+            logits = g.logits(dg[g.members].astype(np.float32), self.t)
             probs = self._layout._logits_to_padded(logits.reshape(-1, logits.shape[-1]))
             view[g.members] = probs.reshape(len(g.members), self.n_envs, self.n_sources, self.max_classes)
+        self.t += 1
         return out
 
     def observe(self, influences: np.ndarray) -> None:
@@ -228,7 +234,7 @@ class StackedPredictor:
             if g.kind == "table":
                 out[g.members] = (g.cum[:, None] < r[g.members]).sum(axis=-1)
                 continue
-            logits = g.logits(dg[g.members].astype(np.float32))  # [G, n, sum K]
+            logits = g.logits(dg[g.members].astype(np.float32), self.t)  # [G, n, sum K]
             if layout._same_k:
                 z = logits.reshape(len(g.members), n, M, layout.max_classes)
                 z -= z.max(axis=-1, keepdims=True)
@@ -241,6 +247,7 @@ class StackedPredictor:
             rr = r[g.members] * z[..., -1:]
             out[g.members] = (z < rr).sum(axis=-1)
             g.remember(out[g.members])
+        self.t += 1
         return out.reshape(self.rows, M)
 
 

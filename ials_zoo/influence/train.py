@@ -32,7 +32,7 @@ from ials_zoo.core.extras import LR_SCHEDULES
 from ials_zoo.core.region import check_dset_kind
 from ials_zoo.core.streams import agent_key
 from ials_zoo.errors import BadInput
-from ials_zoo.influence.base import previous_influences, resolve_influence_lags
+from ials_zoo.influence.base import check_clock_horizon, clock_value, previous_influences, resolve_influence_lags
 from ials_zoo.influence.predictors import (
     ARCHS,
     MarginalPredictor,
@@ -133,10 +133,12 @@ def train_predictor(
     autoregressive: bool = False,
     lr_schedule: str = "linear",
     influence_lags: int | None = None,
+    clock_horizon: int = 0,
 ):
     """Train an AIP of architecture ``arch`` (``"gru"`` or ``"mlp"``) on ``dataset``;
     ``autoregressive``: it also reads ``u_{t-1}`` (the recorded one: teacher forcing), or
     ``u_{t-1} .. u_{t-L}`` with ``influence_lags=L`` (None: 1; only for an autoregressive AIP).
+    ``clock_horizon`` H > 0: it also reads the time since the episode's start, ``min(t, H) / H``.
     ``lr_schedule``: ``"linear"`` (to zero at the last update, the default) or ``"constant"``.
 
     Returns:
@@ -161,7 +163,7 @@ def train_predictor(
     torch.set_num_threads(1)
     try:
         return _train(dataset, arch, dset_kind, epochs, seed, progress, lr, hidden, batch_size, test_fraction,
-                      autoregressive, lr_schedule, influence_lags)
+                      autoregressive, lr_schedule, influence_lags, clock_horizon)
     finally:
         torch.set_num_threads(threads)
 
@@ -182,33 +184,40 @@ def hyperparameters(arch: str, epochs, lr, hidden, batch_size, min_epochs: int, 
     return hp
 
 
-def network_inputs(dataset, dset_kind: str, autoregressive: bool, influence_lags: int | None = None) -> np.ndarray:
-    """A data set's network inputs ``[E, T, D]`` (float32): the d-sets, and for an
-    autoregressive AIP the one-hot ``u_{t-1} .. u_{t-influence_lags}`` beside them (zeros
-    before an episode's start)."""
+def network_inputs(dataset, dset_kind: str, autoregressive: bool, influence_lags: int | None = None,
+                   clock_horizon: int = 0) -> np.ndarray:
+    """A data set's network inputs ``[E, T, D]`` (float32): the d-sets; for an autoregressive
+    AIP the one-hot ``u_{t-1} .. u_{t-influence_lags}`` beside them (zeros before an episode's
+    start); with ``clock_horizon`` H > 0 the clock ``min(t, H) / H`` last."""
     d = dataset.dsets[dset_kind].astype(np.float32)
-    if not autoregressive:
-        return d
-    offsets = np.concatenate([[0], np.cumsum(dataset.region.influence_classes)])
-    lags = resolve_influence_lags(True, influence_lags)
-    return np.concatenate([d, previous_influences(dataset.influences, offsets, lags)], axis=2)
+    parts = [d]
+    if autoregressive:
+        offsets = np.concatenate([[0], np.cumsum(dataset.region.influence_classes)])
+        lags = resolve_influence_lags(True, influence_lags)
+        parts.append(previous_influences(dataset.influences, offsets, lags))
+    if check_clock_horizon(clock_horizon):
+        E, T = d.shape[:2]
+        clock = clock_value(np.arange(T), clock_horizon).astype(np.float32)
+        parts.append(np.broadcast_to(clock[None, :, None], (E, T, 1)))
+    return parts[0] if len(parts) == 1 else np.concatenate(parts, axis=2)
 
 
 def _train(dataset, arch, dset_kind, epochs, seed, progress, lr, hidden, batch_size, test_fraction, autoregressive,
-           lr_schedule, influence_lags):
+           lr_schedule, influence_lags, clock_horizon):
     import torch
 
     if arch not in ARCHS:
         raise BadInput(f"unknown AIP architecture {arch!r}; expected one of {sorted(ARCHS)}")
     check_dset_kind(dset_kind)
     influence_lags = resolve_influence_lags(autoregressive, influence_lags)
+    clock_horizon = check_clock_horizon(clock_horizon)
     hp = hyperparameters(arch, epochs, lr, hidden, batch_size, min_epochs=0, lr_schedule=lr_schedule)
     if dataset.n_episodes < 2:
         raise BadInput(f"need at least 2 episodes to split train/test, got {dataset.n_episodes}")
 
     region = dataset.region
     train_idx, test_idx = dataset.split(test_fraction, seed=seed)
-    d_all = network_inputs(dataset, dset_kind, autoregressive, influence_lags)
+    d_all = network_inputs(dataset, dset_kind, autoregressive, influence_lags, clock_horizon)
     u_all = dataset.influences
     D = d_all.shape[2]
     offsets = [int(x) for x in np.concatenate([[0], np.cumsum(region.influence_classes)])]
@@ -240,9 +249,9 @@ def _train(dataset, arch, dset_kind, epochs, seed, progress, lr, hidden, batch_s
     train_seconds = time.perf_counter() - t0
 
     trained = ARCHS[arch](region, dset_kind=dset_kind, hidden=int(hp["hidden"]), arrays=net.to_numpy(),
-                          autoregressive=autoregressive, influence_lags=influence_lags)
+                          autoregressive=autoregressive, influence_lags=influence_lags, clock_horizon=clock_horizon)
     untrained = ARCHS[arch](region, dset_kind=dset_kind, hidden=int(hp["hidden"]), arrays=init,
-                            autoregressive=autoregressive, influence_lags=influence_lags)
+                            autoregressive=autoregressive, influence_lags=influence_lags, clock_horizon=clock_horizon)
     uniform = UniformPredictor(region, dset_kind=dset_kind, probs=untrained_probs(region))
     marginal = MarginalPredictor.fit(dataset, dset_kind=dset_kind, episodes=train_idx)
     ce = _cross_entropies({"trained": trained, "untrained": untrained, "uniform": uniform, "marginal": marginal},
@@ -254,6 +263,7 @@ def _train(dataset, arch, dset_kind, epochs, seed, progress, lr, hidden, batch_s
         "arch": arch,
         "autoregressive": bool(autoregressive),
         **({"influence_lags": influence_lags} if autoregressive else {}),
+        **({"clock_horizon": clock_horizon} if clock_horizon else {}),
         "dset_kind": dset_kind,
         "hyperparameters": {**hp, "optimizer": "Adam", "seed": int(seed), "test_fraction": test_fraction},
         "dataset": {
@@ -336,14 +346,14 @@ def _stacked_modules():
 
 
 def _initial_arrays(agent: str, old, arch: str, D: int, H: int, n_logits: int, dset_kind: str, autoregressive: bool,
-                    seed: int, influence_lags: int = 0) -> dict:
+                    seed: int, influence_lags: int = 0, clock_horizon: int = 0) -> dict:
     """The starting weights of ``agent``'s network: ``old``'s (a warm start, which must have the
     same shape and kind), else ``init_arrays`` seeded from ``seed`` and the agent's name."""
     if old is None:
         return init_arrays(arch, D, H, n_logits, seed=(seed * 1_000_003 + agent_key(agent)) % 2**32)
     lags = influence_lags
     if (old.name != arch or old.hidden != H or old.dset_kind != dset_kind or old.autoregressive != bool(autoregressive)
-            or old.influence_lags != lags):
+            or old.influence_lags != lags or old.clock_horizon != clock_horizon):
         raise BadInput(f"cannot warm-start a {arch} AIP (hidden {H}, autoregressive {bool(autoregressive)}, "
                        f"influence lags {lags}) from {old!r} (influence lags {old.influence_lags})")
     return {k: np.asarray(v, np.float32) for k, v in old._arrays().items()}
@@ -386,7 +396,8 @@ def train_predictors(datasets: dict, arch: str, hidden: int | None = None, lr: f
                      epochs: int | None = None, batch_size: int | None = None, seed: int = 0,
                      init: dict | None = None, dset_kind: str = "dset", test_fraction: float = 0.1,
                      progress: bool = False, autoregressive: bool = False,
-                     lr_schedule: str = "linear", influence_lags: int | None = None) -> tuple[dict, dict]:
+                     lr_schedule: str = "linear", influence_lags: int | None = None,
+                     clock_horizon: int = 0) -> tuple[dict, dict]:
     """Train one AIP per agent on its own data, all in one stacked torch program.
 
     Every agent's network is a slice of stacked weights; the loss is the sum of the agents'
@@ -395,7 +406,8 @@ def train_predictors(datasets: dict, arch: str, hidden: int | None = None, lr: f
     run: same episodes, same length). ``init`` (``{agent: predictor}``) warm-starts from those
     networks (DIALS retrains its AIPs), else each starts from ``init_arrays`` seeded from
     ``seed`` and the agent's name. ``autoregressive``: every AIP also reads ``u_{t-1}`` (teacher
-    forcing), or ``u_{t-1} .. u_{t-L}`` with ``influence_lags=L``. ``lr_schedule`` as for :func:`train_predictor`. Returns
+    forcing), or ``u_{t-1} .. u_{t-L}`` with ``influence_lags=L``; ``clock_horizon`` as for
+    :func:`train_predictor`. ``lr_schedule`` as for :func:`train_predictor`. Returns
     ``({agent: predictor}, report)`` with each agent's train/test
     cross-entropy and the training seconds.
     """
@@ -413,14 +425,16 @@ def train_predictors(datasets: dict, arch: str, hidden: int | None = None, lr: f
                              f"{first.influences.shape}); collect them in one GS run")
     hp = hyperparameters(arch, epochs, lr, hidden, batch_size, min_epochs=1, lr_schedule=lr_schedule)
     influence_lags = resolve_influence_lags(autoregressive, influence_lags)
+    clock_horizon = check_clock_horizon(clock_horizon)
     region = first.region
     offsets = [int(x) for x in np.concatenate([[0], np.cumsum(region.influence_classes)])]
     n_logits, H = offsets[-1], int(hp["hidden"])
-    inputs = {a: network_inputs(datasets[a], dset_kind, autoregressive, influence_lags) for a in agents}
+    inputs = {a: network_inputs(datasets[a], dset_kind, autoregressive, influence_lags, clock_horizon)
+              for a in agents}
     D = inputs[agents[0]].shape[2]
     train_idx, test_idx = first.split(test_fraction, seed=seed)
     arrays = [_initial_arrays(a, (init or {}).get(a), arch, D, H, n_logits, dset_kind, autoregressive, seed,
-                              influence_lags) for a in agents]
+                              influence_lags, clock_horizon) for a in agents]
     keep_freed_memory()
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
@@ -450,10 +464,12 @@ def train_predictors(datasets: dict, arch: str, hidden: int | None = None, lr: f
     out, ce = {}, {}
     for g, a in enumerate(agents):
         pred = ARCHS[arch](datasets[a].region, dset_kind=dset_kind, hidden=H, arrays=net.arrays(g),
-                           autoregressive=autoregressive, influence_lags=influence_lags)
+                           autoregressive=autoregressive, influence_lags=influence_lags,
+                           clock_horizon=clock_horizon)
         test = cross_entropy_per_source(pred, datasets[a], test_idx if len(test_idx) else train_idx)
         pred.metadata.update({"variant": "trained", "arch": arch, "autoregressive": bool(autoregressive),
                               **({"influence_lags": influence_lags} if autoregressive else {}),
+                              **({"clock_horizon": clock_horizon} if clock_horizon else {}),
                               "hyperparameters": {**hp, "seed": int(seed)},
                               "dataset": {"steps": datasets[a].n_steps,
                                           "collect_seconds": datasets[a].metadata.get("collect_seconds"),
