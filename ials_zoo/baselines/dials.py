@@ -221,7 +221,7 @@ def refresh_aips(env_id, agents, options, net, seed, steps, domain, epochs, old,
     collect_seconds = time.perf_counter() - t0
     lags = 1 if autoregressive else 0  # DIALS's autoregressive AIPs read their last draw only
     warm = {a: p for a, p in old.items() if isinstance(p, ARCHS[d.aip_arch]) and p.hidden == d.aip_hidden
-            and p.autoregressive == autoregressive and p.influence_lags == lags
+            and p.autoregressive == autoregressive and p.influence_lags == lags and p.clock_horizon == 0
             and p.metadata.get("variant") == "trained"}
     t0 = time.perf_counter()
     preds, report = train_predictors(data, d.aip_arch, hidden=d.aip_hidden, lr=lr or d.lr_for(autoregressive),

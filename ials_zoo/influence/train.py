@@ -355,7 +355,8 @@ def _initial_arrays(agent: str, old, arch: str, D: int, H: int, n_logits: int, d
     if (old.name != arch or old.hidden != H or old.dset_kind != dset_kind or old.autoregressive != bool(autoregressive)
             or old.influence_lags != lags or old.clock_horizon != clock_horizon):
         raise BadInput(f"cannot warm-start a {arch} AIP (hidden {H}, autoregressive {bool(autoregressive)}, "
-                       f"influence lags {lags}) from {old!r} (influence lags {old.influence_lags})")
+                       f"influence lags {lags}, clock horizon {clock_horizon}) from {old!r} (influence lags "
+                       f"{old.influence_lags}, clock horizon {old.clock_horizon})")
     return {k: np.asarray(v, np.float32) for k, v in old._arrays().items()}
 
 
