@@ -46,7 +46,7 @@ class _Group:
         ps = [predictors[i] for i in members]
         self.autoregressive = bool(ps[0].autoregressive)
         self.lags = ps[0].influence_lags
-        self.clock = ps[0].clock_horizon if kind != "table" else 0
+        self.clock = ps[0].clock_horizon  # 0 for a table group: constant AIPs read no clock
         self.offsets = ps[0]._offsets
         self.previous = None  # [G, n, L * sum K]: the one-hot u_{t-1} .. u_{t-L} of an autoregressive group
         if kind == "mlp":
