@@ -207,6 +207,31 @@ def test_traffic_dials_gives_the_same_result_with_one_and_two_workers(tmp_path):
     assert one[0]["training"]["aip"]["refreshes"] == 1
 
 
+def test_dials_can_train_its_aips_as_the_fidelity_report_does(tmp_path):
+    """--aip-training fidelity: every round trains the AIPs ``ials-zoo fidelity`` trains (the
+    domain's fidelity lags, clock, rate and schedule), warm-started from the last round, and
+    the shards sample them (two lights, two workers, two rounds)."""
+    from ials_zoo.core.extras import dials_of
+    from ials_zoo.influence.files import load_predictor_set
+
+    d = dials_of("traffic_grid_v0")
+    result, folder = _dials(tmp_path, "fid", env_id="traffic_grid_v0", agents="tls_12,tls_13", env_options="",
+                            collect_steps=300, refresh="128", aip_training="fidelity", workers=2)
+    training = result["training"]
+    hp = training["hyperparameters"]
+    assert training["simulator"] == "dials-fidelity" and hp["aip_training"] == "fidelity"
+    assert (hp["aip_autoregressive"], hp["aip_lr"], hp["aip_lr_schedule"]) == (True, d.fidelity_aip_lr,
+                                                                                d.fidelity_aip_lr_schedule)
+    assert (hp["aip_influence_lags"], hp["aip_clock_horizon"]) == (d.fidelity_aip_influence_lags,
+                                                                    d.fidelity_aip_clock_horizon)
+    assert hp["collect_steps"] == 300 and hp["aip_epochs"] == 1  # the run's own overrides win
+    assert training["aip"]["refreshes"] == 2 and training["aip"]["last"]["warm_start"]
+    aips = load_predictor_set(folder / "aips.pt", env_id="traffic_grid_v0")
+    assert [(p.autoregressive, p.influence_lags, p.clock_horizon) for p in aips.values()] == [
+        (True, d.fidelity_aip_influence_lags, d.fidelity_aip_clock_horizon)] * 2
+    assert json.loads((folder / "status.json").read_text())["state"] == "finished"
+
+
 def test_dials_on_ray_matches_the_process_backend(tmp_path):
     pytest.importorskip("ray")
     assert_same_run(_dials(tmp_path, "proc", workers=2), _dials(tmp_path, "ray", workers=2, backend="ray"))
@@ -273,6 +298,9 @@ def test_ippo_on_the_gs_is_the_same_with_or_without_worker_processes(tmp_path):
     ({"ray_address": "127.0.0.1:1"}, "needs --backend ray"),
     ({"recurrent_hidden": -1}, "recurrent_hidden must be >= 0"),
     ({"recurrent_hidden": 8, "learner": "sb3"}, "needs --learner batched"),
+    ({"aip_training": "best"}, "unknown aip_training 'best'"),
+    ({"aip_training": "fidelity", "aip": "untrained", "refresh": "never"}, "needs --aip trained"),
+    ({"aip_training": "fidelity", "aip_autoregressive": False}, "drop --aip-autoregressive no"),
 ])
 def test_bad_arguments_are_refused_before_anything_starts(tmp_path, kw, message):
     with pytest.raises(ValueError, match=message.replace("(", r"\(").replace("[", r"\[")):

@@ -5,6 +5,7 @@ Usage::
     ials-zoo train dials --env traffic_grid_v0                       # periodic AIP refresh
     ials-zoo train dials --env warehouse_v0 --refresh once           # AIPs trained once, at the start
     ials-zoo train dials --env traffic_grid_v0 --aip untrained --refresh never   # untrained-DIALS
+    ials-zoo train dials --env traffic_grid_v0 --aip-training fidelity   # AIPs as `ials-zoo fidelity` trains them
     ials-zoo train dials --env warehouse_v0 --backend ray [--ray-address host:6379]
     python -m baselines.dials --help
 
@@ -23,6 +24,11 @@ The loop (the authors' follow-up, SPEC §6):
    ``--workers`` worker processes (default: one per core) or Ray actors (``--backend ray``),
    each holding its agents' local simulators and AIPs in one batch
    (:mod:`ials_zoo.dials.shard`).
+
+``--aip-training``: ``dials`` (the domain's DIALS AIP settings) or ``fidelity`` (the settings
+with which ``ials-zoo fidelity``'s on-policy AIPs reproduce the GS's influence over whole
+trajectories, :func:`aip_training_of`: autoregressive, reading more of their own past and maybe
+a clock, trained on more GS steps for more epochs; slower rounds).
 
 ``--aip``: ``trained`` (collected and trained at step 0, timed), ``untrained`` (random
 networks), ``uniform``, ``fixed:P``, ``shipped`` (the AIPs that ship with the package) or a
@@ -76,6 +82,7 @@ from ials_zoo.dials.shard import LEARNERS, ShardSpec, split_agents
 from ials_zoo.errors import BadInput
 from ials_zoo.evaluation import sha256_file
 from ials_zoo.influence.dataset import collect_all
+from ials_zoo.influence.fidelity import on_policy_training
 from ials_zoo.influence.files import load_predictor_set
 from ials_zoo.influence.multi import resolve_predictor_set, shipped_set_path
 from ials_zoo.influence.networks import ARCHS
@@ -84,6 +91,10 @@ from ials_zoo.influence.train import train_predictors
 from ials_zoo.utils import check_seed
 
 REFRESH_WORDS = ("default", "once", "never")
+# "dials": the domain's DIALS AIP training (DIALSSettings.aip_*, collect_steps); "fidelity": the
+# training with which `ials-zoo fidelity`'s on-policy AIPs reproduce the GS over whole
+# trajectories (DIALSSettings.fidelity_*: autoregressive, more data and epochs, maybe a clock)
+AIP_TRAININGS = ("dials", "fidelity")
 
 
 def _per_domain(describe) -> str:
@@ -111,6 +122,10 @@ class Args(MultiAgentRunArgs):
     aip_autoregressive: bool | None = arg(None, lambda: "AIPs that also read the influence they sampled at the "
                                           "previous step, P(u_t | d_<=t, u_<t) (default: the domain's: " + _per_domain(
                                               lambda d: "yes" if dials_of(d).aip_autoregressive else "no") + ")")
+    aip_training: str = arg("dials", "how the AIPs are trained: 'dials' (the domain's DIALS settings) or 'fidelity' "
+                            "(the settings of `ials-zoo fidelity`'s on-policy AIPs, which reproduce the GS's "
+                            "influence over whole trajectories: autoregressive, more GS steps and epochs; "
+                            "slower). --collect-steps, --aip-epochs, --aip-lr override either")
     n_envs: int | None = arg(None, lambda: f"IALS copies per agent (default: the domain's: "
                              f"{_per_domain(lambda d: str(dials_of(d).copies))})")
     learner: str = arg("batched", "batched (one torch program) | sb3 (one SB3 PPO per agent)")
@@ -167,6 +182,13 @@ def check_args(args: Args):
         v = getattr(args, name)
         if v is not None and v < 1:
             raise BadInput(f"{name} must be >= 1, got {v}")
+    if args.aip_training not in AIP_TRAININGS:
+        raise BadInput(f"unknown aip_training {args.aip_training!r}; expected one of {AIP_TRAININGS}")
+    if args.aip_training == "fidelity":
+        if args.aip != "trained" or refresh is None:
+            raise BadInput("--aip-training fidelity is how DIALS trains its AIPs: it needs --aip trained and a refresh")
+        if args.aip_autoregressive is False:
+            raise BadInput("--aip-training fidelity trains autoregressive AIPs: drop --aip-autoregressive no")
     copies = int(args.n_envs or dials_of(domain).copies)
     ppo_config(args, copies, frame_stack_of(args, domain))
     if args.recurrent_hidden and args.learner != "batched":
@@ -185,8 +207,38 @@ def check_args(args: Args):
 
 
 def autoregressive_of(args, domain) -> bool:
-    """Whether the AIPs DIALS trains read ``u_{t-1}``: ``--aip-autoregressive``, else the domain's."""
+    """Whether the AIPs DIALS trains read ``u_{t-1}``: ``--aip-autoregressive``, else the domain's
+    (always with ``--aip-training fidelity``)."""
+    if args.aip_training == "fidelity":
+        return True
     return bool(dials_of(domain).aip_autoregressive if args.aip_autoregressive is None else args.aip_autoregressive)
+
+
+@dataclass(frozen=True)
+class AIPTraining:
+    """How DIALS collects and trains its AIPs at every refresh (:func:`aip_training_of`)."""
+
+    collect_steps: int
+    autoregressive: bool
+    lr: float
+    epochs: int
+    lr_schedule: str
+    influence_lags: int  # 0: memoryless
+    clock_horizon: int  # 0: no clock
+
+
+def aip_training_of(args, domain) -> AIPTraining:
+    """``--aip-training`` resolved against the domain's :class:`~ials_zoo.core.extras.DIALSSettings`,
+    with ``--collect-steps``, ``--aip-epochs`` and ``--aip-lr`` where given."""
+    d = dials_of(domain)
+    autoregressive = autoregressive_of(args, domain)
+    if args.aip_training == "fidelity":
+        lr, epochs, schedule, lags = on_policy_training(domain.env_id, True, args.aip_lr, args.aip_epochs)
+        return AIPTraining(int(args.collect_steps or d.fidelity_collect_steps or d.collect_steps), True, lr, epochs,
+                           schedule, lags, d.fidelity_aip_clock_horizon)
+    return AIPTraining(int(args.collect_steps or d.collect_steps), autoregressive,
+                       float(args.aip_lr or d.lr_for(autoregressive)), int(args.aip_epochs or d.aip_epochs),
+                       d.aip_lr_schedule, 1 if autoregressive else 0, 0)
 
 
 def default_workers(n_agents: int) -> int:
@@ -207,28 +259,27 @@ def initial_aips(args, env_id, agents, options, seed) -> tuple[dict, float]:
     return dict(zip(agents, preds)), 0.0
 
 
-def refresh_aips(env_id, agents, options, net, seed, steps, domain, epochs, old, progress, collect_workers=1,
-                 autoregressive=False, lr=None):
+def refresh_aips(env_id, agents, options, net, seed, domain, training: AIPTraining, old, progress,
+                 collect_workers=1):
     """Collect every region's data with the joint policy ``net`` (None: uniform random) and
-    retrain every AIP (warm start from ``old`` when it holds networks of the same shape);
-    ``autoregressive``: AIPs that also read ``u_{t-1}``."""
+    retrain every AIP as ``training`` says (warm start from ``old`` when it holds networks of
+    the same shape and inputs)."""
 
     d = dials_of(domain)
     policy = None if net is None else JointActor(net, seed)
     t0 = time.perf_counter()
-    data = collect_all(env_id, agents, steps=steps, policy=policy, seed=seed, gs_options=options, progress=progress,
-                       workers=collect_workers)
+    data = collect_all(env_id, agents, steps=training.collect_steps, policy=policy, seed=seed, gs_options=options,
+                       progress=progress, workers=collect_workers)
     collect_seconds = time.perf_counter() - t0
-    lags = 1 if autoregressive else 0  # DIALS's autoregressive AIPs read their last draw only
+    lags, clock = training.influence_lags, training.clock_horizon
     warm = {a: p for a, p in old.items() if isinstance(p, ARCHS[d.aip_arch]) and p.hidden == d.aip_hidden
-            and p.autoregressive == autoregressive and p.influence_lags == lags and p.clock_horizon == 0
-            and p.metadata.get("variant") == "trained"}
+            and p.autoregressive == training.autoregressive and p.influence_lags == lags
+            and p.clock_horizon == clock and p.metadata.get("variant") == "trained"}
     t0 = time.perf_counter()
-    preds, report = train_predictors(data, d.aip_arch, hidden=d.aip_hidden, lr=lr or d.lr_for(autoregressive),
-                                     epochs=epochs,
+    preds, report = train_predictors(data, d.aip_arch, hidden=d.aip_hidden, lr=training.lr, epochs=training.epochs,
                                      batch_size=d.aip_batch, seed=seed, init=warm or None, progress=progress,
-                                     autoregressive=autoregressive, lr_schedule=d.aip_lr_schedule,
-                                     influence_lags=lags)
+                                     autoregressive=training.autoregressive, lr_schedule=training.lr_schedule,
+                                     influence_lags=lags, clock_horizon=clock)
     train_seconds = time.perf_counter() - t0
     return preds, {"collect_seconds": collect_seconds, "train_seconds": train_seconds,
                    "mean_test_cross_entropy": report["mean_test_cross_entropy"], "warm_start": bool(warm)}
@@ -248,9 +299,7 @@ class ShardsLearner(JointActors):
         self.refresh = refresh
         self.copies, self.workers, self.ppo, self.frame_stack, self.updates = copies, workers, ppo, frame_stack, updates
         self.training, self.simulator = training, training["simulator"]
-        self.collect_steps = int(args.collect_steps or dials_of(domain).collect_steps)
-        self.epochs = int(args.aip_epochs or dials_of(domain).aip_epochs)
-        self.autoregressive = autoregressive_of(args, domain)
+        self.aip_training = aip_training_of(args, domain)
         self.chunks = split_agents(agents, workers)
         self.charged_seconds, self.refreshes, self.aip_split = 0.0, 0, {"collect": 0.0, "train": 0.0}
         self.aips, self.state, self.backend = None, None, None
@@ -300,16 +349,16 @@ class ShardsLearner(JointActors):
         due = self._next_refresh()
         if due is None or due > steps:
             return
-        args, d, n = self.args, dials_of(self.domain), self.refreshes
+        args, d, n, how = self.args, dials_of(self.domain), self.refreshes, self.aip_training
         net = policy() if steps > 0 else None
         note(f"AIP round {n}: GS collection + training")
-        print(f"dials: AIP round {n} at {steps:,} steps per agent: {self.collect_steps:,} GS steps of "
+        kind = (f"autoregressive (last {how.influence_lags} draw{'s' if how.influence_lags > 1 else ''}"
+                f"{f', clock {how.clock_horizon}' if how.clock_horizon else ''}) " if how.autoregressive else "")
+        print(f"dials: AIP round {n} at {steps:,} steps per agent: {how.collect_steps:,} GS steps of "
               f"{'the joint policy' if net else 'uniformly random agents'}, then {len(self.agents)} "
-              f"{'autoregressive ' if self.autoregressive else ''}{d.aip_arch.upper()} AIPs x {self.epochs} epochs ...",
-              flush=True)
-        self.aips, rep = refresh_aips(args.env_id, self.agents, self.options, net, args.seed + n, self.collect_steps,
-                                      self.domain, self.epochs, self.aips, progress=False,
-                                      autoregressive=self.autoregressive, lr=args.aip_lr)
+              f"{kind}{d.aip_arch.upper()} AIPs x {how.epochs} epochs ...", flush=True)
+        self.aips, rep = refresh_aips(args.env_id, self.agents, self.options, net, args.seed + n, self.domain, how,
+                                      self.aips, progress=False)
         print(f"dials: AIP round {n} done: collection {rep['collect_seconds']:.0f} s, training "
               f"{rep['train_seconds']:.0f} s, mean test cross-entropy {rep['mean_test_cross_entropy']:.3f}", flush=True)
         self.charged_seconds += rep["collect_seconds"] + rep["train_seconds"]
@@ -350,15 +399,16 @@ def main(args: Args | None = None) -> dict:
     frame_stack = frame_stack_of(args, domain)
     out = Path(args.out_dir or f"runs/{args.env_id}__dials__s{args.seed}")
     ppo = ppo_config(args, copies, frame_stack)
-    label = _label(args.aip, refresh, autoregressive_of(args, domain))
+    how = aip_training_of(args, domain)
+    label = _label(args.aip, refresh, how.autoregressive, args.aip_training)
     training = {"simulator": label, "aip": None, "seeds": [args.seed], "env_steps": 0,
                 "wall_clock_seconds": 0.0, "aip_seconds": 0.0, "workers": max(workers, 1), "backend": args.backend,
                 "hyperparameters": dict(settings_of(args), agents=agents, refresh_steps=refresh,
                                         total_timesteps=total, eval_every=eval_every,
-                                        collect_steps=int(args.collect_steps or dials_of(domain).collect_steps),
-                                        aip_epochs=int(args.aip_epochs or dials_of(domain).aip_epochs),
-                                        aip_autoregressive=autoregressive_of(args, domain),
-                                        aip_lr=float(args.aip_lr or dials_of(domain).lr_for(autoregressive_of(args, domain))),
+                                        collect_steps=how.collect_steps, aip_epochs=how.epochs,
+                                        aip_autoregressive=how.autoregressive, aip_lr=how.lr,
+                                        aip_lr_schedule=how.lr_schedule, aip_influence_lags=how.influence_lags,
+                                        aip_clock_horizon=how.clock_horizon,
                                         ppo=ppo,
                                         learner=args.learner)}
     plan = RunPlan("dials", args.env_id, agents, options, args.seed, total, per_update, eval_every, args.eval_episodes,
@@ -395,10 +445,11 @@ def _shard_state(by_agent: dict, chunk: list) -> dict:
     return {k: v for k, v in state.items() if k != "agents"}
 
 
-def _label(aip: str, refresh, autoregressive: bool = False) -> str:
+def _label(aip: str, refresh, autoregressive: bool = False, aip_training: str = "dials") -> str:
     """The simulator name a result carries."""
     if aip == "trained":
-        return ("dials" if refresh else "dials-once") + ("-autoregressive" if autoregressive else "")
+        kind = "-fidelity" if aip_training == "fidelity" else "-autoregressive" if autoregressive else ""
+        return ("dials" if refresh else "dials-once") + kind
     if aip == "untrained":
         return "untrained-dials"
     return f"dials-{aip}" if not aip.endswith(".pt") else "dials-file"

@@ -31,6 +31,7 @@ from ials_zoo.core.extras import study_of
 from ials_zoo.errors import BadInput
 from ials_zoo.reproduce import build_plan, describe_plan, settings
 from ials_zoo.reproduce.plan import (
+    DEFAULT_DIALS_VARIANTS,
     DEFAULT_MEMORY_BUDGET,
     DEFAULT_SIMULATORS,
     DIALS_VARIANTS,
@@ -66,8 +67,9 @@ def configure(parser):
     parser.add_argument("--dials-budget", default=None,
                         help="steps per agent of each multi-agent run: N, and/or DOMAIN=N pairs (default: "
                              + ", ".join(f"{d}={study_of(d).multi_agent_budget}" for d in domain_ids()) + ")")
-    parser.add_argument("--dials-variants", default=",".join(DIALS_VARIANTS),
-                        help=f"multi-agent runs of the dials experiment, some of {','.join(DIALS_VARIANTS)}")
+    parser.add_argument("--dials-variants", default=",".join(DEFAULT_DIALS_VARIANTS),
+                        help=f"multi-agent runs of the dials experiment, some of {','.join(DIALS_VARIANTS)} "
+                             f"(default: all but {','.join(v for v in DIALS_VARIANTS if v not in DEFAULT_DIALS_VARIANTS)})")
     parser.add_argument("--dials-workers", type=int, default=c.dials_workers,
                         help="worker processes of each DIALS run (default 2 = cores; with more than 1, the "
                              "periodic run of seed 0 is repeated on 1 worker for the parallel efficiency)")

@@ -40,8 +40,10 @@ EXPERIMENTS = ("training", "memory", "dset", "dials")
 # "dials" retrains the AIPs every half budget (rounds at 0 and budget/2); see plan_dials.
 # "dials" and "dials-once" use memoryless AIPs (the paper's), "dials-autoregressive" AIPs that
 # read their own last draw (P(u_t | d_<=t, u_<t), at the domain's DIALSSettings.lr_for): each
-# variant says which, whatever the domain's default (DIALSSettings.aip_autoregressive).
-DIALS_VARIANTS = ("ippo", "dials", "dials-once", "untrained-dials", "dials-autoregressive")
+# variant says which, whatever the domain's default (DIALSSettings.aip_autoregressive);
+# "dials-fidelity" AIPs trained as `ials-zoo fidelity` trains them (dials --aip-training fidelity).
+DIALS_VARIANTS = ("ippo", "dials", "dials-once", "untrained-dials", "dials-autoregressive", "dials-fidelity")
+DEFAULT_DIALS_VARIANTS = DIALS_VARIANTS[:-1]  # dials-fidelity on request: its AIP rounds cost minutes each
 JOINT_REFERENCES = ("scripted", "random")
 RUN_SUBDIR = "run"  # a PPO job's run folder inside its job folder (which holds job.json, log.txt)
 DEFAULT_SIMULATORS = ("gs", "ials", "untrained-ials", "fixed:0.1")
@@ -87,7 +89,7 @@ class Config:
     collect_workers: int = 2  # GS processes of Algorithm 1 in SUMO domains (the cores here)
     dset_offpolicy_steps: int = 10_000
     lifetime_episodes: int = 20
-    dials_variants: tuple = DIALS_VARIANTS
+    dials_variants: tuple = DEFAULT_DIALS_VARIANTS
     dials_budgets: dict = field(default_factory=dict)  # steps per agent; default study_of(domain).multi_agent_budget
     dials_workers: int = 2  # worker processes of each DIALS run (the cores here)
     dials_eval_points: int = 4  # GS evaluations along each multi-agent curve (each scores every agent)
@@ -354,13 +356,16 @@ def _multiagent_params(cfg: Config, env_id: str, variant: str, seed: int, out: P
     if variant != "ippo":
         params["workers"] = workers
         params["refresh"] = {"dials": str(max(1, budget // 2)), "dials-once": "once", "untrained-dials": "never",
-                             "dials-autoregressive": str(max(1, budget // 2))}[variant]
+                             "dials-autoregressive": str(max(1, budget // 2)),
+                             "dials-fidelity": str(max(1, budget // 2))}[variant]
         if variant == "untrained-dials":
             params["aip"] = "untrained"
         if variant in ("dials", "dials-once", "dials-autoregressive"):
             params["aip_autoregressive"] = variant == "dials-autoregressive"
         if variant == "dials-autoregressive":  # the job records the learning rate its AIPs train at
             params["aip_lr"] = dials_of(env_id).lr_for(True)
+        if variant == "dials-fidelity":
+            params["aip_training"] = "fidelity"
     return params
 
 
