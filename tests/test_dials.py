@@ -191,7 +191,7 @@ def test_a_recurrent_dials_run_is_the_same_on_any_workers_and_writes_a_recurrent
     """GRUs over 4 frames: the shards' actors (GRU first) join into one recurrent policy file."""
     from ials_zoo.policy import load_policy_file
 
-    kw = dict(frame_stack=4, recurrent_hidden=8, refresh="never")
+    kw = dict(frame_stack=4, recurrent_hidden=8, aip="untrained", refresh="never")
     in_process, two = _dials(tmp_path, "g0", workers=0, **kw), _dials(tmp_path, "g2", workers=2, **kw)
     assert_same_run(in_process, two)
     net = load_policy_file(two[1] / "policy.safetensors")
@@ -207,28 +207,32 @@ def test_traffic_dials_gives_the_same_result_with_one_and_two_workers(tmp_path):
     assert one[0]["training"]["aip"]["refreshes"] == 1
 
 
-def test_dials_can_train_its_aips_as_the_fidelity_report_does(tmp_path):
-    """--aip-training fidelity: every round trains the AIPs ``ials-zoo fidelity`` trains (the
-    domain's fidelity lags, clock, rate and schedule), warm-started from the last round, and
-    the shards sample them (two lights, two workers, two rounds)."""
+def test_dials_can_train_its_aips_as_the_fidelity_report_does(tmp_path, monkeypatch):
+    """--aip-training fidelity: every round trains the AIPs with the domain's fidelity settings
+    (lags, clock, rate, schedule; here 2 lags and a clock of 40, whatever the defaults), the
+    second round warm-started from the first, and the shards sample them (two lights, two
+    workers, two rounds)."""
+    import dataclasses
+
+    from ials_zoo.core.domains import get_domain
     from ials_zoo.core.extras import dials_of
     from ials_zoo.influence.files import load_predictor_set
 
-    d = dials_of("traffic_grid_v0")
+    d = dataclasses.replace(dials_of("traffic_grid_v0"), fidelity_aip_influence_lags=2, fidelity_aip_clock_horizon=40)
+    monkeypatch.setitem(get_domain("traffic_grid_v0").extras, "dials", d)
     result, folder = _dials(tmp_path, "fid", env_id="traffic_grid_v0", agents="tls_12,tls_13", env_options="",
                             collect_steps=300, refresh="128", aip_training="fidelity", workers=2)
     training = result["training"]
     hp = training["hyperparameters"]
     assert training["simulator"] == "dials-fidelity" and hp["aip_training"] == "fidelity"
-    assert (hp["aip_autoregressive"], hp["aip_lr"], hp["aip_lr_schedule"]) == (True, d.fidelity_aip_lr,
-                                                                                d.fidelity_aip_lr_schedule)
-    assert (hp["aip_influence_lags"], hp["aip_clock_horizon"]) == (d.fidelity_aip_influence_lags,
-                                                                    d.fidelity_aip_clock_horizon)
-    assert hp["collect_steps"] == 300 and hp["aip_epochs"] == 1  # the run's own overrides win
+    assert (hp["aip_influence_lags"], hp["aip_clock_horizon"]) == (2, 40)
     assert training["aip"]["refreshes"] == 2 and training["aip"]["last"]["warm_start"]
     aips = load_predictor_set(folder / "aips.pt", env_id="traffic_grid_v0")
-    assert [(p.autoregressive, p.influence_lags, p.clock_horizon) for p in aips.values()] == [
-        (True, d.fidelity_aip_influence_lags, d.fidelity_aip_clock_horizon)] * 2
+    for p in aips.values():  # what was trained, not what was asked for
+        assert (p.autoregressive, p.influence_lags, p.clock_horizon) == (True, 2, 40)
+        trained = p.metadata["hyperparameters"]
+        assert (trained["lr"], trained["lr_schedule"]) == (d.fidelity_aip_lr, d.fidelity_aip_lr_schedule)
+        assert trained["epochs"] == 1 and p.metadata["dataset"]["steps"] == 300  # the run's overrides win
     assert json.loads((folder / "status.json").read_text())["state"] == "finished"
 
 
@@ -301,6 +305,7 @@ def test_ippo_on_the_gs_is_the_same_with_or_without_worker_processes(tmp_path):
     ({"aip_training": "best"}, "unknown aip_training 'best'"),
     ({"aip_training": "fidelity", "aip": "untrained", "refresh": "never"}, "needs --aip trained"),
     ({"aip_training": "fidelity", "aip_autoregressive": False}, "drop --aip-autoregressive no"),
+    ({"refresh": "never"}, "would never train the AIPs"),
 ])
 def test_bad_arguments_are_refused_before_anything_starts(tmp_path, kw, message):
     with pytest.raises(ValueError, match=message.replace("(", r"\(").replace("[", r"\[")):

@@ -2,18 +2,20 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import pytest
 
 from ials_zoo.reproduce import Config, build_plan
-from ials_zoo.reproduce.plan import DIALS_VARIANTS
+from ials_zoo.reproduce.plan import DEFAULT_DIALS_VARIANTS, DIALS_VARIANTS
 
 
 def test_dials_plan_has_every_variant_seed_references_and_a_one_worker_repeat(tmp_path):
     cfg = Config(experiments=("dials",), domains=("warehouse_v0",), seeds=2, out=str(tmp_path),
                  dials_budgets={"warehouse_v0": 2048})
-    jobs = build_plan(cfg)
+    assert "dials-fidelity" in DIALS_VARIANTS and "dials-fidelity" not in cfg.dials_variants == DEFAULT_DIALS_VARIANTS
+    jobs = build_plan(dataclasses.replace(cfg, dials_variants=DIALS_VARIANTS))
     multi = [j for j in jobs if j.kind == "multiagent"]
     assert len(multi) == len(DIALS_VARIANTS) * 2 + 1
     assert all(j.exclusive for j in multi) and not any(j.exclusive for j in jobs if j.kind != "multiagent")
@@ -26,6 +28,8 @@ def test_dials_plan_has_every_variant_seed_references_and_a_one_worker_repeat(tm
     assert by_label["dials-once"][0].params["refresh"] == "once"
     un = by_label["untrained-dials"][0].params
     assert un["aip"] == "untrained" and un["refresh"] == "never"
+    fid = by_label["dials-fidelity"][0].params
+    assert fid["aip_training"] == "fidelity" and fid["refresh"] == "1024"
     (one,) = by_label["dials (1 worker)"]
     assert one.params["workers"] == 1 and one.params["seed"] == 0
     assert all(j.params["total_timesteps"] == 2048 for j in multi)
@@ -38,7 +42,8 @@ def test_dials_plan_has_every_variant_seed_references_and_a_one_worker_repeat(tm
 def test_every_planned_run_passes_its_baselines_argument_check(tmp_path):
     from importlib import import_module
 
-    cfg = Config(experiments=("dials",), domains=("traffic_grid_v0", "warehouse_v0"), seeds=1, out=str(tmp_path))
+    cfg = Config(experiments=("dials",), domains=("traffic_grid_v0", "warehouse_v0"), seeds=1, out=str(tmp_path),
+                 dials_variants=DIALS_VARIANTS)
     for job in build_plan(cfg):
         if job.kind != "multiagent":
             continue

@@ -27,8 +27,9 @@ The loop (the authors' follow-up, SPEC §6):
 
 ``--aip-training``: ``dials`` (the domain's DIALS AIP settings) or ``fidelity`` (the settings
 with which ``ials-zoo fidelity``'s on-policy AIPs reproduce the GS's influence over whole
-trajectories, :func:`aip_training_of`: autoregressive, reading more of their own past and maybe
-a clock, trained on more GS steps for more epochs; slower rounds).
+trajectories, :func:`aip_training_of`: autoregressive, maybe reading more of their own past and
+a clock, trained on more GS steps for more epochs; slower rounds). Unlike the report's, which
+start from scratch, a round's AIPs start from the last round's.
 
 ``--aip``: ``trained`` (collected and trained at step 0, timed), ``untrained`` (random
 networks), ``uniform``, ``fixed:P``, ``shipped`` (the AIPs that ship with the package) or a
@@ -102,6 +103,14 @@ def _per_domain(describe) -> str:
     return ", ".join(f"{env_id} {describe(get_domain(env_id))}" for env_id in domain_ids())
 
 
+def _fidelity_text(domain) -> str:
+    d = dials_of(domain)
+    lr, epochs, schedule, lags = on_policy_training(domain.env_id, True)
+    clock = f", clock {d.fidelity_aip_clock_horizon}" if d.fidelity_aip_clock_horizon else ""
+    return (f"{(d.fidelity_collect_steps or d.collect_steps):,} GS steps, last {lags} draw{'s' if lags > 1 else ''}"
+            f"{clock}, lr {lr:g} {schedule} x {epochs} epochs")
+
+
 def _refresh_text(domain) -> str:
     refresh = dials_of(domain).refresh
     return "once" if refresh == 0 else "never" if refresh is None else f"every {refresh:,}"
@@ -115,17 +124,20 @@ class Args(MultiAgentRunArgs):
                        f"or 'default' (the domain's: {_per_domain(_refresh_text)})")
     aip: str = arg("trained", "initial AIPs: trained | untrained | uniform | fixed:P | shipped | FILE.pt")
     collect_steps: int | None = arg(None, lambda: "GS steps per data collection (default: the domain's: "
-                                    f"{_per_domain(lambda d: f'{dials_of(d).collect_steps:,}')})")
+                                    f"{_per_domain(lambda d: f'{dials_of(d).collect_steps:,}')}; with "
+                                    "--aip-training fidelity: " + _per_domain(
+                                        lambda d: f'{dials_of(d).fidelity_collect_steps or dials_of(d).collect_steps:,}')
+                                    + ")")
     aip_epochs: int | None = arg(None, "epochs per AIP (re)training (default: the domain's)")
     aip_lr: float | None = arg(None, "learning rate of the AIP (re)training (default: the domain's for the kind "
-                               "of AIP, memoryless or autoregressive)")
+                               "of AIP, memoryless or autoregressive, or for --aip-training fidelity)")
     aip_autoregressive: bool | None = arg(None, lambda: "AIPs that also read the influence they sampled at the "
                                           "previous step, P(u_t | d_<=t, u_<t) (default: the domain's: " + _per_domain(
                                               lambda d: "yes" if dials_of(d).aip_autoregressive else "no") + ")")
-    aip_training: str = arg("dials", "how the AIPs are trained: 'dials' (the domain's DIALS settings) or 'fidelity' "
-                            "(the settings of `ials-zoo fidelity`'s on-policy AIPs, which reproduce the GS's "
-                            "influence over whole trajectories: autoregressive, more GS steps and epochs; "
-                            "slower). --collect-steps, --aip-epochs, --aip-lr override either")
+    aip_training: str = arg("dials", lambda: "how the AIPs are trained: 'dials' (the domain's DIALS settings) or "
+                            "'fidelity' (the settings of `ials-zoo fidelity`'s on-policy AIPs, which reproduce the "
+                            "GS's influence over whole trajectories, warm-started from the last round: "
+                            + _per_domain(_fidelity_text) + "). --collect-steps, --aip-epochs, --aip-lr override either")
     n_envs: int | None = arg(None, lambda: f"IALS copies per agent (default: the domain's: "
                              f"{_per_domain(lambda d: str(dials_of(d).copies))})")
     learner: str = arg("batched", "batched (one torch program) | sb3 (one SB3 PPO per agent)")
@@ -164,6 +176,16 @@ def check_args(args: Args):
     check_seed(args.seed, "seed")
     check_multi_ppo(args, domain)
     refresh = parse_refresh(args.refresh, dials_of(domain).refresh)
+    if args.aip_training not in AIP_TRAININGS:
+        raise BadInput(f"unknown aip_training {args.aip_training!r}; expected one of {AIP_TRAININGS}")
+    if args.aip_training == "fidelity":
+        if args.aip != "trained" or refresh is None:
+            raise BadInput("--aip-training fidelity is how DIALS trains its AIPs: it needs --aip trained and a refresh")
+        if args.aip_autoregressive is False:
+            raise BadInput("--aip-training fidelity trains autoregressive AIPs: drop --aip-autoregressive no")
+    if args.aip == "trained" and refresh is None:
+        raise BadInput("--aip trained --refresh never would never train the AIPs: use --refresh once, or --aip "
+                       "untrained for untrained-DIALS")
     if args.aip == "shipped":
         if not shipped_set_path(args.env_id).is_file():
             raise BadInput(f"--aip shipped: no AIPs ship for {args.env_id}")
@@ -182,13 +204,6 @@ def check_args(args: Args):
         v = getattr(args, name)
         if v is not None and v < 1:
             raise BadInput(f"{name} must be >= 1, got {v}")
-    if args.aip_training not in AIP_TRAININGS:
-        raise BadInput(f"unknown aip_training {args.aip_training!r}; expected one of {AIP_TRAININGS}")
-    if args.aip_training == "fidelity":
-        if args.aip != "trained" or refresh is None:
-            raise BadInput("--aip-training fidelity is how DIALS trains its AIPs: it needs --aip trained and a refresh")
-        if args.aip_autoregressive is False:
-            raise BadInput("--aip-training fidelity trains autoregressive AIPs: drop --aip-autoregressive no")
     copies = int(args.n_envs or dials_of(domain).copies)
     ppo_config(args, copies, frame_stack_of(args, domain))
     if args.recurrent_hidden and args.learner != "batched":

@@ -43,7 +43,8 @@ EXPERIMENTS = ("training", "memory", "dset", "dials")
 # variant says which, whatever the domain's default (DIALSSettings.aip_autoregressive);
 # "dials-fidelity" AIPs trained as `ials-zoo fidelity` trains them (dials --aip-training fidelity).
 DIALS_VARIANTS = ("ippo", "dials", "dials-once", "untrained-dials", "dials-autoregressive", "dials-fidelity")
-DEFAULT_DIALS_VARIANTS = DIALS_VARIANTS[:-1]  # dials-fidelity on request: its AIP rounds cost minutes each
+OPT_IN_DIALS_VARIANTS = ("dials-fidelity",)  # on request only: its AIP rounds cost minutes each
+DEFAULT_DIALS_VARIANTS = tuple(v for v in DIALS_VARIANTS if v not in OPT_IN_DIALS_VARIANTS)
 JOINT_REFERENCES = ("scripted", "random")
 RUN_SUBDIR = "run"  # a PPO job's run folder inside its job folder (which holds job.json, log.txt)
 DEFAULT_SIMULATORS = ("gs", "ials", "untrained-ials", "fixed:0.1")

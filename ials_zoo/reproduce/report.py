@@ -214,7 +214,8 @@ def dials_section(out, leaderboard) -> list[str]:
          "excluded), as measured: with `--jobs` above 1 or other work on the machine, runs shared its cores, "
          "so compare wall-clocks with care. `dials` retrains every AIP every half "
          "budget, `dials-once` trains them once at the start, `untrained-dials` keeps randomly initialised "
-         "AIPs.", ""]
+         "AIPs; `-autoregressive`: AIPs that also read their last draw; `dials-fidelity`: AIPs trained as "
+         "`ials-zoo fidelity` trains them (`train dials --aip-training fidelity`).", ""]
     for env_id, summ in summarize_dials(runs).items():
         v = summ["variants"]
         refs = joint_references(out, env_id)
