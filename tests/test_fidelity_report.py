@@ -144,9 +144,10 @@ def test_several_aip_trainings_count_the_rows_that_hold_under_each():
         fidelity_report("warehouse_v0", ["random"], episodes=2, predictor="uniform", aip_seeds=2, robots=(2, 2))
 
 
-def test_traffic_on_policy_aips_read_their_last_three_draws(monkeypatch):
-    """Traffic's fidelity AIPs read their last 3 draws (the domain's fidelity_aip_influence_lags)
-    and the multi-agent IALS samples them on SUMO; the report states the lags and the data."""
+def test_traffic_on_policy_aips_read_their_last_three_draws_and_a_clock(monkeypatch):
+    """Traffic's fidelity AIPs read their last 3 draws and a clock of 100 steps (the domain's
+    fidelity_aip_influence_lags and fidelity_aip_clock_horizon), and the multi-agent IALS
+    samples them on SUMO; the report states the lags, the clock and the data."""
     from ials_zoo.influence import fidelity
 
     trained = []
@@ -160,9 +161,10 @@ def test_traffic_on_policy_aips_read_their_last_three_draws(monkeypatch):
     monkeypatch.setattr(fidelity, "train_predictors", spy)
     report = fidelity.fidelity_report("traffic_grid_v0", ["random"], episodes=2, watched=["tls_0"], progress=False,
                                       collect_steps=600, aip_epochs=1, predictor="on-policy-autoregressive")
-    assert (report["aip_influence_lags"], report["collect_steps"]) == (3, 600)
-    assert {p.influence_lags for p in trained[0].values()} == {3}
-    assert trained[0]["tls_0"].input_size == 36 + 3 * 4 * 2
+    assert (report["aip_influence_lags"], report["aip_clock_horizon"], report["collect_steps"]) == (3, 100, 600)
+    assert {(p.influence_lags, p.clock_horizon) for p in trained[0].values()} == {(3, 100)}
+    assert trained[0]["tls_0"].input_size == 36 + 3 * 4 * 2 + 1
     arrivals = report["policies"]["random"]["tls_0"]["arrivals"]
     assert arrivals["gs"] > 0 and arrivals["ials"] > 0
-    assert "reading their last 3 draws, trained on 600 GS steps" in fidelity.markdown(report)
+    assert ("reading their last 3 draws, reading a clock (min(t, 100) / 100), trained on 600 GS steps"
+            in fidelity.markdown(report))

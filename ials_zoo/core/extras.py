@@ -92,7 +92,9 @@ class DIALSSettings:
         fidelity_collect_steps: GS steps of each joint policy's AIP data in ``ials-zoo fidelity``
             (None: ``collect_steps``).
         fidelity_aip_clock_horizon: H > 0: the on-policy AIPs also read the time since the
-            episode's start, ``min(t, H) / H`` (0: they do not; not yet a default anywhere).
+            episode's start, ``min(t, H) / H`` (0: they do not). Traffic reads 100: its grid
+            starts empty, and an AIP without a clock cannot tell the first steps of an empty
+            lane from later ones, so it brings the first cars too early.
     """
 
     aip_arch: str = "mlp"

@@ -34,10 +34,12 @@ STUDY = StudySettings(budget=300_000, ppo_steps_per_second={"gs": 1000.0, "ials"
 # The fidelity report's AIPs read their last 3 draws and learn from 100,000 GS steps: under the
 # board's IPPO lights the neighbours release platoons (arrivals 2-3 steps apart), and AIPs that
 # read one draw, or learn from 10,000 steps, made arrivals too smooth and the corner and edge
-# lights' return 15% too high (docs/fidelity.md).
+# lights' return 15% too high. They also read a clock (the steps since the episode's start, up
+# to 100): the grid starts empty, and without one they brought the first cars to the centre
+# light at step 18 on average instead of 33 (docs/fidelity.md).
 DIALS = DIALSSettings(aip_arch="mlp", aip_hidden=128, aip_lr=1e-3, aip_epochs=10, aip_batch=256, copies=2,
                      collect_steps=10_000, refresh=250_000, fidelity_aip_lr=3e-3, fidelity_aip_epochs=30,
-                     fidelity_aip_influence_lags=3, fidelity_collect_steps=100_000)
+                     fidelity_aip_influence_lags=3, fidelity_collect_steps=100_000, fidelity_aip_clock_horizon=100)
 TOOLS = {"calibrate": ("ials_zoo.traffic.calibrate", "demand calibration under actuated lights"),
          "sumo-bench": ("ials_zoo.traffic.benchmark", "raw SUMO vs GS vs LS steps/s, LS step breakdown")}
 
