@@ -46,7 +46,7 @@ def stats(env):
 gs_env = dom.parallel_env(learners=agents)
 g = stats(gs_env)
 gs_env.close()
-aips = F.on_policy_aips("traffic_grid_v0", agents, policy, steps, seed + 100_000, True, {}, influence_lags=lags)
+aips = F.on_policy_aips("traffic_grid_v0", agents, policy, steps, seed + 100_000, True, {}, influence_lags=lags, clock_horizon=0)
 ie = make_ials_parallel_env("traffic_grid_v0", agents, predictor=aips, seed=seed)
 s = stats(ie)
 ie.close()

@@ -21,7 +21,7 @@ env = "traffic_grid_v0"
 agents = get_domain(env).agents()
 # the same data and seed as on_policy_aips uses for `ials-zoo fidelity --seed 1`'s first training
 train = collect_all(env, agents, steps=10_000, seed=100_001, progress=False)
-aips = F.on_policy_aips(env, agents, "random", 10_000, 100_001, True, {}, lr_schedule=schedule, influence_lags=1)
+aips = F.on_policy_aips(env, agents, "random", 10_000, 100_001, True, {}, lr_schedule=schedule, influence_lags=1, clock_horizon=0)
 test = collect_all(env, agents, steps=3000, seed=7, progress=False)
 
 

@@ -56,7 +56,7 @@ def record(env, ials=False):
 gs_env = dom.parallel_env(learners=agents)
 g = record(gs_env)
 gs_env.close()
-aips = F.on_policy_aips("traffic_grid_v0", agents, policy, 10000, seed + 100_000, True, {}, influence_lags=1)
+aips = F.on_policy_aips("traffic_grid_v0", agents, policy, 10000, seed + 100_000, True, {}, influence_lags=1, clock_horizon=0)
 ie = make_ials_parallel_env("traffic_grid_v0", agents, predictor=aips, seed=seed)
 s = record(ie, True)
 ie.close()

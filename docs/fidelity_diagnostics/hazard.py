@@ -41,7 +41,7 @@ def hazards(us, K=12):
 gs_env = dom.parallel_env(learners=agents)
 gs = F.run(gs_env, agents, watched, policy, episodes, 0, dom.n_actions)
 gs_env.close()
-aips = F.on_policy_aips(env_id, agents, policy, steps, 100_000, True, {}, lr, epochs, influence_lags=1)
+aips = F.on_policy_aips(env_id, agents, policy, steps, 100_000, True, {}, lr, epochs, influence_lags=1, clock_horizon=0)
 ie = make_ials_parallel_env(env_id, agents, predictor=aips, seed=0)
 ia = F.run(ie, agents, watched, policy, episodes, 0, dom.n_actions)
 ie.close()

@@ -6,7 +6,8 @@ reward and arrivals per 50-step block, over 30 episodes (GS seeds SEED * 1000 + 
 
     python docs/fidelity_diagnostics/warm_up.py SEED
 
-(the AIPs: the fidelity report's defaults, trained on the data of ``ials-zoo fidelity --seed SEED``).
+(the AIPs: the fidelity report's defaults before traffic's AIPs read a clock, i.e. without one,
+trained on the data of ``ials-zoo fidelity --seed SEED``).
 """
 
 import sys
@@ -40,7 +41,7 @@ def rewards(env, episodes=30):
 gs_env = dom.parallel_env(learners=agents)
 gs = rewards(gs_env)
 gs_env.close()
-aips = F.on_policy_aips("traffic_grid_v0", agents, "constant", 100_000, seed + F.DATA_SEED_OFFSET, True, {})
+aips = F.on_policy_aips("traffic_grid_v0", agents, "constant", 100_000, seed + F.DATA_SEED_OFFSET, True, {}, clock_horizon=0)
 ials_env = make_ials_parallel_env("traffic_grid_v0", agents, predictor=aips, seed=seed)
 ials = rewards(ials_env)
 ials_env.close()
