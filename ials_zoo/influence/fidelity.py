@@ -339,7 +339,7 @@ def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: i
                           f"{f' (training {k + 1} of {aip_seeds})' if aip_seeds > 1 else ''} ...", flush=True)
                 aips = on_policy_aips(env_id, agents, policy, steps, seed + DATA_SEED_OFFSET + k,
                                       predictor == "on-policy-autoregressive", options, aip_lr, aip_epochs,
-                                      aip_lr_schedule, aip_influence_lags, aip_clock_horizon)
+                                      aip_lr_schedule, aip_influence_lags, report["aip_clock_horizon"])
             ials_env = make_ials_parallel_env(env_id, agents, predictor=aips, seed=seed, **options)
             try:
                 ials = run(ials_env, agents, watched, policy, episodes, seed, domain.n_actions)

@@ -153,7 +153,7 @@ class GRUPredictor(InfluencePredictor):
     def sample(self, dsets, rng):
         if self.n == 1:
             d = self._check_dsets(dsets)
-            logits = self._logits1(self._input(d) if (self.autoregressive or self.clock_horizon) else d)
+            logits = self._logits1(self._input(d))
             u = self._sample_logits1(logits, rng) if self._same_k else self._sample_logits(logits, rng)
         else:
             u = self._sample_logits(self._logits(dsets), rng)
