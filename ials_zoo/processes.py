@@ -15,7 +15,7 @@ waiting on a worker that no longer answers.
 :class:`Worker` is the one protocol for a long-lived worker of ours: an object built in a
 fresh interpreter and called by method name, ``call(method, *args)``, with a heartbeat, a
 death and stop signal and a timeout: DIALS's shards (:mod:`ials_zoo.dials.backends`), IPPO's
-GS copies (:mod:`ials_zoo.learners.gs_vec`), SUMO simulations (:mod:`ials_zoo.traffic.lease`)
+GS copies (:mod:`ials_zoo.learners.gs_vec`), SUMO simulations (:mod:`ials_zoo.sumo.lease`)
 and the env workers of SB3's vector envs (:mod:`ials_zoo.single_agent`). Pools of short tasks
 (collection, evaluation) stay ``concurrent.futures`` pools (:func:`spawn_pool`).
 """

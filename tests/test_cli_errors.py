@@ -124,7 +124,7 @@ def test_a_sumo_error_ends_a_baseline_run_in_one_line_on_both_entry_points(monke
     import sys
 
     from ials_zoo.baselines import arguments, ippo
-    from ials_zoo.traffic.lease import SimulationError
+    from ials_zoo.sumo.lease import SimulationError
 
     def fails(args=None):
         raise SimulationError("SUMO error (TraCIException): the network broke")

@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from ials_zoo.sumo.lease import WorkerDiedError, WorkerUnresponsiveError
 from ials_zoo.traffic.env import TrafficGridEnv
-from ials_zoo.traffic.lease import WorkerDiedError, WorkerUnresponsiveError
 
 
 def _children(pid: int) -> set[int]:

@@ -9,10 +9,10 @@ import pytest
 from pettingzoo.test import api_test, parallel_seed_test
 
 from ials_zoo.core.domains import get_domain
+from ials_zoo.sumo.lease import SimulationBusyError, SimulationError, WorkerDiedError
 from ials_zoo.traffic import network
 from ials_zoo.traffic.env import TrafficGridEnv, parallel_env
 from ials_zoo.traffic.env import env as aec_env
-from ials_zoo.traffic.lease import SimulationBusyError, SimulationError, WorkerDiedError
 
 
 @pytest.fixture

@@ -1,7 +1,7 @@
 """Traffic signal control on a SUMO grid (``traffic_grid_v0``, SPEC §2).
 
 Modules: :mod:`~ials_zoo.traffic.network` (builds and caches the SUMO files),
-:mod:`~ials_zoo.traffic.cores` (the simulation cores), :mod:`~ials_zoo.traffic.lease` (where a
+:mod:`~ials_zoo.traffic.cores` (the simulation cores), :mod:`~ials_zoo.sumo.lease` (where a
 simulation runs: this process or a worker), :mod:`~ials_zoo.traffic.env` (the global
 simulator), :mod:`~ials_zoo.traffic.local` (the local simulator),
 :mod:`~ials_zoo.traffic.calibrate` (the demand calibration report),

@@ -29,8 +29,8 @@ import time
 import numpy as np
 
 from ials_zoo.errors import BadInput
+from ials_zoo.sumo.lease import SimulationBusyError, import_libsumo
 from ials_zoo.traffic.env import TrafficGridEnv
-from ials_zoo.traffic.lease import SimulationBusyError, import_libsumo
 from ials_zoo.traffic.local import TrafficLocalSimulator
 
 

@@ -1,7 +1,7 @@
 """SUMO simulation cores: each method does one whole step's libsumo work and returns arrays.
 
 A core lives where libsumo lives -- this process or a worker process, see
-:mod:`ials_zoo.traffic.lease` -- so an env needs exactly one core call per step.
+:mod:`ials_zoo.sumo.lease` -- so an env needs exactly one core call per step.
 
 * :class:`GridCore` -- the global grid (the GS);
 * :class:`LocalCore` -- ``n`` disjoint copies of one intersection in one network (the LS);
@@ -14,8 +14,12 @@ from __future__ import annotations
 import numpy as np
 
 from ials_zoo.errors import BadInput
-from ials_zoo.traffic.lease import import_libsumo
+from ials_zoo.sumo.command import close_any_simulation, sumo_command
+from ials_zoo.sumo.lease import import_libsumo
 from ials_zoo.traffic.network import CELL_LENGTH, N_CELLS, SPEED_LIMIT
+
+# the grid's routes are fixed: SUMO's rerouting device stays off
+_GRID_OPTIONS = ("--device.rerouting.probability", "0")
 
 # ----------------------------------------------------------------------------- shared reading
 
@@ -154,30 +158,7 @@ class _Lights:
                 self._set(k)
 
 
-def _sumo_cmd(net, routes, additionals, seed, extra=()):
-    cmd = ["sumo", "-n", net, "-r", routes]
-    if additionals:
-        cmd += ["-a", ",".join(additionals)]
-    cmd += [
-        "--step-length", "1", "--seed", str(int(seed)), "--no-step-log", "true",
-        "--no-warnings", "true", "--duration-log.disable", "true",
-        "--device.rerouting.probability", "0", *extra,
-    ]  # fmt: skip
-    return cmd
-
-
 # ----------------------------------------------------------------------------- cores
-
-
-def _close_any_simulation(core) -> None:
-    """Close the core's simulation before a fresh start, also one that a SUMO error left
-    half-closed (loaded but no longer marked running)."""
-    if core.running or core.ls.simulation.isLoaded():
-        core.running = False
-        try:
-            core.ls.close()
-        except Exception:
-            pass
 
 
 class GridCore:
@@ -214,11 +195,11 @@ class GridCore:
     def reset(self, seed: int, warmup_steps: int = 0):
         """Start a new simulation; returns ``(occ [L,36], phases [L])``."""
         ls = self.ls
-        _close_any_simulation(self)
+        close_any_simulation(self)
         net, routes, tls_add = self.files
         # every vehicle carries SUMO's tripinfo device (time loss, waiting time) for the
         # episode's metrics; it only records (episodes are bitwise the same with or without it)
-        ls.start(_sumo_cmd(net, routes, [tls_add], seed, extra=("--device.tripinfo.probability", "1")))
+        ls.start(sumo_command(seed, net=net, routes=routes, additionals=[tls_add], extra=_GRID_OPTIONS + ("--device.tripinfo.probability", "1")))
         self.running = True
         self._halting = self._steps = 0
         for _ in range(int(warmup_steps)):
@@ -365,10 +346,11 @@ class LocalCore:
             except Exception:
                 soft = False
         if not soft:
-            _close_any_simulation(self)
+            close_any_simulation(self)
             # a car that cannot be inserted at once is dropped: in the GS it would simply
             # not have entered the lane at this step
-            ls.start(_sumo_cmd(*self.files, [], seed, extra=("--max-depart-delay", "0")))
+            net, routes = self.files
+            ls.start(sumo_command(seed, net=net, routes=routes, extra=_GRID_OPTIONS + ("--max-depart-delay", "0")))
             self.running = True
             self.counters = [0] * self.n
         if self.reader is None:

@@ -9,9 +9,9 @@ from pettingzoo.utils.conversions import parallel_to_aec, parallel_to_aec_wrappe
 
 from ials_zoo.core.region import INFLUENCE_KEY, RegionSpec
 from ials_zoo.errors import BadInput, BadInputType
+from ials_zoo.sumo.lease import SimHandle
 from ials_zoo.traffic import network
 from ials_zoo.traffic.cores import PHASE_NAMES, observation
-from ials_zoo.traffic.lease import SimHandle
 from ials_zoo.traffic.network import APPROACHES, N_CELLS
 from ials_zoo.traffic.render import render_grid
 from ials_zoo.utils import check_reset_options, check_seed
@@ -165,7 +165,7 @@ class TrafficGridEnv(ParallelEnv):
     last explicit seed.
 
     **SUMO and libsumo**: all SUMO work runs in a simulation core with one call per step, via
-    :class:`ials_zoo.traffic.lease.SimHandle`. ``backend="auto"`` (default) runs it in this
+    :class:`ials_zoo.sumo.lease.SimHandle`. ``backend="auto"`` (default) runs it in this
     process when no other libsumo simulation is live here, else in a worker process;
     ``"inprocess"`` raises ``SimulationBusyError`` when another simulation is live;
     ``"worker"`` always uses a process. A killed worker raises ``WorkerDiedError`` and the
@@ -253,7 +253,7 @@ class TrafficGridEnv(ParallelEnv):
             "all_lanes": [[e + "_0" for e in network.incoming_edges(self.grid, i)]
                           for i in range(len(all_agents))],
         }
-        self._sim = SimHandle("GridCore", config, backend)
+        self._sim = SimHandle("ials_zoo.traffic.cores:GridCore", config, backend)
         self.backend = self._sim.mode
         self._seed_rng = np.random.default_rng()
         self._t = 0

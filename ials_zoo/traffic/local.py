@@ -8,10 +8,10 @@ from gymnasium import spaces
 from ials_zoo.core.local import LocalSimulator, agent_list, check_n_envs
 from ials_zoo.core.streams import CopyStreams
 from ials_zoo.errors import BadInput, BadInputType
+from ials_zoo.sumo.lease import SimHandle
 from ials_zoo.traffic import network
 from ials_zoo.traffic.cores import observation
 from ials_zoo.traffic.env import OBS_SIZE, agent_index, region_spec
-from ials_zoo.traffic.lease import SimHandle
 from ials_zoo.utils import check_seed
 
 
@@ -41,7 +41,7 @@ class TrafficLocalSimulator(LocalSimulator):
             statistics, the junction model and the region's parameters).
         max_cycles: episode length (the caller truncates).
         backend: ``"auto"`` / ``"inprocess"`` / ``"worker"`` (see
-            :mod:`ials_zoo.traffic.lease`).
+            :mod:`ials_zoo.sumo.lease`).
         turn_probabilities: optional override of the turning probabilities.
 
     Attributes:
@@ -108,7 +108,7 @@ class TrafficLocalSimulator(LocalSimulator):
             "states": self.files.meta["states"],
             "route_ids": self.files.meta["routes"],
         }
-        self._sim = SimHandle("LocalCore", config, backend)
+        self._sim = SimHandle("ials_zoo.traffic.cores:LocalCore", config, backend)
         self.backend = self._sim.mode
         # turn draws: one uniform per (agent, copy) and lane each step (ials_zoo.core.streams)
         self._streams = CopyStreams(self.agents, self.n_envs, 4)

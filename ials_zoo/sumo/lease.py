@@ -1,8 +1,10 @@
 """Where a SUMO simulation runs: this process (under a lease) or a worker process.
 
-libsumo holds ONE simulation per process, and a second ``libsumo.start()`` silently replaces
-the first. Everything that touches libsumo therefore lives in a *simulation core*
-(:mod:`ials_zoo.traffic.cores`) whose methods each do one whole step's work, and a
+Shared by every SUMO domain (the grid, real city networks). libsumo holds ONE simulation per
+process, and a second ``libsumo.start()`` silently replaces the first. Everything that touches
+libsumo therefore lives in a *simulation core* (a domain's class, named to :class:`SimHandle`
+as ``"package.module:Class"`` so a worker can import it) whose methods each do one whole step's
+work, and a
 :class:`SimHandle` runs a core
 
 * **in-process** (``backend="inprocess"``): the core calls libsumo directly. A module-level
@@ -38,7 +40,6 @@ from ials_zoo.errors import BadInput
 from ials_zoo.processes import Worker, WorkerError
 
 BACKENDS = ("auto", "inprocess", "worker")
-CORES_MODULE = "ials_zoo.traffic.cores"
 
 
 class SimulationError(RuntimeError):
@@ -136,8 +137,16 @@ def call_core(core, method: str, args: tuple):
         raise w from e
 
 
-def _core_class(name: str):
-    return getattr(importlib.import_module(CORES_MODULE), name)
+def _core_class(path: str):
+    module, _, name = path.partition(":")
+    return getattr(importlib.import_module(module), name)
+
+
+def check_core_path(path) -> str:
+    """``path`` if it reads ``"package.module:Class"``, else a BadInput naming the form."""
+    if not (isinstance(path, str) and path.count(":") == 1 and all(path.split(":"))):
+        raise BadInput(f"a simulation core is named 'package.module:Class', got {path!r}")
+    return path
 
 
 # ----------------------------------------------------------------------------- handle
@@ -170,7 +179,7 @@ class SimHandle:
     """Runs one core in-process or in a worker process (see the module docstring).
 
     Args:
-        core: name of a core class of :mod:`ials_zoo.traffic.cores`.
+        core: the core class as ``"package.module:Class"`` (importable in a fresh worker).
         config: keyword arguments of the core (picklable).
         backend: ``"auto"``, ``"inprocess"`` or ``"worker"``.
         timeout: seconds one worker call may take at most.
@@ -181,7 +190,7 @@ class SimHandle:
                  unresponsive_after: float = 5.0):
         if backend not in BACKENDS:
             raise BadInput(f"unknown backend {backend!r}; expected one of {BACKENDS}")
-        self.core_name = core
+        self.core_name = check_core_path(core)
         self.config = config
         self.timeout = float(timeout)
         self.unresponsive_after = float(unresponsive_after)
