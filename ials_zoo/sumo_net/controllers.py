@@ -1,0 +1,121 @@
+"""Rule-based controllers of ``sumo_net_v0``, as RESCO defines them, and one episode of each.
+
+* ``fixed``: every light runs the network's own program (RESCO's "Fixed Time").
+* ``actuated``: SUMO's actuated control on the network's own phases (an extra row; RESCO has none).
+* ``greedy`` (RESCO's MAXWAVE, ``agents/maxwave.py``; detection within 50 m): each decision,
+  the green whose served incoming lanes hold the most detected vehicles (queue + approach).
+* ``max_pressure`` (RESCO's MAXPRESSURE, ``agents/maxpressure.py``; detection within 200 m):
+  the green with the largest pressure, the sum over the movements it lets go (incoming edge to
+  outgoing edge) of the queue on the movement's incoming lanes minus the queue on the outgoing
+  edge's lanes where they enter another light.
+* ``random``: a uniformly drawn green each decision (RESCO's STOCHASTIC; detection within 1 m).
+
+RESCO scores phase *pairs* from a hand-written table per map (``config/signal_config.py``);
+here every green is scored by the lanes and movements it serves, read from the network, so any
+network works. Ties go to the first green, as ``np.argmax`` does in RESCO.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ials_zoo.errors import BadInput
+from ials_zoo.sumo_net.network import Network
+
+# name -> RESCO's detection distance (m) for it (agent_config.py); None: no detection needed
+CONTROLLERS = {"fixed": 200.0, "actuated": 200.0, "greedy": 50.0, "max_pressure": 200.0, "random": 1.0}
+
+
+def check_controller(name: str) -> str:
+    if name not in CONTROLLERS:
+        raise BadInput(f"unknown controller {name!r}; expected one of {', '.join(CONTROLLERS)}")
+    return name
+
+
+class Greedy:
+    """RESCO's MAXWAVE on any network: the green serving the most detected vehicles."""
+
+    def __init__(self, network: Network):
+        self.rows = {x.id: [[x.lanes.index(lane) for lane in x.served_lanes(a)] for a in range(x.n_actions)]
+                     for x in network.lights}
+
+    def __call__(self, env) -> dict:
+        out = {}
+        for tls in env.agents:
+            m = env.measures(tls)
+            wave = m["queue"] + m["approach"]
+            out[tls] = int(np.argmax([wave[rows].sum() for rows in self.rows[tls]]))
+        return out
+
+
+class MaxPressure:
+    """RESCO's MAXPRESSURE on any network (see the module docstring)."""
+
+    def __init__(self, network: Network):
+        entering = {lane: (x.id, k) for x in network.lights for k, lane in enumerate(x.lanes)}
+        edge_lanes: dict[str, list[str]] = {}
+        for lane, edge in network.lane_edges.items():
+            edge_lanes.setdefault(edge, []).append(lane)
+        self.terms = {}
+        for x in network.lights:
+            per_green = []
+            for a in range(x.n_actions):
+                moves: dict[tuple, set] = {}
+                for lane_in, lane_out in x.movements(a):
+                    key = (network.lane_edges.get(lane_in), network.lane_edges.get(lane_out))
+                    moves.setdefault(key, set()).add(x.lanes.index(lane_in))
+                per_green.append([(sorted(rows), [entering[lane] for lane in edge_lanes.get(out, []) if lane in entering])
+                                  for (_, out), rows in moves.items()])
+            self.terms[x.id] = per_green
+
+    def __call__(self, env) -> dict:
+        queues = {x: env.measures(x)["queue"] for x in env.network.ids}
+        out = {}
+        for tls in env.agents:
+            q = queues[tls]
+            scores = [sum(q[rows].sum() - sum(queues[t][k] for t, k in down) for rows, down in green)
+                      for green in self.terms[tls]]
+            out[tls] = int(np.argmax(scores))
+        return out
+
+
+class Random:
+    """A uniformly drawn green per light per decision."""
+
+    def __init__(self, network: Network, seed: int = 0):
+        self.rng = np.random.default_rng(seed)
+
+    def __call__(self, env) -> dict:
+        return {a: int(self.rng.integers(env.action_space(a).n)) for a in env.agents}
+
+
+def run_episode(controller: str, seed: int, **options) -> dict[str, float]:
+    """One episode of ``controller`` on the network ``options`` name; its metrics (and its
+    wall-clock ``seconds``). Detection uses RESCO's distance for the controller."""
+    import time
+
+    from ials_zoo.sumo_net.env import SumoNetEnv
+
+    check_controller(controller)
+    rule_based = controller in ("greedy", "max_pressure", "random")
+    options = {**options, "max_distance": CONTROLLERS[controller]}
+    if not rule_based:
+        options["learners"] = []
+    env = SumoNetEnv(**options)
+    try:
+        start = time.perf_counter()
+        env.reset(seed=seed)
+        if rule_based:
+            policy = {"greedy": Greedy, "max_pressure": MaxPressure}.get(controller, Random)(env.network)
+            while env.agents:
+                env.step(policy(env))
+        else:
+            env.run_uncontrolled(actuated=controller == "actuated")
+        metrics = env.episode_metrics()
+        metrics["seconds"] = time.perf_counter() - start
+        return metrics
+    finally:
+        env.close()
+
+
+__all__ = ["CONTROLLERS", "Greedy", "MaxPressure", "Random", "check_controller", "run_episode"]

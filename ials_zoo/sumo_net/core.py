@@ -1,0 +1,192 @@
+"""The simulation core of ``sumo_net_v0``: RESCO's signal loop, where libsumo lives.
+
+Runs in the process that owns the simulation (this one under the lease, or a worker; see
+:mod:`ials_zoo.sumo.lease`): one call per decision. Read from RESCO's code
+(``resco_benchmark/traffic_signal.py`` and ``multi_signal.py``, Pi-Star-Lab/RESCO):
+
+* a controlled light gets a static program of its greens followed by one yellow per ordered
+  pair of greens that needs one (``create_yellows``); the actions index the greens;
+* one decision: every controlled light whose action differs from its current phase index is
+  set to the yellow of (current, action) if there is one; ``yellow`` seconds pass; every
+  controlled light is set to its action (``setPhase``: the timer restarts, the net's own phase
+  duration applies, so a green shorter than the rest of the interval moves on by itself, as
+  in RESCO); the rest of the interval passes; then every light observes;
+* observing a light: the vehicles on its incoming lanes whose next light is at most
+  ``max_distance`` m ahead; a vehicle's wait starts at SUMO's waiting time when first seen
+  stopped and then grows by the decision interval each observation until it leaves the zone
+  (RESCO's own bookkeeping); ``queue`` counts those with a wait, ``approach`` the others.
+
+Lights that are not controlled run their own program from the network file.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ials_zoo.sumo.command import close_any_simulation, sumo_command
+from ials_zoo.sumo.lease import import_libsumo
+from ials_zoo.sumo_net.metrics import episode_metrics
+
+# per incoming lane: vehicles approaching, RESCO's total wait (s), queue, sum of speeds (m/s), max wait
+MEASURES = ("approach", "total_wait", "queue", "speed_sum", "max_wait")
+
+
+def yellow_program(greens: list[str], yellow_seconds: int) -> tuple[list[tuple[int, str]], dict]:
+    """RESCO's ``create_yellows``: the yellows after the greens, and ``(i, j) -> yellow index``."""
+    yellows, index = [], {}
+    for i, a in enumerate(greens):
+        for j, b in enumerate(greens):
+            if i == j:
+                continue
+            need = [x in "Gg" and y in "rs" for x, y in zip(a, b)]
+            if any(need):
+                yellows.append((yellow_seconds, "".join("y" if n else x for n, x in zip(need, a))))
+                index[(i, j)] = len(greens) + len(yellows) - 1
+    return yellows, index
+
+
+class _Signal:
+    """One light's RESCO bookkeeping: its detected vehicles and their waits."""
+
+    def __init__(self, lanes):
+        self.lanes = list(lanes)
+        self.waits: dict[str, float] = {}
+        self.seen: set | None = None
+
+    def observe(self, ls, interval: int, max_distance: float) -> np.ndarray:
+        out = np.zeros((len(self.lanes), len(MEASURES)), np.float64)
+        now = set()
+        v = ls.vehicle
+        for row, lane in enumerate(self.lanes):
+            for veh in ls.lane.getLastStepVehicleIDs(lane):
+                nxt = v.getNextTLS(veh)
+                if not nxt or nxt[0][2] > max_distance:
+                    continue
+                now.add(veh)
+                if veh in self.waits:
+                    self.waits[veh] += interval
+                else:
+                    w = v.getWaitingTime(veh)
+                    if w > 0:
+                        self.waits[veh] = w
+                wait = self.waits.get(veh, 0.0)
+                m = out[row]
+                if wait > 0:
+                    m[1] += wait
+                    m[2] += 1
+                    m[4] = max(m[4], wait)
+                else:
+                    m[0] += 1
+                m[3] += v.getSpeed(veh)
+        if self.seen is not None:
+            for veh in self.seen - now:
+                self.waits.pop(veh, None)
+        self.seen = now
+        return out
+
+
+class NetCore:
+    """RESCO's multi-signal loop over one network (see the module docstring).
+
+    Config: ``net_file``, ``route_files``, ``begin``, ``end``, ``decision``, ``yellow``
+    (seconds), ``lights`` (every light's id, observed in this order), ``lanes`` (their incoming
+    lanes), ``greens`` (their green phases as ``(duration, state)``), ``controlled`` (the ids driven by actions),
+    ``max_distance`` (m), ``extra`` (more SUMO options).
+    """
+
+    def __init__(self, net_file, route_files, begin, end, decision, yellow, lights, lanes, greens, controlled,
+                 max_distance=200.0, extra=()):
+        self.ls = import_libsumo()
+        self.files = (net_file, tuple(route_files))
+        self.begin, self.end = int(begin), int(end)
+        self.decision, self.yellow = int(decision), int(yellow)
+        self.lights = list(lights)
+        self.lanes = [list(x) for x in lanes]
+        self.greens = {t: [(float(d), str(s)) for d, s in g] for t, g in zip(self.lights, greens)}
+        self.controlled = list(controlled)
+        self.max_distance = float(max_distance)
+        self.extra = tuple(extra)
+        self.running = False
+        self.tripinfo = None
+        self.signals: list[_Signal] = []
+        self._yellow_index: dict[str, dict] = {}
+        self._queues: list[float] = []
+
+    def _command(self, seed: int, tripinfo: str | None) -> list[str]:
+        net, routes = self.files
+        extra = ["--begin", str(self.begin), "--end", str(self.end), "--time-to-teleport", "-1", *self.extra]
+        if tripinfo:
+            extra += ["--tripinfo-output", tripinfo, "--tripinfo-output.write-unfinished", "true"]
+        return sumo_command(seed, net=net, routes=routes, extra=extra)
+
+    def _install(self, tls: str) -> None:
+        """Replace the light's program by RESCO's: its greens, then the yellows."""
+        tl = self.ls.trafficlight
+        greens = self.greens[tls]
+        yellows, self._yellow_index[tls] = yellow_program([s for _, s in greens], self.yellow)
+        logic = tl.getAllProgramLogics(tls)[0]
+        logic.type = 0
+        logic.phases = [tl.Phase(d, s) for d, s in greens + yellows]
+        tl.setProgramLogic(tls, logic)
+
+    def reset(self, seed: int, tripinfo: str | None = None):
+        """Start an episode; returns ``(measures [lanes, 5], phases [lights], time)``."""
+        close_any_simulation(self)
+        self.ls.start(self._command(seed, tripinfo))
+        self.running, self.tripinfo = True, tripinfo
+        for tls in self.controlled:
+            self._install(tls)
+        self.signals = [_Signal(lanes) for lanes in self.lanes]
+        self._queues = []
+        return self._observe()
+
+    def _observe(self):
+        ls = self.ls
+        measures = [s.observe(ls, self.decision, self.max_distance) for s in self.signals]
+        phases = np.array([ls.trafficlight.getPhase(t) for t in self.lights], np.int64)
+        self._queues.append(float(np.mean([m[:, 2].sum() for m in measures])))
+        return np.concatenate(measures), phases, float(ls.simulation.getTime())
+
+    def step(self, actions):
+        """One decision of the controlled lights (green indices, in ``controlled`` order)."""
+        tl = self.ls.trafficlight
+        step = self.ls._libsumo.simulation_step  # the raw call: no TraCI step listeners
+        actions = [int(a) for a in actions]
+        for tls, a in zip(self.controlled, actions):
+            current = tl.getPhase(tls)
+            if current != a and (current, a) in self._yellow_index[tls]:
+                tl.setPhase(tls, self._yellow_index[tls][(current, a)])
+        for _ in range(self.yellow):
+            step(0.0)
+        for tls, a in zip(self.controlled, actions):
+            tl.setPhase(tls, a)
+        for _ in range(self.decision - self.yellow):
+            step(0.0)
+        return self._observe()
+
+    def make_actuated(self) -> None:
+        """Every light on SUMO's actuated control of its own program's phases (type 3)."""
+        tl = self.ls.trafficlight
+        for tls in self.lights:
+            logic = tl.getAllProgramLogics(tls)[0]
+            tl.setProgramLogic(tls, tl.Logic("actuated", 3, tl.getPhase(tls), logic.phases))
+
+    def finish(self) -> dict:
+        """End the episode (SUMO writes the unfinished trips) and return its metrics."""
+        close_any_simulation(self)
+        out = {"queue": float(np.mean(self._queues[1:])) if len(self._queues) > 1 else 0.0}
+        if self.tripinfo:
+            out.update(episode_metrics(self.tripinfo, self.files[1], self.end))
+        return out
+
+    def query(self, domain: str, method: str, *args):
+        """A read-only libsumo getter (``domain.method(*args)``), for viewers and tests."""
+        if not method.startswith("get"):
+            raise ValueError(f"only getters may be queried, not {method!r}")
+        return getattr(getattr(self.ls, domain), method)(*args)
+
+    def close(self):
+        close_any_simulation(self)
+
+
+__all__ = ["MEASURES", "NetCore", "yellow_program"]

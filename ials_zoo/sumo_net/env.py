@@ -1,0 +1,311 @@
+"""``sumo_net_v0``: traffic-signal control on any SUMO network, RESCO's MDP by default (PettingZoo)."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+
+import numpy as np
+from gymnasium import spaces
+from pettingzoo import ParallelEnv
+from pettingzoo.utils.conversions import parallel_to_aec, parallel_to_aec_wrapper
+
+from ials_zoo.errors import BadInput, BadInputType
+from ials_zoo.sumo.lease import SimHandle
+from ials_zoo.sumo_net.core import MEASURES
+from ials_zoo.sumo_net.mdp import N_FEATURES, observation_fn, reward_fn
+from ials_zoo.sumo_net.network import read_network
+from ials_zoo.sumo_net.scenario import make_scenario
+from ials_zoo.utils import check_reset_options, check_seed
+
+ENV_ID = "sumo_net_v0"
+SUMO_SEED_MAX = 2**31 - 2
+SCENARIO_OPTIONS = ("net", "sumocfg", "net_file", "route_files", "begin", "end", "decision_seconds", "yellow_seconds")
+OPTIONS = (*SCENARIO_OPTIONS, "learners", "max_distance", "observation", "reward", "backend", "render_mode")
+
+
+def possible_agents(**options) -> list[str]:
+    """Every signalised junction of the network the options name (traffic-light ids, file order)."""
+    scenario = make_scenario(**{k: options.get(k) for k in SCENARIO_OPTIONS})
+    return read_network(scenario.net_file).ids
+
+
+def _check_distance(value) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) or not value > 0:
+        raise BadInput(f"max_distance must be a positive number of metres, got {value!r}")
+    return float(value)
+
+
+def _learner_ids(learners, all_ids: list[str]) -> list[str]:
+    if learners is None:
+        return list(all_ids)
+    if isinstance(learners, str):
+        learners = [x.strip() for x in learners.split(",") if x.strip()]
+    learners = list(learners)
+    unknown = [x for x in learners if x not in all_ids]
+    if unknown:
+        shown = ", ".join(all_ids[:8]) + (f", ... ({len(all_ids)} in all)" if len(all_ids) > 8 else "")
+        raise BadInput(f"learners: unknown traffic light(s) {unknown}; this network has {shown}")
+    if len(set(learners)) != len(learners):
+        raise BadInput(f"learners: duplicates in {learners}")
+    return [x for x in all_ids if x in learners]  # network order
+
+
+class SumoNetEnv(ParallelEnv):
+    """Traffic-signal control on any SUMO network (``sumo_net_v0``), RESCO's MDP by default.
+
+    **Networks**: ``net=`` one of RESCO's maps (grid4x4, arterial4x4, cologne1, cologne3,
+    cologne8, ingolstadt1, ingolstadt7, ingolstadt21; files from the ``sumo-rl`` wheel),
+    ``sumocfg=PATH``, or ``net_file=PATH`` with ``route_files=``; ``begin``/``end`` (s) override
+    the map's hour (Cologne 25,200-28,800, Ingolstadt 57,600-61,200, the grids 0-3,600). Known
+    differences of the wheel's files from RESCO's (Ault & Sharon, NeurIPS 2021 Datasets and
+    Benchmarks; github Pi-Star-Lab/RESCO): ingolstadt7 and ingolstadt21 lack one 25 s green of
+    one junction (3 actions there, 4 in RESCO), and grid4x4/arterial4x4 have only their first
+    per-episode route file (here every episode uses it, with its own SUMO seed).
+
+    **Agents**: every signalised junction (a ``tlLogic`` that controls a lane), named by its
+    traffic-light id. ``learners`` (default: all) are driven by actions; the others run the
+    network's own program.
+
+    **Action** (RESCO's): ``Discrete(n)``, ``n`` = the light's green phases in program 0
+    (phases with no ``y`` and some ``g``/``G``, file order; 2 to 8 on RESCO's maps). A change
+    of green shows RESCO's yellow first (3 s; arterial4x4 2 s); there is no minimum green.
+
+    **Step**: one decision every ``decision_seconds`` of simulated time (10; arterial4x4 5),
+    1 s SUMO steps, ``--time-to-teleport -1`` (no teleports). See :mod:`ials_zoo.sumo_net.core`
+    for RESCO's signal loop, which this reproduces (its yellows, ``setPhase`` on the net's phase
+    durations, its detection within ``max_distance`` m and its wait bookkeeping).
+
+    **Observation** (``observation="drq_norm"``, RESCO's for IDQN and IPPO):
+    ``Box(0, inf, (5 * lanes,), float32)``, per incoming lane in controlled-link order
+    ``[lane index == current phase index, approach / 28, total wait / 28, queue / 28, speed sum
+    / 560]`` (row-major). ``"drq"``: the same without the scaling.
+
+    **Reward** (``reward="wait_norm"``, RESCO's): ``clip(-total wait / 224, -4, 4)`` of the
+    light's detected vehicles; ``"wait"`` and ``"queue"`` are offered too.
+
+    **Episode end**: truncation when SUMO's clock reaches ``end`` (360 decisions on RESCO's maps).
+
+    **Metrics** (``episode_metrics()`` after the last step; ``ials_zoo.sumo_net.metrics``):
+    RESCO's average delay per vehicle (``delay``, from SUMO's tripinfo as RESCO reads it),
+    ``delay_all``, ``trip_time``, ``waiting_time``, ``throughput``, ``vehicles`` and ``queue``
+    (the mean over decisions of the mean over lights of their detected queue).
+
+    **State** (``state()``): every light's observation, concatenated in network order.
+
+    **Seeding**: ``reset(seed=s)`` runs SUMO with ``--seed s``; the same seed and actions give
+    the same episode. **SUMO**: one core call per decision through
+    :class:`ials_zoo.sumo.lease.SimHandle` (``backend`` ``"auto"``, ``"inprocess"``, ``"worker"``).
+
+    **Rendering**: ``"ansi"`` (one line per light: its phase and queue), ``"human"`` prints it.
+
+    Version history: v0 -- first version.
+    """
+
+    metadata = {"name": ENV_ID, "render_modes": ["ansi", "human"], "is_parallelizable": True, "render_fps": 10}
+
+    def __init__(self, net=None, sumocfg=None, net_file=None, route_files=None, begin=None, end=None,
+                 decision_seconds=None, yellow_seconds=None, learners=None, max_distance=200.0,
+                 observation="drq_norm", reward="wait_norm", backend="auto", render_mode=None, **unknown):
+        if unknown:
+            raise BadInputType(f"unknown option(s) {sorted(unknown)} for {ENV_ID}; valid options: {', '.join(OPTIONS)}")
+        if render_mode not in (None, *self.metadata["render_modes"]):
+            raise BadInput(f"unknown render_mode {render_mode!r}; expected None or one of {self.metadata['render_modes']}")
+        self.render_mode = render_mode
+        self._observe, self._reward = observation_fn(observation), reward_fn(reward)
+        self.scenario = make_scenario(net, sumocfg, net_file, route_files, begin, end, decision_seconds, yellow_seconds)
+        self.network = read_network(self.scenario.net_file)
+        self.max_distance = _check_distance(max_distance)
+        self.possible_agents = _learner_ids(learners, self.network.ids)
+        self.agents = []
+        lights = self.network.lights
+        self._rows = np.cumsum([0] + [len(x.lanes) for x in lights])
+        self._index = {x.id: k for k, x in enumerate(lights)}
+        self.observation_spaces = {
+            x.id: spaces.Box(0.0, np.inf, (N_FEATURES * len(x.lanes),), np.float32) for x in lights}
+        self.action_spaces = {x.id: spaces.Discrete(x.n_actions) for x in lights}
+        self.state_space = spaces.Box(0.0, np.inf, (int(self._rows[-1]) * N_FEATURES,), np.float32)
+        self._tmp = tempfile.mkdtemp(prefix="ials_zoo_sumo_net_")
+        self._sim = SimHandle("ials_zoo.sumo_net.core:NetCore", self._core_config(), backend)
+        self.backend = self._sim.mode
+        self._seed_rng = np.random.default_rng()
+        self._measures, self._phases, self._time = None, None, 0.0
+        self._metrics, self._episodes = None, 0
+
+    def _core_config(self) -> dict:
+        s, lights = self.scenario, self.network.lights
+        return {
+            "net_file": s.net_file, "route_files": list(s.route_files), "begin": s.begin, "end": s.end,
+            "decision": s.decision_seconds, "yellow": s.yellow_seconds, "lights": [x.id for x in lights],
+            "lanes": [list(x.lanes) for x in lights],
+            "greens": [[x.phases[i] for i in x.greens] for x in lights],
+            "controlled": list(self.possible_agents), "max_distance": self.max_distance,
+        }
+
+    # -- spaces
+    def observation_space(self, agent):
+        return self.observation_spaces[self._check_agent(agent)]
+
+    def action_space(self, agent):
+        return self.action_spaces[self._check_agent(agent)]
+
+    def _check_agent(self, agent):
+        if agent not in self.possible_agents:
+            raise BadInput(f"unknown agent {agent!r}; agents: {self.possible_agents}")
+        return agent
+
+    # -- episode
+    def _light_measures(self, tls: str) -> np.ndarray:
+        k = self._index[tls]
+        return self._measures[self._rows[k]:self._rows[k + 1]]
+
+    def observe(self, tls: str) -> np.ndarray:
+        """Light ``tls``'s observation now (any light, learner or not)."""
+        return self._observe(self._light_measures(tls), int(self._phases[self._index[tls]]))
+
+    def measures(self, tls: str) -> dict[str, np.ndarray]:
+        """Light ``tls``'s raw per-lane measures now (:data:`ials_zoo.sumo_net.core.MEASURES`),
+        lanes in its observation order; for rule-based controllers."""
+        m = self._light_measures(tls)
+        return {name: m[:, i].copy() for i, name in enumerate(MEASURES)}
+
+    def _store(self, result) -> None:
+        self._measures, self._phases, self._time = result
+
+    def reset(self, seed=None, options=None):
+        """Start an episode (``options``: none are known; PettingZoo's API)."""
+        check_reset_options(options)
+        seed = check_seed(seed, upper=SUMO_SEED_MAX)
+        if seed is not None:
+            self._seed_rng = np.random.default_rng(seed)
+        else:
+            seed = int(self._seed_rng.integers(SUMO_SEED_MAX + 1))
+        self._episodes += 1
+        self._metrics = None
+        tripinfo = os.path.join(self._tmp, f"tripinfo_{self._episodes}.xml")
+        self._store(self._sim.call("reset", seed, tripinfo))
+        self.agents = list(self.possible_agents)
+        return {a: self.observe(a) for a in self.agents}, {a: {} for a in self.agents}
+
+    def _actions(self, actions) -> list[int]:
+        if not isinstance(actions, dict):
+            raise BadInputType(f"actions must be a dict agent -> action, got {type(actions).__name__}")
+        extra = [a for a in actions if a not in self.agents]
+        if extra:
+            raise BadInput(f"actions for unknown agent(s) {extra}; agents: {self.agents}")
+        missing = [a for a in self.agents if a not in actions]
+        if missing:
+            raise BadInput(f"missing actions for agent(s) {missing}")
+        out = []
+        for a in self.agents:
+            act = actions[a]
+            n = self.action_spaces[a].n
+            if isinstance(act, (bool, np.bool_)) or not isinstance(act, (int, np.integer)) and not (
+                    isinstance(act, np.ndarray) and act.shape == () and np.issubdtype(act.dtype, np.integer)):
+                raise BadInputType(f"action of {a!r} must be an int in [0, {n}), got {act!r}")
+            if not 0 <= int(act) < n:
+                raise BadInput(f"action of {a!r} must be in [0, {n}) (its green phases), got {int(act)}")
+            out.append(int(act))
+        return out
+
+    def step(self, actions):
+        if not self.agents:
+            raise RuntimeError("step() called on a finished episode; call reset() first")
+        self._store(self._sim.call("step", self._actions(actions)))
+        done = self._time >= self.scenario.end
+        if done:
+            self._metrics = self._sim.call("finish")
+        obs = {a: self.observe(a) for a in self.agents}
+        rewards = {a: self._reward(self._light_measures(a), int(self._phases[self._index[a]])) for a in self.agents}
+        terms = {a: False for a in self.agents}
+        truncs = {a: done for a in self.agents}
+        infos = {a: {} for a in self.agents}
+        if done:
+            self.agents = []
+        return obs, rewards, terms, truncs, infos
+
+    def run_uncontrolled(self, actuated: bool = False) -> dict[str, float]:
+        """Run the episode started by :meth:`reset` to its end with no learner acting (every
+        light on its own program; ``actuated``: on SUMO's actuated control of the program's
+        phases); returns :meth:`episode_metrics`."""
+        if self.possible_agents:
+            raise BadInput("run_uncontrolled() needs learners=[] (every light on its own program)")
+        if self._measures is None or self._metrics is not None:
+            raise RuntimeError("run_uncontrolled() needs a fresh reset()")
+        if actuated:
+            self._sim.call("make_actuated")
+        while self._time < self.scenario.end:
+            self._store(self._sim.call("step", []))
+        self._metrics = self._sim.call("finish")
+        return self.episode_metrics()
+
+    # -- extras
+    def state(self) -> np.ndarray:
+        """Every light's observation, concatenated in network order (float32)."""
+        if self._measures is None:
+            raise RuntimeError("state() before reset()")
+        return np.concatenate([self.observe(x) for x in self.network.ids]).astype(np.float32)
+
+    def enable_metrics(self) -> None:
+        """Metrics are always recorded (SUMO's tripinfo of every episode); kept for the domain contract."""
+
+    def episode_metrics(self) -> dict[str, float]:
+        """The metrics of the episode that just ended (see the class docstring)."""
+        if self._metrics is None:
+            raise RuntimeError("episode_metrics() before the end of an episode")
+        return dict(self._metrics)
+
+    @property
+    def sim_time(self) -> float:
+        """SUMO's clock (s)."""
+        return self._time
+
+    def sumo_query(self, domain: str, method: str, *args):
+        """Call a libsumo getter on this env's simulation, e.g. ``("lane", "getLength", id)``."""
+        return self._sim.call("query", domain, method, *args)
+
+    def render(self):
+        if self.render_mode is None or self._measures is None:
+            return None
+        lines = [f"t={self._time:.0f} s"]
+        for x in self.network.ids:
+            q = int(self._light_measures(x)[:, 2].sum())
+            mark = "*" if x in self.possible_agents else " "
+            lines.append(f"{mark}{x[:40]:<40} phase {int(self._phases[self._index[x]]):>2d} queue {q:>3d}")
+        text = "\n".join(lines)
+        if self.render_mode == "human":
+            print(text, flush=True)
+            return None
+        return text
+
+    def close(self):
+        sim = getattr(self, "_sim", None)
+        if sim is not None:
+            sim.close()
+        tmp = getattr(self, "_tmp", None)
+        if tmp:
+            shutil.rmtree(tmp, ignore_errors=True)
+            self._tmp = None
+        self.agents = []
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:
+            pass
+
+
+def raw_env(**options):
+    """The AEC version without wrappers (PettingZoo's ``raw_env`` convention)."""
+    return parallel_to_aec_wrapper(SumoNetEnv(**options))
+
+
+def parallel_env(**options) -> SumoNetEnv:
+    """``sumo_net_v0`` as a PettingZoo ``ParallelEnv``."""
+    return SumoNetEnv(**options)
+
+
+def env(**options):
+    """``sumo_net_v0`` as a PettingZoo AEC env (via ``parallel_to_aec``)."""
+    return parallel_to_aec(parallel_env(**options))

@@ -1,0 +1,68 @@
+"""Observations and rewards of ``sumo_net_v0``: small pluggable functions, RESCO's by default.
+
+Each takes one light's measures (``[lanes, 5]``: approach, total wait, queue, speed sum, max
+wait; :data:`ials_zoo.sumo_net.core.MEASURES`) and its current phase index, and returns the
+agent's observation (float32, flat) or reward (float). Read from RESCO's ``states.py`` and
+``rewards.py``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ials_zoo.errors import BadInput
+
+N_FEATURES = 5
+
+
+def drq(measures: np.ndarray, phase: int) -> np.ndarray:
+    """RESCO's ``drq``: per lane ``[lane index == phase index, approach, total wait, queue,
+    speed sum]`` (the first entry is RESCO's: a lane marker, not a one-hot of the phase)."""
+    n = len(measures)
+    out = np.zeros((n, N_FEATURES), np.float32)
+    if 0 <= phase < n:
+        out[phase, 0] = 1.0
+    out[:, 1:] = measures[:, :4]
+    return out.reshape(-1)
+
+
+def drq_norm(measures: np.ndarray, phase: int) -> np.ndarray:
+    """RESCO's ``drq_norm`` (IDQN, IPPO): ``drq`` with counts and waits over 28, speeds over 20 * 28."""
+    out = drq(measures, phase).reshape(-1, N_FEATURES)
+    out[:, 1:4] /= 28.0
+    out[:, 4] /= 20.0 * 28.0
+    return out.reshape(-1)
+
+
+def wait_norm(measures: np.ndarray, phase: int) -> float:
+    """RESCO's ``wait_norm`` (IDQN, IPPO): ``clip(-total wait / 224, -4, 4)``."""
+    return float(np.clip(-measures[:, 1].sum() / 224.0, -4.0, 4.0))
+
+
+def wait(measures: np.ndarray, phase: int) -> float:
+    """RESCO's ``wait``: minus the total wait of the light's detected vehicles (s)."""
+    return float(-measures[:, 1].sum())
+
+
+def queue(measures: np.ndarray, phase: int) -> float:
+    """Minus the light's queue (vehicles that stopped within detection)."""
+    return float(-measures[:, 2].sum())
+
+
+OBSERVATIONS = {"drq_norm": drq_norm, "drq": drq}
+REWARDS = {"wait_norm": wait_norm, "wait": wait, "queue": queue}
+
+
+def observation_fn(name: str):
+    if name not in OBSERVATIONS:
+        raise BadInput(f"unknown observation {name!r}; expected one of {', '.join(OBSERVATIONS)}")
+    return OBSERVATIONS[name]
+
+
+def reward_fn(name: str):
+    if name not in REWARDS:
+        raise BadInput(f"unknown reward {name!r}; expected one of {', '.join(REWARDS)}")
+    return REWARDS[name]
+
+
+__all__ = ["N_FEATURES", "OBSERVATIONS", "REWARDS", "drq", "drq_norm", "observation_fn", "reward_fn", "wait", "wait_norm"]
