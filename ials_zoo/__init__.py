@@ -21,7 +21,7 @@ declare it in the ``ials_zoo.domains`` entry point group).
 """
 
 from ials_zoo._version import __version__
-from ials_zoo.core.domains import Domain, domain_ids, get_domain, register_domain
+from ials_zoo.core.domains import Domain, domain_ids, get_domain, ials_domain_ids, register_domain
 from ials_zoo.core.gym_ids import register_ials
 
 
@@ -39,7 +39,7 @@ def make_ials_parallel_env(*args, **kwargs):
     return _make(*args, **kwargs)
 
 
-for _env_id in domain_ids():  # every domain's IALS as a Gymnasium id (ials_zoo.core.gym_ids)
+for _env_id in ials_domain_ids():  # every IALS domain's IALS as a Gymnasium id (ials_zoo.core.gym_ids)
     register_ials(_env_id)
 del _env_id
 

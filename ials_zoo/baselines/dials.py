@@ -76,7 +76,7 @@ from ials_zoo.baselines.multiagent import (
     settings_of,
     whole_updates,
 )
-from ials_zoo.core.domains import domain_ids, get_domain
+from ials_zoo.core.domains import get_domain, ials_domain_ids
 from ials_zoo.core.extras import dials_of, study_of
 from ials_zoo.dials.backends import BACKENDS, InProcessBackend, check_ray_address, make_backend
 from ials_zoo.dials.shard import LEARNERS, ShardSpec, split_agents
@@ -100,7 +100,7 @@ AIP_TRAININGS = ("dials", "fidelity")
 
 def _per_domain(describe) -> str:
     """``"<env_id> <what>, ..."`` for every known domain (help texts read from the data)."""
-    return ", ".join(f"{env_id} {describe(get_domain(env_id))}" for env_id in domain_ids())
+    return ", ".join(f"{env_id} {describe(get_domain(env_id))}" for env_id in ials_domain_ids())
 
 
 def _fidelity_text(domain) -> str:
@@ -169,8 +169,8 @@ def parse_refresh(text: str, default: int) -> int | None:
 def check_args(args: Args):
     """Clear errors before anything starts; returns (domain, agents, options, refresh, copies)."""
     if args.env_id is None:
-        raise BadInput(f"name the domain to train on: --env, one of {', '.join(domain_ids())}")
-    domain = get_domain(args.env_id)
+        raise BadInput(f"name the domain to train on: --env, one of {', '.join(ials_domain_ids())}")
+    domain = get_domain(args.env_id).require_ials("train dials")
     options = parse_env_options(args.env_options)
     agents = domain.check_agents(None if args.agents == "all" else args.agents, **options)
     check_seed(args.seed, "seed")

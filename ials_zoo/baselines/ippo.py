@@ -37,7 +37,7 @@ from ials_zoo.baselines.multiagent import (
     settings_of,
     whole_updates,
 )
-from ials_zoo.core.domains import domain_ids, get_domain
+from ials_zoo.core.domains import get_domain, ials_domain_ids
 from ials_zoo.core.extras import study_of
 from ials_zoo.errors import BadInput
 from ials_zoo.learners.batched_ppo import BatchedPPO, PPOConfig
@@ -59,11 +59,11 @@ class Args(MultiAgentRunArgs):
 def check_args(args: Args):
     """Clear errors before anything starts; returns (domain, agents, options, worker processes)."""
     if args.env_id is None:
-        raise BadInput(f"name the domain to train on: --env, one of {', '.join(domain_ids())}")
+        raise BadInput(f"name the domain to train on: --env, one of {', '.join(ials_domain_ids())}")
     if args.simulator != "gs":
         raise BadInput(f"ippo trains on the GS (--simulator gs); every agent on its own IALS is `ials-zoo train "
                          f"dials`, not --simulator {args.simulator!r}")
-    domain = get_domain(args.env_id)
+    domain = get_domain(args.env_id).require_ials("train ippo")
     options = parse_env_options(args.env_options)
     agents = domain.check_agents(None if args.agents == "all" else args.agents, **options)
     check_seed(args.seed, "seed")

@@ -50,7 +50,7 @@ from ials_zoo.baselines.sb3_run import (
     ppo_speed,
     sb3_env,
 )
-from ials_zoo.core.domains import domain_ids, get_domain
+from ials_zoo.core.domains import get_domain, ials_domain_ids
 from ials_zoo.errors import BadInput
 
 
@@ -162,10 +162,10 @@ def main(args: Args | None = None) -> list[dict]:
     args = args or Args()
 
     if args.env_id is None:
-        raise BadInput(f"name the domain to train on: --env, one of {', '.join(domain_ids())}")
+        raise BadInput(f"name the domain to train on: --env, one of {', '.join(ials_domain_ids())}")
     check_ppo_args(args, positive=("total_timesteps", "n_copies"))
     torch.set_num_threads(1)
-    dom = get_domain(args.env_id)
+    dom = get_domain(args.env_id).require_ials("train ppo_shared")
     options = parse_env_options(args.env_options)
     learners = _agent_list(args.learners, args.env_id, dom.agents(**options), **options)
     default_eval = [a for a in dom.default_agents if a in learners] or learners[:1]

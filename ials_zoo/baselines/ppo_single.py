@@ -80,7 +80,7 @@ from ials_zoo.baselines.sb3_run import (
     ppo_speed,
     sb3_env,
 )
-from ials_zoo.core.domains import domain_ids, get_domain
+from ials_zoo.core.domains import get_domain, ials_domain_ids
 from ials_zoo.core.extras import dials_of, study_of
 from ials_zoo.errors import BadInput
 from ials_zoo.influence.ials import make_ials_vec_env, trained_predictor
@@ -161,7 +161,7 @@ def check_args(args: Args) -> None:
     """Clear errors for bad arguments before anything is built."""
 
     if args.env_id is None:
-        raise BadInput(f"name the domain to train on: --env, one of {', '.join(domain_ids())}")
+        raise BadInput(f"name the domain to train on: --env, one of {', '.join(ials_domain_ids())}")
     check_ppo_args(args, positive=("total_timesteps",))
     predictor_for(args.simulator)
 
@@ -208,7 +208,7 @@ def main(args: Args | None = None) -> dict:
     args = args or Args()
     check_args(args)
     torch.set_num_threads(1)
-    dom = get_domain(args.env_id)
+    dom = get_domain(args.env_id).require_ials("train ppo_single")
     options = parse_env_options(args.env_options)
     agent = dom.check_agent(args.agent or dom.default_agents[0], **options)
     args.n_steps, args.batch_size = update_size(args, dom)

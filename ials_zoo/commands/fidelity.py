@@ -58,7 +58,7 @@ def run(args) -> int:
     import os
 
 
-    domain = get_domain(args.env)
+    domain = get_domain(args.env).require_ials("fidelity")
     if args.episodes < 2:
         raise BadInput(f"--episodes must be >= 2 (intervals over episodes), got {args.episodes}")
     if not args.tolerance >= 0:

@@ -10,13 +10,13 @@ uniform random policy (:func:`ials_zoo.influence.rates.influence_rates`).
 from __future__ import annotations
 
 from ials_zoo.commands import CommandError
-from ials_zoo.core.domains import domain_ids, get_domain
+from ials_zoo.core.domains import get_domain, ials_domain_ids
 from ials_zoo.influence.rates import influence_rates
 from ials_zoo.influence.specs import parse_predictor
 
 
 def configure(parser):
-    parser.add_argument("--env", required=True, choices=domain_ids(), help="domain id")
+    parser.add_argument("--env", required=True, choices=ials_domain_ids(), help="domain id")
     parser.add_argument("--agent", default=None, help="agent (default: the domain's first paper agent)")
     parser.add_argument("--predictors", default="untrained,fixed:0.1,trained",
                         help="comma-separated predictor specs")

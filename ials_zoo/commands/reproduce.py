@@ -26,7 +26,7 @@ curves are flat from ~100k steps) and 500,000 per memory-experiment run; see ``-
 
 from __future__ import annotations
 
-from ials_zoo.core.domains import domain_ids
+from ials_zoo.core.domains import ials_domain_ids
 from ials_zoo.core.extras import study_of
 from ials_zoo.errors import BadInput
 from ials_zoo.reproduce import build_plan, describe_plan, settings
@@ -52,7 +52,7 @@ def configure(parser):
     c = Config()
     parser.add_argument("--experiments", default=",".join(EXPERIMENTS),
                         help=f"comma-separated, some of {','.join(EXPERIMENTS)} (default: all)")
-    parser.add_argument("--domains", default=",".join(domain_ids()), help="comma-separated domain ids (default: all)")
+    parser.add_argument("--domains", default=",".join(ials_domain_ids()), help="comma-separated domain ids (default: all)")
     parser.add_argument("--agents", default="",
                         help="learning agents, e.g. tls_12,tls_18 (default: robot_20 and tls_12)")
     parser.add_argument("--simulators", default=",".join(DEFAULT_SIMULATORS),
@@ -66,7 +66,7 @@ def configure(parser):
                              f"default {DEFAULT_MEMORY_BUDGET}, or the warehouse's budget when --budget is given)")
     parser.add_argument("--dials-budget", default=None,
                         help="steps per agent of each multi-agent run: N, and/or DOMAIN=N pairs (default: "
-                             + ", ".join(f"{d}={study_of(d).multi_agent_budget}" for d in domain_ids()) + ")")
+                             + ", ".join(f"{d}={study_of(d).multi_agent_budget}" for d in ials_domain_ids()) + ")")
     parser.add_argument("--dials-variants", default=",".join(DEFAULT_DIALS_VARIANTS),
                         help=f"multi-agent runs of the dials experiment, some of {','.join(DIALS_VARIANTS)} "
                              f"(default: all but {','.join(v for v in DIALS_VARIANTS if v not in DEFAULT_DIALS_VARIANTS)})")

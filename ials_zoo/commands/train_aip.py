@@ -119,7 +119,7 @@ def _train_set(args, progress: bool) -> int:
     if not args.env:
         raise CommandError("give --env")
     options = check_collect_arguments(args)
-    domain = get_domain(args.env)
+    domain = get_domain(args.env).require_ials("train-aip")
     agents = domain.check_agents(None if args.agent == "all" else args.agent, **options)
     d = dials_of(domain)
     arch = args.arch or d.aip_arch

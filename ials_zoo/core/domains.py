@@ -52,13 +52,17 @@ class Domain:
             other agent is scripted. It reports the region data of
             :mod:`ials_zoo.core.region` in its infos and has ``region_spec(agent)``.
         local_simulator: ``local_simulator(agent, n_envs=1, **options) -> LocalSimulator``;
-            accepts (and ignores) the GS-only options.
-        region_spec: ``region_spec(agent, **options) -> RegionSpec`` without building a GS.
+            accepts (and ignores) the GS-only options. None for a domain that has a GS only
+            (no IALS yet: :attr:`has_ials` is False, and the IALS tools refuse it by name).
+        region_spec: ``region_spec(agent, **options) -> RegionSpec`` without building a GS
+            (None without a local simulator).
         possible_agents: ``possible_agents(**options) -> list[str]``: every agent id of the
             GS under these options.
-        observation_space, action_space: every agent's spaces (the same for all agents).
+        observation_space, action_space: every agent's spaces (the same for all agents); None
+            where agents have their own (the GS's ``observation_space(agent)`` says).
         default_agents: the agents the paper trained (their AIPs ship with the package).
-        default_predictor: ``"gru"`` or ``"mlp"``, the AIP architecture of the paper.
+        default_predictor: ``"gru"`` or ``"mlp"``, the AIP architecture of the paper (None
+            without a local simulator).
         episode_length: default episode length (steps; every episode ends by truncation).
         frame_stack: observations the paper's policy reads (1 = current only).
         agent_options: the GS options that change the set of agents (e.g. a grid size):
@@ -86,14 +90,14 @@ class Domain:
 
     env_id: str
     parallel_env: Callable
-    local_simulator: Callable[..., LocalSimulator]
-    region_spec: Callable[..., RegionSpec]
     possible_agents: Callable[..., list]
-    observation_space: spaces.Space
-    action_space: spaces.Space
     default_agents: tuple[str, ...]
-    default_predictor: str
     episode_length: int
+    local_simulator: Callable[..., LocalSimulator] | None = None
+    region_spec: Callable[..., RegionSpec] | None = None
+    observation_space: spaces.Space | None = None
+    action_space: spaces.Space | None = None
+    default_predictor: str | None = None
     frame_stack: int = 1
     agent_options: tuple[str, ...] = ()
     gs_options: tuple[str, ...] = ()
@@ -106,8 +110,12 @@ class Domain:
     extras: dict = field(default_factory=dict)
 
     def __post_init__(self):
-        if self.default_predictor not in ("gru", "mlp"):
-            raise BadInput(f"{self.env_id}: default_predictor must be 'gru' or 'mlp'")
+        if self.local_simulator is not None:
+            missing = [k for k in ("region_spec", "observation_space", "action_space") if getattr(self, k) is None]
+            if missing:
+                raise BadInput(f"{self.env_id}: a domain with a local simulator needs {', '.join(missing)}")
+            if self.default_predictor not in ("gru", "mlp"):
+                raise BadInput(f"{self.env_id}: default_predictor must be 'gru' or 'mlp'")
         if not self.default_agents:
             raise BadInput(f"{self.env_id}: default_agents must name at least one agent")
         unknown = sorted(set(self.extras) - set(EXTRA_KINDS))
@@ -145,8 +153,24 @@ class Domain:
         return out
 
     @property
+    def has_ials(self) -> bool:
+        """Whether the domain has a local simulator (and so IALS, AIPs, DIALS and the tools
+        built on them); a domain with a GS only has none yet."""
+        return self.local_simulator is not None
+
+    def require_ials(self, what: str) -> Domain:
+        """This domain, or a BadInput saying that ``what`` needs a local simulator it lacks."""
+        if not self.has_ials:
+            raise BadInput(f"{what} needs a local simulator and shared agent spaces, which {self.env_id} does not "
+                           f"have yet; its GS is ials_zoo.{self.env_id}.parallel_env() (domains with an IALS: "
+                           f"{', '.join(ials_domain_ids())})")
+        return self
+
+    @property
     def n_actions(self) -> int:
         """Number of actions of a ``Discrete`` action space."""
+        if self.action_space is None:
+            raise BadInput(f"{self.env_id}: every agent has its own action space; ask the env's action_space(agent)")
         return int(self.action_space.n)
 
 
@@ -203,6 +227,11 @@ def domain_ids() -> list[str]:
         return list(_loaders()) + [d for d in _registered if d not in _loaders()]
 
 
+def ials_domain_ids() -> list[str]:
+    """The ids of the domains with a local simulator (:attr:`Domain.has_ials`)."""
+    return [d for d in domain_ids() if get_domain(d).has_ials]
+
+
 def get_domain(env_id: str) -> Domain:
     """The domain ``env_id``; a ValueError naming the available ones for an unknown id."""
     with _lock:
@@ -227,7 +256,8 @@ def register_domain(domain: Domain, replace: bool = False) -> Domain:
         if taken and not replace:
             raise BadInput(f"a domain {domain.env_id!r} is already registered; pass replace=True")
         _registered[domain.env_id] = domain
-    register_ials(domain.env_id)
+    if domain.has_ials:
+        register_ials(domain.env_id)
     return domain
 
 
@@ -256,8 +286,8 @@ def unregister_domain(env_id: str) -> None:
 
 
 def default_domain() -> str:
-    """The domain command-line tools use when none is named (the first available)."""
-    return domain_ids()[0]
+    """The domain command-line tools use when none is named (the first with an IALS)."""
+    return ials_domain_ids()[0]
 
 
 def domain_of_agent(agent: str, **options) -> str:
@@ -276,6 +306,7 @@ __all__ = [
     "domain_ids",
     "domain_of_agent",
     "get_domain",
+    "ials_domain_ids",
     "register_domain",
     "unregister_domain",
 ]

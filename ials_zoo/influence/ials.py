@@ -325,7 +325,7 @@ def trained_predictor(
     A shipped/cached AIP is used only if it was trained for exactly this region setting
     (``RegionSpec`` incl. its params), d-set kind and architecture (default: the domain's).
     """
-    domain = get_domain(env_id)
+    domain = get_domain(env_id).require_ials("make_ials")
     options = dict(options or {})
     region = domain.region_spec(agent, **options)
     arch = arch or domain.default_predictor
@@ -429,7 +429,7 @@ def make_ials(
     """
     if render_mode is not None:
         raise BadInput(f"IALS envs do not render; got render_mode={render_mode!r}")
-    domain = get_domain(env_id)
+    domain = get_domain(env_id).require_ials("make_ials")
     domain.check_agent(agent, **options)
     pred = resolve_predictor(predictor, env_id, agent, dset_kind, seed, options)
     ls = domain.local_simulator(agent, n_envs=1, **options)

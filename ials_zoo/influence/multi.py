@@ -302,7 +302,7 @@ def make_ials_parallel_env(env_id: str, agents=None, predictor="trained", dset_k
         seed: seeds the first ``reset`` (and ``"untrained"`` weights).
         **options: domain options, as for the GS.
     """
-    domain = get_domain(env_id)
+    domain = get_domain(env_id).require_ials("make_ials_parallel_env")
     for gs_only in ("learners", "scripted_learners", "render_mode"):
         if gs_only in options:
             raise BadInput(f"{gs_only!r} is a GS option; the multi-agent IALS has no scripted agents and no renderer")

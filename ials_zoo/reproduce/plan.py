@@ -29,7 +29,7 @@ import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ials_zoo.core.domains import domain_ids, domain_of_agent, get_domain
+from ials_zoo.core.domains import domain_of_agent, get_domain, ials_domain_ids
 from ials_zoo.core.extras import dials_of, study_of
 from ials_zoo.errors import BadInput
 from ials_zoo.utils import atomic_write_text
@@ -57,12 +57,12 @@ DEFAULT_MEMORY_BUDGET = 500_000
 
 def default_budgets() -> dict:
     """PPO steps per single-agent run of each domain (``study_of(domain).budget``)."""
-    return {d: study_of(d).budget for d in domain_ids()}
+    return {d: study_of(d).budget for d in ials_domain_ids()}
 
 
 def memory_domains() -> tuple:
     """The domains with a memory variant (paper §5.4): ``study_of(domain).memory_variant``."""
-    return tuple(d for d in domain_ids() if study_of(d).memory_variant)
+    return tuple(d for d in ials_domain_ids() if study_of(d).memory_variant)
 
 
 @dataclass
@@ -70,7 +70,7 @@ class Config:
     """Settings of one study (the options of ``ials-zoo reproduce``)."""
 
     experiments: tuple = EXPERIMENTS
-    domains: tuple = field(default_factory=lambda: tuple(domain_ids()))
+    domains: tuple = field(default_factory=lambda: tuple(ials_domain_ids()))
     agents: tuple = ()  # extra/override agents, e.g. ("tls_12", "tls_18")
     simulators: tuple = DEFAULT_SIMULATORS
     budget: int = 500_000  # PPO environment steps per run (see DEFAULT_BUDGETS)
@@ -97,7 +97,7 @@ class Config:
 
     def check(self) -> Config:
         """Clear errors for bad settings; returns self."""
-        for name, allowed in (("experiments", EXPERIMENTS), ("domains", tuple(domain_ids())),
+        for name, allowed in (("experiments", EXPERIMENTS), ("domains", tuple(ials_domain_ids())),
                               ("simulators", KNOWN_SIMULATORS)):
             values = tuple(getattr(self, name))
             if not values:
@@ -108,8 +108,8 @@ class Config:
         if "gs" not in self.simulators:
             raise BadInput(f"simulators {list(self.simulators)} must include 'gs' (the reference)")
         for env_id, steps in dict(self.domain_budgets).items():
-            if env_id not in domain_ids():
-                raise BadInput(f"unknown domain {env_id!r} in domain_budgets; expected one of {domain_ids()}")
+            if env_id not in ials_domain_ids():
+                raise BadInput(f"unknown domain {env_id!r} in domain_budgets; expected one of {ials_domain_ids()}")
             if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
                 raise BadInput(f"budget of {env_id} must be a positive int, got {steps!r}")
         for name in ("budget", "seeds", "jobs", "collect_workers", "n_envs", "eval_points", "eval_episodes",
@@ -126,8 +126,8 @@ class Config:
         if bad or not self.dials_variants:
             raise BadInput(f"unknown dials_variants {bad}; expected some of {list(DIALS_VARIANTS)}")
         for env_id, steps in dict(self.dials_budgets).items():
-            if env_id not in domain_ids():
-                raise BadInput(f"unknown domain {env_id!r} in dials_budgets; expected one of {domain_ids()}")
+            if env_id not in ials_domain_ids():
+                raise BadInput(f"unknown domain {env_id!r} in dials_budgets; expected one of {ials_domain_ids()}")
             if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
                 raise BadInput(f"dials budget of {env_id} must be a positive int, got {steps!r}")
         for name in ("dials_workers", "dials_eval_points"):

@@ -21,13 +21,33 @@ from ials_zoo.utils import check_reset_options, check_seed
 
 ENV_ID = "sumo_net_v0"
 SUMO_SEED_MAX = 2**31 - 2
-SCENARIO_OPTIONS = ("net", "sumocfg", "net_file", "route_files", "begin", "end", "decision_seconds", "yellow_seconds")
+SCENARIO_OPTIONS = ("net", "sumocfg", "net_file", "route_files", "begin", "end", "decision_seconds", "yellow_seconds",
+                    "max_cycles")
+DEFAULT_NET = "cologne8"
 OPTIONS = (*SCENARIO_OPTIONS, "learners", "max_distance", "observation", "reward", "backend", "render_mode")
+
+
+def scenario_of(net=None, sumocfg=None, net_file=None, route_files=None, begin=None, end=None,
+                decision_seconds=None, yellow_seconds=None, max_cycles=None):
+    """The :class:`~ials_zoo.sumo_net.scenario.Scenario` the options name (no network named:
+    RESCO's cologne8); ``max_cycles`` decisions, if given, set the end."""
+    if net is None and sumocfg is None and net_file is None:
+        net = DEFAULT_NET
+    scenario = make_scenario(net, sumocfg, net_file, route_files, begin, end, decision_seconds, yellow_seconds)
+    if max_cycles is None:
+        return scenario
+    if isinstance(max_cycles, bool) or not isinstance(max_cycles, (int, np.integer)) or max_cycles < 1:
+        raise BadInput(f"max_cycles must be an int >= 1 (decisions per episode), got {max_cycles!r}")
+    if end is not None:
+        raise BadInput("give end or max_cycles, not both")
+    import dataclasses
+
+    return dataclasses.replace(scenario, end=scenario.begin + int(max_cycles) * scenario.decision_seconds)
 
 
 def possible_agents(**options) -> list[str]:
     """Every signalised junction of the network the options name (traffic-light ids, file order)."""
-    scenario = make_scenario(**{k: options.get(k) for k in SCENARIO_OPTIONS})
+    scenario = scenario_of(**{k: options[k] for k in SCENARIO_OPTIONS if k in options})
     return read_network(scenario.net_file).ids
 
 
@@ -55,7 +75,7 @@ def _learner_ids(learners, all_ids: list[str]) -> list[str]:
 class SumoNetEnv(ParallelEnv):
     """Traffic-signal control on any SUMO network (``sumo_net_v0``), RESCO's MDP by default.
 
-    **Networks**: ``net=`` one of RESCO's maps (grid4x4, arterial4x4, cologne1, cologne3,
+    **Networks**: ``net=`` (default ``"cologne8"``) one of RESCO's maps (grid4x4, arterial4x4, cologne1, cologne3,
     cologne8, ingolstadt1, ingolstadt7, ingolstadt21; files from the ``sumo-rl`` wheel),
     ``sumocfg=PATH``, or ``net_file=PATH`` with ``route_files=``; ``begin``/``end`` (s) override
     the map's hour (Cologne 25,200-28,800, Ingolstadt 57,600-61,200, the grids 0-3,600). Known
@@ -85,7 +105,8 @@ class SumoNetEnv(ParallelEnv):
     **Reward** (``reward="wait_norm"``, RESCO's): ``clip(-total wait / 224, -4, 4)`` of the
     light's detected vehicles; ``"wait"`` and ``"queue"`` are offered too.
 
-    **Episode end**: truncation when SUMO's clock reaches ``end`` (360 decisions on RESCO's maps).
+    **Episode end**: truncation when SUMO's clock reaches ``end`` (360 decisions on RESCO's maps;
+    ``max_cycles=N``: after N decisions, for short tests).
 
     **Metrics** (``episode_metrics()`` after the last step; ``ials_zoo.sumo_net.metrics``):
     RESCO's average delay per vehicle (``delay``, from SUMO's tripinfo as RESCO reads it),
@@ -106,7 +127,7 @@ class SumoNetEnv(ParallelEnv):
     metadata = {"name": ENV_ID, "render_modes": ["ansi", "human"], "is_parallelizable": True, "render_fps": 10}
 
     def __init__(self, net=None, sumocfg=None, net_file=None, route_files=None, begin=None, end=None,
-                 decision_seconds=None, yellow_seconds=None, learners=None, max_distance=200.0,
+                 decision_seconds=None, yellow_seconds=None, max_cycles=None, learners=None, max_distance=200.0,
                  observation="drq_norm", reward="wait_norm", backend="auto", render_mode=None, **unknown):
         if unknown:
             raise BadInputType(f"unknown option(s) {sorted(unknown)} for {ENV_ID}; valid options: {', '.join(OPTIONS)}")
@@ -114,7 +135,8 @@ class SumoNetEnv(ParallelEnv):
             raise BadInput(f"unknown render_mode {render_mode!r}; expected None or one of {self.metadata['render_modes']}")
         self.render_mode = render_mode
         self._observe, self._reward = observation_fn(observation), reward_fn(reward)
-        self.scenario = make_scenario(net, sumocfg, net_file, route_files, begin, end, decision_seconds, yellow_seconds)
+        self.scenario = scenario_of(net, sumocfg, net_file, route_files, begin, end, decision_seconds, yellow_seconds,
+                                    max_cycles)
         self.network = read_network(self.scenario.net_file)
         self.max_distance = _check_distance(max_distance)
         self.possible_agents = _learner_ids(learners, self.network.ids)

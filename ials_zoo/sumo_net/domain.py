@@ -1,0 +1,24 @@
+"""Any SUMO network as a zoo domain (GS only: the local simulators of its junctions come later)."""
+
+from __future__ import annotations
+
+from ials_zoo.core.domains import Domain
+from ials_zoo.sumo_net.env import ENV_ID, SCENARIO_OPTIONS, parallel_env, possible_agents
+
+TOOLS = {"resco-controllers": ("ials_zoo.sumo_net.study",
+                               "fixed time, max pressure, greedy and actuated lights on RESCO's maps, beside RESCO's table")}
+
+DOMAIN = Domain(
+    env_id=ENV_ID,
+    description="any SUMO network, RESCO's eight city and grid maps by name (libsumo; GS only)",
+    parallel_env=parallel_env,
+    possible_agents=possible_agents,
+    default_agents=("cluster_1098574052_1098574061_247379905",),  # cologne8's 4-green junction
+    episode_length=360,
+    agent_options=SCENARIO_OPTIONS,
+    gs_options=(*SCENARIO_OPTIONS, "max_distance", "observation", "reward"),
+    one_simulation_per_process=True,
+    metrics={"delay": "lower", "delay_all": "lower", "trip_time": "lower", "waiting_time": "lower",
+             "throughput": "higher", "queue": "lower"},
+    extras={"tools": TOOLS},
+)
