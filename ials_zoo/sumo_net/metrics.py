@@ -5,7 +5,8 @@ RESCO (``resco_benchmark/utils/readXML.py``) reads ``tripinfo_<episode>.xml``, w
 
 * **delay**: the mean over tripinfo records of ``timeLoss + departDelay``, plus, for every
   ``<vehicle>`` of the route file scheduled after the scheduled departure of the vehicle that
-  departed last, a record of ``end - scheduled depart`` (it never departed). RESCO's loop reads
+  departed last (and before the episode's end), a record of ``end - scheduled depart`` (it
+  never departed). RESCO's loop reads
   only ``<vehicle>`` elements, so route files of ``<trip>`` elements (cologne1/8, the Ingolstadt
   maps) never get that penalty. ``delay`` is RESCO's figure; ``delay_all`` charges never-departed
   ``<trip>`` entries as well (``<flow>`` entries are not counted by either).
@@ -76,7 +77,9 @@ def resco_delay(trips: dict, route_files, end: float, tags=("vehicle",)) -> floa
     scheduled, entries = scheduled_departures(route_files)
     last_scheduled = scheduled.get(last_id)
     if last_scheduled is not None:
-        never = [t for tag, t in entries if tag in tags and t > last_scheduled]
+        # scheduled before the end: an episode shorter than its route file (max_cycles) does not
+        # charge the vehicles it never had time for (RESCO's episodes cover every departure)
+        never = [t for tag, t in entries if tag in tags and last_scheduled < t < end]
         total += float(np.sum(end - np.asarray(never, np.float64)))
         count += len(never)
     return total / count

@@ -1,0 +1,312 @@
+"""sumo_net_v0: RESCO's maps and any SUMO network, checked against independent references:
+RESCO's own delay loop (readXML.py, re-implemented here), plain SUMO, RESCO's signal
+bookkeeping (traffic_signal.py's observe, re-implemented on libsumo getters), hand-computed
+controller choices."""
+
+import os
+import subprocess
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+
+from ials_zoo import sumo_net_v0
+from ials_zoo.errors import BadInput
+from ials_zoo.sumo.command import sumo_binary, sumo_command
+from ials_zoo.sumo_net.controllers import Greedy, MaxPressure, run_episode
+from ials_zoo.sumo_net.core import yellow_program
+from ials_zoo.sumo_net.metrics import episode_metrics
+from ials_zoo.sumo_net.network import read_network
+from ials_zoo.sumo_net.scenario import make_scenario
+from ials_zoo.sumo_net.study import run_plain_sumo
+
+
+def resco_delay_reference(tripinfo, route_file, end_time):
+    """RESCO's readXML.py delay loop, as written there (one route file)."""
+    root = ET.parse(tripinfo).getroot()
+    num_trips, total, last_departure_time, last_depart_id = 0, 0.0, 0, ""
+    for child in root:
+        num_trips += 1
+        total += float(child.attrib["timeLoss"]) + float(child.attrib["departDelay"])
+        depart_time = float(child.attrib["depart"])
+        if depart_time > last_departure_time:
+            last_departure_time, last_depart_id = depart_time, child.attrib["id"]
+    route = ET.parse(route_file).getroot()
+    last_departure_time = None
+    for child in route:
+        if child.attrib.get("id") == last_depart_id:
+            last_departure_time = float(child.attrib["depart"])
+    never = [float(c.attrib["depart"]) for c in route if c.tag == "vehicle" and float(c.attrib["depart"]) > last_departure_time]
+    total += float(np.sum(end_time - np.asarray(never)))
+    return total / (num_trips + len(never))
+
+
+def _plain_tripinfo(tmp_path, net, end=None, seed=0):
+    s = make_scenario(net=net, end=end)
+    trip = str(tmp_path / f"{net}.xml")
+    cmd = sumo_command(seed, net=s.net_file, routes=s.route_files, extra=[
+        "--begin", str(s.begin), "--end", str(s.end), "--time-to-teleport", "-1",
+        "--tripinfo-output", trip, "--tripinfo-output.write-unfinished", "true"])
+    cmd[0] = sumo_binary()
+    subprocess.run(cmd, check=True, capture_output=True, timeout=600)
+    return s, trip
+
+
+@pytest.mark.parametrize("net", ["cologne1", "grid4x4"])  # <trip> and <vehicle> route files
+def test_delay_is_rescos_on_two_maps(tmp_path, net):
+    s, trip = _plain_tripinfo(tmp_path, net)
+    ours = episode_metrics(trip, s.route_files, s.end)
+    assert ours["delay"] == pytest.approx(resco_delay_reference(trip, s.route_files[0], s.end), rel=1e-12)
+    assert ours["vehicles"] > 1000 and 0 < ours["delay"] < 200
+
+
+def test_the_never_departed_penalty_reads_vehicles_only_as_resco_does(tmp_path):
+    """A hand-made tripinfo and route file where 2 <vehicle>s and 1 <trip> never departed."""
+    trip = tmp_path / "t.xml"
+    trip.write_text('<tripinfos><tripinfo id="a" depart="0" departDelay="2" timeLoss="10" duration="50" '
+                    'waitingTime="3" arrival="50"/><tripinfo id="b" depart="5" departDelay="0" timeLoss="4" '
+                    'duration="30" waitingTime="1" arrival="-1"/></tripinfos>')
+    routes = tmp_path / "r.rou.xml"
+    routes.write_text('<routes><vehicle id="a" depart="0"/><trip id="b" depart="4"/><vehicle id="c" depart="40"/>'
+                      '<trip id="d" depart="50"/><vehicle id="e" depart="60"/></routes>')
+    m = episode_metrics(str(trip), [str(routes)], 100)
+    assert m["delay"] == pytest.approx(resco_delay_reference(str(trip), str(routes), 100))
+    assert m["delay"] == pytest.approx((12 + 4 + 60 + 40) / 4)
+    assert m["delay_all"] == pytest.approx((12 + 4 + 60 + 50 + 40) / 5)
+    assert m["throughput"] == 1 and m["vehicles"] == 2
+
+
+def test_fixed_time_in_the_env_is_plain_sumo_exactly():
+    """The env's own-program episode is the simulation a plain sumo process runs: the env
+    observes without disturbing."""
+    ours = run_episode("fixed", 3, net="cologne1")
+    plain = run_plain_sumo(3, net="cologne1")
+    for key in ("delay", "trip_time", "waiting_time", "throughput", "vehicles"):
+        assert ours[key] == plain[key], key
+
+
+class _RescoSignal:
+    """RESCO's Signal.observe (traffic_signal.py) on libsumo getters, for comparison."""
+
+    def __init__(self, env, lanes):
+        self.env, self.lanes, self.waits, self.last = env, lanes, {}, None
+
+    def observe(self, step_length, max_distance):
+        q = self.env.sumo_query
+        out, seen = [], set()
+        for lane in self.lanes:
+            m = {"queue": 0, "approach": 0, "total_wait": 0.0, "speed": 0.0}
+            for v in q("lane", "getLastStepVehicleIDs", lane):
+                path = q("vehicle", "getNextTLS", v)
+                if not (len(path) > 0 and path[0][2] <= max_distance):
+                    continue
+                seen.add(v)
+                if v in self.waits:
+                    self.waits[v] += step_length
+                elif q("vehicle", "getWaitingTime", v) > 0:
+                    self.waits[v] = q("vehicle", "getWaitingTime", v)
+                wait = self.waits.get(v, 0)
+                if wait > 0:
+                    m["total_wait"] += wait
+                    m["queue"] += 1
+                else:
+                    m["approach"] += 1
+                m["speed"] += q("vehicle", "getSpeed", v)
+            out.append(m)
+        if self.last is not None:
+            for v in self.last - seen:
+                self.waits.pop(v, None)
+        self.last = seen
+        return out
+
+
+def test_observations_and_rewards_follow_rescos_bookkeeping():
+    env = sumo_net_v0.parallel_env(net="cologne1", max_cycles=60)
+    tls = env.possible_agents[0]
+    ref = _RescoSignal(env, list(env.network.light(tls).lanes))
+    rng = np.random.default_rng(0)
+    obs, _ = env.reset(seed=1)
+    ref.observe(10, 200)
+    busy = 0
+    try:
+        for _ in range(59):  # the 60th decision ends the episode and closes SUMO
+            obs, rew, _, _, _ = env.step({tls: int(rng.integers(env.action_space(tls).n))})
+            lanes = ref.observe(10, 200)
+            phase = env.sumo_query("trafficlight", "getPhase", tls)
+            want = np.array([[float(i == phase), m["approach"] / 28, m["total_wait"] / 28, m["queue"] / 28,
+                              m["speed"] / 20 / 28] for i, m in enumerate(lanes)], np.float32).reshape(-1)
+            np.testing.assert_allclose(obs[tls], want, rtol=1e-6, atol=1e-7)
+            total = sum(m["total_wait"] for m in lanes)
+            assert rew[tls] == pytest.approx(float(np.clip(-total / 224, -4, 4)))
+            busy += total > 0
+    finally:
+        env.close()
+    assert busy > 20  # the comparison saw waiting vehicles
+
+
+def test_yellows_are_rescos_and_a_change_of_green_ends_in_that_green():
+    greens = ["GGrr", "rrGG", "GrGr"]
+    yellows, index = yellow_program(greens, 3)
+    # (0 -> 1): links 0 and 1 lose green; (0 -> 2): link 1; (1 -> 0): 2, 3; (1 -> 2): 3; (2 -> 0): 2; (2 -> 1): 0
+    assert yellows == [(3, "yyrr"), (3, "Gyrr"), (3, "rryy"), (3, "rrGy"), (3, "Gryr"), (3, "yrGr")]
+    assert index == {(0, 1): 3, (0, 2): 4, (1, 0): 5, (1, 2): 6, (2, 0): 7, (2, 1): 8}
+    env = sumo_net_v0.parallel_env(net="ingolstadt1", max_cycles=5)
+    tls = env.possible_agents[0]
+    light = env.network.light(tls)
+    env.reset(seed=0)
+    try:
+        assert [light.phases[i][0] for i in light.greens] == [38, 6, 37]
+        for a in (2, 0, 2):
+            env.step({tls: a})
+            # greens 0 and 2 last 37-38 s in the file: still the chosen green 7 s after the yellow
+            assert env.sumo_query("trafficlight", "getPhase", tls) == a
+            assert env.sumo_query("trafficlight", "getRedYellowGreenState", tls) == light.green_states()[a]
+        # green 1 lasts 6 s: as in RESCO (setPhase keeps the file's duration) it has moved on to
+        # the next phase of the installed program, green 2, by the end of the decision
+        env.step({tls: 1})
+        assert env.sumo_query("trafficlight", "getPhase", tls) == 2
+    finally:
+        env.close()
+
+
+class _Fake:
+    """Just enough of an env for a controller: agents, network and measures."""
+
+    def __init__(self, network, measures):
+        self.network, self._m = network, measures
+        self.agents = network.ids
+
+    def measures(self, tls):
+        return self._m[tls]
+
+
+def test_greedy_and_max_pressure_pick_what_a_hand_count_picks():
+    net = read_network(make_scenario(net="cologne8").net_file)
+    rng = np.random.default_rng(0)
+    measures = {x.id: {"queue": rng.integers(0, 9, len(x.lanes)).astype(float),
+                       "approach": rng.integers(0, 9, len(x.lanes)).astype(float)} for x in net.lights}
+    fake = _Fake(net, measures)
+    greedy, pressure = Greedy(net)(fake), MaxPressure(net)(fake)
+    incoming = {lane: (x.id, k) for x in net.lights for k, lane in enumerate(x.lanes)}
+    for x in net.lights:
+        m = measures[x.id]
+        waves = [sum(m["queue"][x.lanes.index(lane)] + m["approach"][x.lanes.index(lane)]
+                     for lane in {i for i, o, k in x.links if x.green_states()[a][k] in "Gg"})
+                 for a in range(x.n_actions)]
+        assert greedy[x.id] == int(np.argmax(waves))
+        scores = []
+        for a in range(x.n_actions):
+            moves = {}
+            for i, o, k in x.links:
+                if x.green_states()[a][k] in "Gg":
+                    moves.setdefault((net.lane_edges[i], net.lane_edges[o]), set()).add(i)
+            score = 0.0
+            for (_, out_edge), lanes in moves.items():
+                score += sum(m["queue"][x.lanes.index(lane)] for lane in lanes)
+                score -= sum(measures[incoming[lane][0]]["queue"][incoming[lane][1]]
+                             for lane, edge in net.lane_edges.items() if edge == out_edge and lane in incoming)
+            scores.append(score)
+        assert pressure[x.id] == int(np.argmax(scores))
+    assert len(set(greedy.values())) > 1 or len(set(pressure.values())) > 1
+
+
+def test_rule_based_lights_beat_fixed_time_and_random_on_cologne1():
+    delay = {c: run_episode(c, 0, net="cologne1")["delay"] for c in ("fixed", "greedy", "max_pressure", "random")}
+    assert delay["greedy"] < 0.7 * delay["fixed"] and delay["max_pressure"] < 0.7 * delay["fixed"]
+    assert delay["random"] > delay["fixed"]
+
+
+def test_a_second_env_in_one_process_runs_in_a_worker_and_matches():
+    a = sumo_net_v0.parallel_env(net="ingolstadt1", max_cycles=20)
+    b = sumo_net_v0.parallel_env(net="ingolstadt1", max_cycles=20)
+    try:
+        assert a.backend == "inprocess" and b.backend == "worker"
+        oa, _ = a.reset(seed=4)
+        ob, _ = b.reset(seed=4)
+        tls = a.possible_agents[0]
+        for t in range(20):
+            act = {tls: t % a.action_space(tls).n}
+            oa, ra, *_ = a.step(act)
+            ob, rb, *_ = b.step(act)
+            np.testing.assert_array_equal(oa[tls], ob[tls])
+            assert ra == rb
+        assert a.episode_metrics() == b.episode_metrics()
+    finally:
+        a.close()
+        b.close()
+
+
+def _netgenerate(tmp_path, tls: bool):
+    bin_dir = os.path.join(os.path.dirname(sumo_binary()))
+    net = tmp_path / ("tls.net.xml" if tls else "plain.net.xml")
+    cmd = [os.path.join(bin_dir, "netgenerate"), "--grid", "--grid.number", "3", "--grid.length", "100",
+           "--no-turnarounds", "true", "-o", str(net), "--seed", "1"]
+    if tls:
+        cmd += ["--default-junction-type", "traffic_light"]
+    subprocess.run(cmd, check=True, capture_output=True, timeout=120)
+    return net
+
+
+def test_bring_your_own_network(tmp_path):
+    net = _netgenerate(tmp_path, tls=True)
+    routes = tmp_path / "r.rou.xml"
+    trips = "".join(f'<trip id="t{i}" depart="{i * 3}" from="A0B0" to="B2C2"/>' for i in range(80))
+    routes.write_text(f"<routes>{trips}</routes>")
+    env = sumo_net_v0.parallel_env(net_file=str(net), route_files=[str(routes)], end=400)
+    try:
+        assert env.possible_agents == read_network(str(net)).ids and len(env.possible_agents) >= 1
+        obs, _ = env.reset(seed=0)
+        steps = 0
+        while env.agents:
+            env.step({a: (steps // 3) % env.action_space(a).n for a in env.agents})  # each green 30 s
+            steps += 1
+        assert steps == 40
+        m = env.episode_metrics()
+        assert m["vehicles"] > 20 and m["throughput"] > 0 and np.isfinite(m["delay"])
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("options, message", [
+    ({"net": "cologne9"}, "unknown map 'cologne9'"),
+    ({"net": "cologne1", "begin": 28800}, "begin .* must come before end"),
+    ({"net_file": "/nonexistent/x.net.xml", "route_files": ["r.xml"]}, "net_file: no such file"),
+    ({"net": "cologne1", "learners": ["nobody"]}, "unknown traffic light"),
+    ({"net": "cologne1", "max_distance": 0}, "max_distance"),
+    ({"net": "cologne1", "observation": "pixels"}, "unknown observation"),
+    ({"net": "cologne1", "max_cycles": 0}, "max_cycles"),
+    ({"net": "cologne1", "sumocfg": "x"}, "exactly one network"),
+    ({"net": "cologne1", "yellow_seconds": 10}, "yellow_seconds"),
+])
+def test_bad_input_is_refused_before_sumo_starts(options, message, monkeypatch):
+    from ials_zoo.sumo import lease
+
+    monkeypatch.setattr(lease.SimHandle, "__init__", lambda *a, **k: pytest.fail("SUMO was started"))
+    with pytest.raises(BadInput, match=message):
+        sumo_net_v0.parallel_env(**options)
+
+
+def test_a_network_without_lights_or_a_missing_route_file_is_refused(tmp_path):
+    net = _netgenerate(tmp_path, tls=False)
+    routes = tmp_path / "r.rou.xml"
+    routes.write_text("<routes/>")
+    with pytest.raises(BadInput, match="no traffic light"):
+        sumo_net_v0.parallel_env(net_file=str(net), route_files=[str(routes)])
+    with pytest.raises(BadInput, match="route_files: no such file"):
+        sumo_net_v0.parallel_env(net_file=str(net), route_files=[str(tmp_path / "missing.rou.xml")])
+    cfg = tmp_path / "x.sumocfg"
+    cfg.write_text('<configuration><input><net-file value="plain.net.xml"/><route-files value="gone.rou.xml"/>'
+                   '</input></configuration>')
+    with pytest.raises(BadInput, match="route-files: no such file"):
+        sumo_net_v0.parallel_env(sumocfg=str(cfg))
+
+
+def test_resco_maps_have_rescos_lights_and_actions():
+    """RESCO's counts (its map_config and nets; ingolstadt21 there: 2 x 1, 3 x 15, 4 x 5 greens):
+    sumo-rl's ingolstadt21 lacks one green of one junction, so one 4 becomes a 3."""
+    counts = {m: [x.n_actions for x in read_network(make_scenario(net=m).net_file).lights]
+              for m in ("grid4x4", "arterial4x4", "cologne8", "ingolstadt21")}
+    assert counts["grid4x4"] == [8] * 16 and counts["arterial4x4"] == [5] * 16
+    assert sorted(counts["cologne8"]) == [2, 2, 3, 3, 3, 4, 4, 4]
+    assert sorted(counts["ingolstadt21"]) == [2] + [3] * 16 + [4] * 4
+    assert make_scenario(net="arterial4x4").decision_seconds == 5 and make_scenario(net="cologne3").begin == 25200
