@@ -34,7 +34,7 @@ from ials_zoo.baselines import dials
 from ials_zoo.baselines.multiagent import PREVIOUS_PPO_SETTINGS, fill_update_size, frame_stack_of, ppo_config
 from ials_zoo.baselines.throughput import NO_SIMULATOR, ppo_bound, ppo_throughput
 from ials_zoo.commands import CommandError
-from ials_zoo.core.domains import domain_ids, get_domain
+from ials_zoo.core.domains import domain_ids, get_domain, ials_domain_ids
 from ials_zoo.core.extras import bench_of, dials_of
 from ials_zoo.influence.ials import make_ials, make_ials_vec_env
 from ials_zoo.influence.multi import make_ials_parallel_env, make_multi_agent_ials, resolve_predictor_set
@@ -66,6 +66,9 @@ def configure(parser):
                              "architectures, e.g. gru-64-ar,gru-32-ar,mlp-128, beside the GS (untrained weights: the "
                              "network's cost is a trained one's, but a local simulator whose cost follows the "
                              "influence, SUMO's inserted vehicles, runs at untrained arrival rates)")
+    parser.add_argument("--net", default=None, metavar="NAME[,NAME]",
+                        help="a domain with a GS only (sumo_net_v0): the networks to measure, its GS against raw "
+                             "SUMO (default: the domain's)")
     parser.add_argument("--out", default=None, help="write the figures (and the machine) as JSON here")
     parser.add_argument("--plot", default="bench_scaling.png",
                         help="PNG for --scaling (default: bench_scaling.png)")
@@ -485,11 +488,19 @@ def run(args) -> int:
     if args.ppo and args.ppo_steps < 1:
         raise CommandError(f"--ppo-steps must be >= 1, got {args.ppo_steps}")
     archs = parse_aip_archs(args.aip_archs) if args.aip_archs else None
-    env_ids = domain_ids() if args.domain == "all" else [args.domain]
+    env_ids = ials_domain_ids() if args.domain == "all" else [args.domain]
+    gs_only = args.domain != "all" and not get_domain(args.domain).has_ials
+    if gs_only and bench_of(args.domain).gs_runner is None:
+        raise CommandError(f"--domain {args.domain} has no IALS and no benchmark of its GS")
+    if args.net is not None and not gs_only:
+        raise CommandError("--net is for a domain with a GS only (e.g. --domain sumo_net_v0)")
+    nets = None if args.net is None else [x.strip() for x in args.net.split(",") if x.strip()]
     machine = machine_info()
     print(f"machine: {machine['cpu']}, {machine['cores']} cores; python {machine['python']}, torch {machine['torch']}, "
           f"numpy {machine['numpy']}, SUMO {machine['sumo']}, ials_zoo {machine['ials_zoo']}", flush=True)
-    if args.ppo:
+    if gs_only:
+        rows = bench_of(args.domain).gs_runner(nets, args.repeats)
+    elif args.ppo:
         rows = [r for env_id in env_ids for r in bench_ppo(env_id, args.ppo_steps, args.predictor, args.seed)]
         print(f"\nppo_single training throughput ({args.ppo_steps} steps each, 8 envs, evaluation excluded)")
         print(f"{'domain':<16}{'simulator':<12}{'PPO steps/s':>12}{'time/step vs GS':>17}")

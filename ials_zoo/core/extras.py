@@ -160,9 +160,13 @@ class BenchSettings:
     Attributes:
         scaling: ``(option, sizes)`` for ``--scaling`` (the system grown through one GS
             option), or None.
+        gs_runner: see below.
     """
 
     scaling: tuple | None = None
+    gs_runner: Callable | None = None
+    """For a domain without an IALS: ``gs_runner(nets, repeats) -> rows`` measures (and prints)
+    its GS instead, ``nets`` the ``--net`` names (None: the domain's defaults)."""
 
 
 def _extra(domain, kind: str, default):

@@ -21,6 +21,8 @@ Lights that are not controlled run their own program from the network file.
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from ials_zoo.sumo.command import close_any_simulation, sumo_command
@@ -48,41 +50,47 @@ def yellow_program(greens: list[str], yellow_seconds: int) -> tuple[list[tuple[i
 class _Signal:
     """One light's RESCO bookkeeping: its detected vehicles and their waits."""
 
-    def __init__(self, lanes):
+    def __init__(self, lanes, lengths):
         self.lanes = list(lanes)
+        self.lengths = list(lengths)
         self.waits: dict[str, float] = {}
         self.seen: set | None = None
 
-    def observe(self, ls, interval: int, max_distance: float) -> np.ndarray:
-        out = np.zeros((len(self.lanes), len(MEASURES)), np.float64)
+    def observe(self, raw, interval: int, max_distance: float) -> np.ndarray:
+        """``raw`` is libsumo's ``_libsumo`` module (its plain functions: no wrapper per call)."""
+        rows = []
         now = set()
-        v = ls.vehicle
-        for row, lane in enumerate(self.lanes):
-            for veh in ls.lane.getLastStepVehicleIDs(lane):
-                nxt = v.getNextTLS(veh)
-                if not nxt or nxt[0][2] > max_distance:
+        waits = self.waits
+        ids, position, waiting, speed = (raw.lane_getLastStepVehicleIDs, raw.vehicle_getLanePosition,
+                                         raw.vehicle_getWaitingTime, raw.vehicle_getSpeed)
+        for lane, length in zip(self.lanes, self.lengths):
+            approach = total = queue = speeds = longest = 0.0
+            for veh in ids(lane):
+                # RESCO reads getNextTLS(veh)[0] distance; on a lane that ends at this light that
+                # is the distance to the lane's end, which the lane position gives at a tenth of the cost
+                if length - position(veh) > max_distance:
                     continue
                 now.add(veh)
-                if veh in self.waits:
-                    self.waits[veh] += interval
+                if veh in waits:
+                    waits[veh] += interval
                 else:
-                    w = v.getWaitingTime(veh)
+                    w = waiting(veh)
                     if w > 0:
-                        self.waits[veh] = w
-                wait = self.waits.get(veh, 0.0)
-                m = out[row]
+                        waits[veh] = w
+                wait = waits.get(veh, 0.0)
                 if wait > 0:
-                    m[1] += wait
-                    m[2] += 1
-                    m[4] = max(m[4], wait)
+                    total += wait
+                    queue += 1
+                    longest = max(longest, wait)
                 else:
-                    m[0] += 1
-                m[3] += v.getSpeed(veh)
+                    approach += 1
+                speeds += speed(veh)
+            rows.append((approach, total, queue, speeds, longest))
         if self.seen is not None:
             for veh in self.seen - now:
-                self.waits.pop(veh, None)
+                waits.pop(veh, None)
         self.seen = now
-        return out
+        return np.array(rows, np.float64).reshape(len(self.lanes), len(MEASURES))
 
 
 class NetCore:
@@ -111,6 +119,8 @@ class NetCore:
         self.signals: list[_Signal] = []
         self._yellow_index: dict[str, dict] = {}
         self._queues: list[float] = []
+        self._lengths = None
+        self.sim_seconds = 0.0  # wall-clock inside SUMO's own steps (the benchmark's "raw SUMO")
 
     def _command(self, seed: int, tripinfo: str | None) -> list[str]:
         net, routes = self.files
@@ -136,13 +146,15 @@ class NetCore:
         self.running, self.tripinfo = True, tripinfo
         for tls in self.controlled:
             self._install(tls)
-        self.signals = [_Signal(lanes) for lanes in self.lanes]
+        if self._lengths is None:
+            self._lengths = [[self.ls.lane.getLength(x) for x in lanes] for lanes in self.lanes]
+        self.signals = [_Signal(lanes, lengths) for lanes, lengths in zip(self.lanes, self._lengths)]
         self._queues = []
         return self._observe()
 
     def _observe(self):
         ls = self.ls
-        measures = [s.observe(ls, self.decision, self.max_distance) for s in self.signals]
+        measures = [s.observe(ls._libsumo, self.decision, self.max_distance) for s in self.signals]
         phases = np.array([ls.trafficlight.getPhase(t) for t in self.lights], np.int64)
         self._queues.append(float(np.mean([m[:, 2].sum() for m in measures])))
         return np.concatenate(measures), phases, float(ls.simulation.getTime())
@@ -156,13 +168,21 @@ class NetCore:
             current = tl.getPhase(tls)
             if current != a and (current, a) in self._yellow_index[tls]:
                 tl.setPhase(tls, self._yellow_index[tls][(current, a)])
+        start = time.perf_counter()
         for _ in range(self.yellow):
             step(0.0)
+        middle = time.perf_counter()
         for tls, a in zip(self.controlled, actions):
             tl.setPhase(tls, a)
+        restart = time.perf_counter()
         for _ in range(self.decision - self.yellow):
             step(0.0)
+        self.sim_seconds += time.perf_counter() - restart + middle - start
         return self._observe()
+
+    def timing(self) -> float:
+        """Seconds spent inside SUMO's own steps since the core was made."""
+        return self.sim_seconds
 
     def make_actuated(self) -> None:
         """Every light on SUMO's actuated control of its own program's phases (type 3)."""

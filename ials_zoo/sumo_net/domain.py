@@ -3,7 +3,16 @@
 from __future__ import annotations
 
 from ials_zoo.core.domains import Domain
+from ials_zoo.core.extras import BenchSettings
 from ials_zoo.sumo_net.env import ENV_ID, SCENARIO_OPTIONS, parallel_env, possible_agents
+
+
+def bench_gs(nets, repeats: int) -> list[dict]:
+    """``ials-zoo bench --domain sumo_net_v0 [--net M,...]``: the GS against raw SUMO per map."""
+    from ials_zoo.sumo_net.benchmark import DEFAULT_MAPS, run_bench
+
+    return run_bench(tuple(nets or DEFAULT_MAPS), repeats)
+
 
 TOOLS = {"resco-controllers": ("ials_zoo.sumo_net.study",
                                "fixed time, max pressure, greedy and actuated lights on RESCO's maps, beside RESCO's table")}
@@ -20,5 +29,5 @@ DOMAIN = Domain(
     one_simulation_per_process=True,
     metrics={"delay": "lower", "delay_all": "lower", "trip_time": "lower", "waiting_time": "lower",
              "throughput": "higher", "queue": "lower"},
-    extras={"tools": TOOLS},
+    extras={"tools": TOOLS, "bench": BenchSettings(gs_runner=bench_gs)},
 )

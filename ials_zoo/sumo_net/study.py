@@ -40,7 +40,7 @@ def run_plain_sumo(seed: int, **options) -> dict[str, float]:
         trip = os.path.join(tmp, "tripinfo.xml")
         cmd = sumo_command(seed, net=s.net_file, routes=s.route_files, extra=[
             "--begin", str(s.begin), "--end", str(s.end), "--time-to-teleport", "-1",
-            "--tripinfo-output", trip, "--tripinfo-output.write-unfinished", "true"])
+            "--tripinfo-output", trip, "--tripinfo-output.write-unfinished", "true"])  # SUMO's defaults otherwise
         cmd[0] = sumo_binary()
         start = time.perf_counter()
         subprocess.run(cmd, check=True, capture_output=True, timeout=3600)
