@@ -78,8 +78,8 @@ def test_the_never_departed_penalty_reads_vehicles_only_as_resco_does(tmp_path):
 
 def test_fixed_time_in_the_env_is_plain_sumo_exactly_episode_after_episode():
     """The env's own-program episode is the simulation a plain sumo process runs (the env
-    observes without disturbing), also for the third episode of one libsumo process (with
-    SUMO's rerouting device left on, the episodes of <trip> routes drifted run to run)."""
+    observes without disturbing), every time: run_episode starts a fresh SUMO worker, because
+    later libsumo simulations of one process drifted from it on <trip> routes (SUMO 1.28)."""
     plain = run_plain_sumo(3, net="cologne1")
     for _ in range(3):
         ours = run_episode("fixed", 3, net="cologne1")
