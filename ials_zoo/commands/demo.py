@@ -28,6 +28,8 @@ def configure(parser):
     parser.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
     parser.add_argument("--agent", default=None,
                         help="the randomly acting agent (default: the domain's first paper agent)")
+    parser.add_argument("--net", default=None, metavar="NAME",
+                        help="the network, for a domain that takes one (sumo_net_v0: a RESCO map, e.g. cologne8)")
     parser.add_argument("--gif", default=None, metavar="PATH",
                         help="save the episode as an animated GIF here")
 
@@ -40,14 +42,19 @@ def run(args) -> int:
         raise CommandError(f"--steps must be >= 1, got {steps}")
     if args.seed < 0:
         raise CommandError(f"--seed must be >= 0, got {args.seed}")
-    agent = args.agent or domain.default_agents[0]
+    network = {}
+    if args.net is not None:
+        if "net" not in domain.agent_options:
+            raise CommandError(f"--net: {domain.env_id} takes no network")
+        network = {"net": args.net}
     try:
-        domain.check_agent(agent)
+        agent = args.agent or (domain.agents(**network)[0] if network else domain.default_agents[0])
+        domain.check_agent(agent, **network)
     except ValueError as exc:
         raise CommandError(str(exc)) from None
     if args.gif:
         check_output_file(args.gif, "--gif")
-    options = {"learners": [agent], "max_cycles": steps}
+    options = {"learners": [agent], "max_cycles": steps, **network}
     if args.gif:
         options["render_mode"] = "rgb_array"
     env = domain.parallel_env(**options)

@@ -199,6 +199,12 @@ class NetCore:
             out.update(episode_metrics(self.tripinfo, self.files[1], self.end))
         return out
 
+    def render_data(self) -> dict:
+        """Vehicle positions and every light's signal state, for the viewer."""
+        v, tl = self.ls.vehicle, self.ls.trafficlight
+        return {"xy": [v.getPosition(x) for x in v.getIDList()],
+                "signals": {t: tl.getRedYellowGreenState(t) for t in self.lights}}
+
     def query(self, domain: str, method: str, *args):
         """A read-only libsumo getter (``domain.method(*args)``), for viewers and tests."""
         if not method.startswith("get"):

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from ials_zoo.core.domains import Domain
-from ials_zoo.core.extras import BenchSettings
+from ials_zoo.core.extras import BenchSettings, ViewerSettings
 from ials_zoo.sumo_net.env import ENV_ID, SCENARIO_OPTIONS, parallel_env, possible_agents
 
 
@@ -12,6 +12,19 @@ def bench_gs(nets, repeats: int) -> list[dict]:
     from ials_zoo.sumo_net.benchmark import DEFAULT_MAPS, run_bench
 
     return run_bench(tuple(nets or DEFAULT_MAPS), repeats)
+
+
+def episode_summary(env) -> dict[str, str]:
+    """RESCO's figures of the episode just run (the demo prints them)."""
+    m = env.episode_metrics()
+    return {"network": env.scenario.name, "average delay (RESCO)": f"{m['delay']:.2f} s",
+            "trip time": f"{m['trip_time']:.1f} s", "vehicles arrived": f"{m['throughput']:.0f} of {m['vehicles']:.0f}"}
+
+
+def _legend():
+    from ials_zoo.sumo_net.render import LEGEND
+
+    return LEGEND
 
 
 TOOLS = {"resco-controllers": ("ials_zoo.sumo_net.study",
@@ -29,5 +42,6 @@ DOMAIN = Domain(
     one_simulation_per_process=True,
     metrics={"delay": "lower", "delay_all": "lower", "trip_time": "lower", "waiting_time": "lower",
              "throughput": "higher", "queue": "lower"},
-    extras={"tools": TOOLS, "bench": BenchSettings(gs_runner=bench_gs)},
+    extras={"tools": TOOLS, "bench": BenchSettings(gs_runner=bench_gs),
+            "viewer": ViewerSettings(legend=_legend(), episode_summary=episode_summary)},
 )

@@ -119,12 +119,15 @@ class SumoNetEnv(ParallelEnv):
     the same episode. **SUMO**: one core call per decision through
     :class:`ials_zoo.sumo.lease.SimHandle` (``backend`` ``"auto"``, ``"inprocess"``, ``"worker"``).
 
-    **Rendering**: ``"ansi"`` (one line per light: its phase and queue), ``"human"`` prints it.
+    **Rendering**: ``"rgb_array"`` (a top view: roads, vehicles, each incoming lane's signal,
+    learners ringed; :mod:`ials_zoo.sumo_net.render`), ``"ansi"`` (one line per light: its phase
+    and queue), ``"human"`` prints the ``"ansi"`` view.
 
     Version history: v0 -- first version.
     """
 
-    metadata = {"name": ENV_ID, "render_modes": ["ansi", "human"], "is_parallelizable": True, "render_fps": 10}
+    metadata = {"name": ENV_ID, "render_modes": ["rgb_array", "ansi", "human"], "is_parallelizable": True,
+                "render_fps": 10}
 
     def __init__(self, net=None, sumocfg=None, net_file=None, route_files=None, begin=None, end=None,
                  decision_seconds=None, yellow_seconds=None, max_cycles=None, learners=None, max_distance=200.0,
@@ -154,6 +157,7 @@ class SumoNetEnv(ParallelEnv):
         self._seed_rng = np.random.default_rng()
         self._measures, self._phases, self._time = None, None, 0.0
         self._metrics, self._episodes = None, 0
+        self._view = self._last_frame = None
 
     def _core_config(self) -> dict:
         s, lights = self.scenario, self.network.lights
@@ -290,6 +294,15 @@ class SumoNetEnv(ParallelEnv):
     def render(self):
         if self.render_mode is None or self._measures is None:
             return None
+        if self.render_mode == "rgb_array":
+            if self._view is None:
+                from ials_zoo.sumo_net.render import NetworkView
+
+                self._view = NetworkView(self.network)
+            if self._metrics is not None:  # the episode is over and SUMO closed: the last picture
+                return self._last_frame if self._last_frame is not None else np.asarray(self._view.base)
+            self._last_frame = self._view.draw(self._sim.call("render_data"), self.possible_agents)
+            return self._last_frame
         lines = [f"t={self._time:.0f} s"]
         for x in self.network.ids:
             q = int(self._light_measures(x)[:, 2].sum())

@@ -67,6 +67,7 @@ class Network:
 
     lights: tuple[Light, ...]
     lane_edges: dict  # lane id -> edge id
+    lane_shapes: dict  # lane id -> [(x, y), ...] metres (for drawing), internal lanes left out
 
     def light(self, tls_id: str) -> Light:
         for light in self.lights:
@@ -114,11 +115,13 @@ def _links(root) -> dict[str, list[tuple[str, str, int]]]:
 @functools.lru_cache(maxsize=16)
 def _read_network(path: str, mtime: float) -> Network:
     root = _parse(path)
-    lengths, lane_edges = {}, {}
+    lengths, lane_edges, shapes = {}, {}, {}
     for edge in root.iter("edge"):
         for lane in edge.iter("lane"):
             lengths[lane.get("id")] = float(lane.get("length", 0))
             lane_edges[lane.get("id")] = edge.get("id")
+            if edge.get("function") != "internal":
+                shapes[lane.get("id")] = [tuple(map(float, xy.split(",")[:2])) for xy in lane.get("shape", "").split()]
     links = _links(root)
     lights = []
     for tls, phases in _programs(root).items():
@@ -128,7 +131,7 @@ def _read_network(path: str, mtime: float) -> Network:
         if not greens or not lanes:
             continue  # a light that controls nothing, or never shows green, is no agent
         lights.append(Light(tls, tuple(phases), greens, lanes, tls_links, tuple(lengths.get(x, 0.0) for x in lanes)))
-    return Network(tuple(lights), lane_edges)
+    return Network(tuple(lights), lane_edges, shapes)
 
 
 def read_network(net_file: str) -> Network:
