@@ -49,6 +49,7 @@ from typing import Any
 import numpy as np
 
 from ials_zoo.core.domains import get_domain
+from ials_zoo.core.spaces import sizes_of_env, stack_observations
 from ials_zoo.errors import BadInput, BadInputType
 from ials_zoo.policy import (
     PolicyNetwork,
@@ -506,10 +507,18 @@ def evaluate_joint(env_id: str, policy, agents=None, episodes: int = PROTOCOL_EP
         if tuple(agents) != pol.agents:
             pol = pol.for_agents(agents)
     seeds = _check_seeds(seeds, episodes)
-    env = domain.parallel_env(learners=agents, scripted_learners=(pol.kind == "scripted"), **options)
+    scripted = {"scripted_learners": True} if pol.kind == "scripted" else {}
+    env = domain.parallel_env(learners=agents, **scripted, **options)
     recorder = _MetricRecorder(domain, env)
     stack = FrameStack(pol.frame_stack)
-    n_actions = domain.n_actions
+    sizes = sizes_of_env(env, agents)  # agents with spaces of their own: padded, each its own actions
+    width = pol.net.obs_size if isinstance(pol, NetworkPolicy) else sizes.obs_size
+    if isinstance(pol, NetworkPolicy) and pol.net.action_counts is not None and (
+            tuple(pol.net.action_counts) != sizes.action_counts):
+        raise BadInput(f"policy {pol.name!r} has {list(pol.net.action_counts)} actions per agent; "
+                       f"these agents have {list(sizes.action_counts or [])}")
+    # the shared-space draw stays as it was (entries on the board re-measure bitwise)
+    counts = sizes.n_actions if sizes.action_counts is None else np.asarray(sizes.action_counts)
     start = time.perf_counter()
     iterator = seeds
     if progress:
@@ -523,20 +532,20 @@ def evaluate_joint(env_id: str, policy, agents=None, episodes: int = PROTOCOL_EP
             pol.reset(int(seed))
             obs, _ = env.reset(seed=int(seed))
             recorder.episode_started()
-            x = stack.reset(np.stack([obs[a] for a in agents]))
+            x = stack.reset(stack_observations(obs, agents, width))
             steps = 0
             while env.agents:
                 if isinstance(pol, NetworkPolicy):
                     acts = pol.act_all(x)
                 elif pol.kind == "random":
-                    acts = pol._rng.integers(n_actions, size=len(agents))
+                    acts = pol._rng.integers(counts, size=len(agents))
                 else:
                     acts = np.zeros(len(agents), np.int64)
                 obs, rewards, _, _, _ = env.step({a: int(u) for a, u in zip(agents, acts)})
                 per_agent[:, e] += [rewards[a] for a in agents]
                 steps += 1
                 if env.agents:
-                    x = stack.step(np.stack([obs[a] for a in agents]))
+                    x = stack.step(stack_observations(obs, agents, width))
             recorder.episode_ended()
             length = steps
     finally:

@@ -47,6 +47,7 @@ from ials_zoo.utils import atomic_path, loads_untrusted_json
 
 FORMAT = "ials_zoo.policy"
 FORMAT_VERSION = 1
+MASKED_FORMAT_VERSION = 2  # a policy with per-agent action counts (older readers must refuse it)
 HEADER_KEY = "ials_zoo.policy"
 SUFFIX = ".safetensors"
 ACTIVATIONS = ("tanh", "relu")
@@ -80,10 +81,14 @@ class PolicyNetwork:
         shared: one set of weights (leading axis 1) for every agent.
         recurrent: ``(W_ih, W_hh, b_ih, b_hh)`` of a GRU that reads the frames before the
             layers (module docstring), or None.
+        action_counts: per agent, how many of the ``n_actions`` it has (agents with their own
+            action spaces: the others get probability 0), or None (all ``n_actions``). Such a
+            policy reads observations zero-padded to ``obs_size``.
     """
 
     def __init__(self, agents, obs_size: int, n_actions: int, layers, activation: str = "tanh",
-                 frame_stack: int = 1, metadata: dict | None = None, shared: bool = False, recurrent=None):
+                 frame_stack: int = 1, metadata: dict | None = None, shared: bool = False, recurrent=None,
+                 action_counts=None):
         self.agents = tuple(agents)
         if not self.agents or len(set(self.agents)) != len(self.agents):
             raise PolicyFileError(f"a policy needs distinct agents, got {list(self.agents)}")
@@ -119,9 +124,20 @@ class PolicyNetwork:
             width = w.shape[2]
         if not self.layers or width != self.n_actions:
             raise PolicyFileError(f"the last layer has {width} outputs, not n_actions={self.n_actions}")
+        self.action_counts = self._check_counts(action_counts)
         # float64 copies for inference (see the module docstring)
         self._layers64 = [(w.astype(np.float64), b.astype(np.float64)[:, None, :]) for w, b in self.layers]
         self._gru64 = None if self.recurrent is None else [t.astype(np.float64) for t in self.recurrent]
+
+    def _check_counts(self, counts):
+        if counts is None:
+            return None
+        if not isinstance(counts, (list, tuple)) or len(counts) != len(self.agents) or any(
+                isinstance(c, bool) or not isinstance(c, (int, np.integer)) or not 1 <= c <= self.n_actions
+                for c in counts):
+            raise PolicyFileError(f"action_counts must give each of the {len(self.agents)} agents an integer "
+                                  f"in [1, {self.n_actions}], got {counts!r}")
+        return tuple(int(c) for c in counts)
 
     def _check_gru(self, parts, A: int) -> tuple:
         if len(parts) != 4:
@@ -165,13 +181,15 @@ class PolicyNetwork:
     def subset(self, agents) -> PolicyNetwork:
         """The policies of ``agents`` only (in that order)."""
         idx = [self.index(a) for a in agents]
+        counts = None if self.action_counts is None else [self.action_counts[i] for i in idx]
         if self.shared:
             return PolicyNetwork(agents, self.obs_size, self.n_actions, self.layers, self.activation,
-                                 self.frame_stack, self.metadata, shared=True, recurrent=self.recurrent)
+                                 self.frame_stack, self.metadata, shared=True, recurrent=self.recurrent,
+                                 action_counts=counts)
         gru = None if self.recurrent is None else [t[idx] for t in self.recurrent]
         return PolicyNetwork(agents, self.obs_size, self.n_actions,
                              [(w[idx], b[idx]) for w, b in self.layers], self.activation,
-                             self.frame_stack, self.metadata, recurrent=gru)
+                             self.frame_stack, self.metadata, recurrent=gru, action_counts=counts)
 
     def logits(self, x) -> np.ndarray:
         """``x [A, n, input]`` (or ``[A, input]``) -> logits ``[A, n, n_actions]`` (float64)."""
@@ -207,6 +225,9 @@ class PolicyNetwork:
 
     def probs(self, x) -> np.ndarray:
         z = self.logits(x)
+        if self.action_counts is not None:  # an agent's missing actions get probability 0
+            missing = np.arange(self.n_actions) >= np.asarray(self.action_counts)[:, None]
+            z[missing[:, None, :] if z.ndim == 3 else missing] = -np.inf
         z = z - z.max(axis=-1, keepdims=True)
         np.exp(z, out=z)
         return z / z.sum(axis=-1, keepdims=True)
@@ -221,10 +242,15 @@ class PolicyNetwork:
             raise BadInput("a stochastic policy needs a random generator")
         cum = np.cumsum(p, axis=-1)
         u = rng.random(p.shape[:-1] + (1,))
-        return np.minimum((cum < u).sum(axis=-1), self.n_actions - 1)
+        last = self.n_actions - 1 if self.action_counts is None else np.asarray(self.action_counts) - 1
+        if np.ndim(last) and p.ndim == 3:
+            last = last[:, None]
+        return np.minimum((cum < u).sum(axis=-1), last)
 
     def header(self) -> dict:
-        return {"format": FORMAT, "format_version": FORMAT_VERSION, "agents": list(self.agents),
+        counts = {} if self.action_counts is None else {"action_counts": list(self.action_counts)}
+        version = FORMAT_VERSION if self.action_counts is None else MASKED_FORMAT_VERSION
+        return {"format": FORMAT, "format_version": version, "agents": list(self.agents), **counts,
                 "obs_size": self.obs_size, "n_actions": self.n_actions, "hidden": self.hidden,
                 "activation": self.activation, "frame_stack": self.frame_stack, "shared": self.shared,
                 **({"recurrent_hidden": self.recurrent_hidden} if self.recurrent is not None else {}), **self.metadata}
@@ -245,7 +271,7 @@ class PolicyNetwork:
 
 
 _RESERVED = ("format", "format_version", "agents", "obs_size", "n_actions", "hidden", "activation", "frame_stack",
-             "shared", "recurrent_hidden")
+             "shared", "recurrent_hidden", "action_counts")
 GRU_TENSORS = ("weight_ih", "weight_hh", "bias_ih", "bias_hh")
 
 
@@ -295,9 +321,11 @@ def _from_parts(meta: dict, tensors: dict, where: str) -> PolicyNetwork:
         raise PolicyFileError(f"not an ials_zoo policy file: {where} (no readable {HEADER_KEY!r} header: {exc})") from None
     if not isinstance(header, dict) or header.get("format") != FORMAT:
         raise PolicyFileError(f"not an ials_zoo policy file: {where}")
-    if header.get("format_version") != FORMAT_VERSION:
-        raise PolicyFileError(f"{where}: policy format version {header.get('format_version')!r}; this "
-                              f"ials_zoo reads version {FORMAT_VERSION}")
+    version = header.get("format_version")
+    if version not in (FORMAT_VERSION, MASKED_FORMAT_VERSION) or (version == MASKED_FORMAT_VERSION) != (
+            "action_counts" in header):
+        raise PolicyFileError(f"{where}: policy format version {version!r}; this ials_zoo reads version "
+                              f"{FORMAT_VERSION}, and {MASKED_FORMAT_VERSION} with action_counts")
     n = len(header.get("hidden", [])) + 1
     recurrent = header.get("recurrent_hidden", 0)
     try:
@@ -311,7 +339,8 @@ def _from_parts(meta: dict, tensors: dict, where: str) -> PolicyNetwork:
         net = PolicyNetwork(header["agents"], header["obs_size"], header["n_actions"], layers,
                             header.get("activation", "tanh"), header.get("frame_stack", 1),
                             {k: v for k, v in header.items() if k not in _RESERVED},
-                            shared=bool(header.get("shared", False)), recurrent=gru)
+                            shared=bool(header.get("shared", False)), recurrent=gru,
+                            action_counts=header.get("action_counts"))
         if net.recurrent_hidden != recurrent:
             raise PolicyFileError(f"recurrent_hidden {recurrent!r} does not fit its GRU ({net.recurrent_hidden} units)")
         return net
@@ -414,9 +443,12 @@ def stack_policies(nets: list[PolicyNetwork], metadata: dict | None = None) -> P
     layers = [(np.concatenate([n.layers[i][0] for n in nets]), np.concatenate([n.layers[i][1] for n in nets]))
               for i in range(len(first.layers))]
     gru = None if first.recurrent is None else [np.concatenate([n.recurrent[j] for n in nets]) for j in range(4)]
+    counts = None
+    if any(n.action_counts is not None for n in nets):
+        counts = [c for n in nets for c in (n.action_counts or (n.n_actions,) * len(n.agents))]
     return PolicyNetwork([a for n in nets for a in n.agents], first.obs_size, first.n_actions, layers,
                          first.activation, first.frame_stack, metadata if metadata is not None else first.metadata,
-                         recurrent=gru)
+                         recurrent=gru, action_counts=counts)
 
 
 def is_policy_file(path) -> bool:

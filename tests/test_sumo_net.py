@@ -87,6 +87,23 @@ def test_fixed_time_in_the_env_is_plain_sumo_exactly_episode_after_episode():
             assert ours[key] == plain[key], key
 
 
+def test_one_env_repeats_an_episode_exactly_reset_after_reset():
+    """Every episode in a fresh SUMO process (the default): the same seed, the same episode,
+    however many episodes the env ran before (in one libsumo process they drifted)."""
+    env = sumo_net_v0.parallel_env(net="cologne1", learners=[])
+    try:
+        runs = []
+        for _ in range(3):
+            env.reset(seed=3)
+            runs.append(env.run_uncontrolled())
+        pids = env._sim.worker_pid
+    finally:
+        env.close()
+    assert runs[0] == runs[1] == runs[2] and pids is not None
+    with pytest.raises(BadInput, match="fresh_process"):
+        sumo_net_v0.parallel_env(net="cologne1", backend="inprocess")
+
+
 class _RescoSignal:
     """RESCO's Signal.observe (traffic_signal.py) on libsumo getters, for comparison."""
 
@@ -218,8 +235,8 @@ def test_rule_based_lights_beat_fixed_time_and_random_on_cologne1():
     assert delay["random"] > delay["fixed"]
 
 
-def test_a_second_env_in_one_process_runs_in_a_worker_and_matches():
-    a = sumo_net_v0.parallel_env(net="ingolstadt1", max_cycles=20)
+def test_an_env_in_this_process_and_one_in_a_worker_match():
+    a = sumo_net_v0.parallel_env(net="ingolstadt1", max_cycles=20, backend="auto", fresh_process=False)
     b = sumo_net_v0.parallel_env(net="ingolstadt1", max_cycles=20)
     try:
         assert a.backend == "inprocess" and b.backend == "worker"

@@ -157,9 +157,11 @@ class JointActors:
     recurrent actor's GRU first). The learner has ``agents``, ``obs_size``, ``n_actions``,
     ``frame_stack`` and ``actor_layers()``."""
 
+    action_counts = None  # agents with action spaces of their own: each one's count
+
     def policy(self, metadata: dict):
         return joint_policy(self.agents, self.actor_layers(), self.obs_size, self.n_actions, self.frame_stack,
-                            metadata)
+                            metadata, self.action_counts)
 
 
 def estimate_text(plan: RunPlan, learner: Learner, domain) -> str:

@@ -37,8 +37,9 @@ from ials_zoo.baselines.multiagent import (
     settings_of,
     whole_updates,
 )
-from ials_zoo.core.domains import get_domain, ials_domain_ids
+from ials_zoo.core.domains import domain_ids, get_domain
 from ials_zoo.core.extras import study_of
+from ials_zoo.core.spaces import joint_sizes
 from ials_zoo.errors import BadInput
 from ials_zoo.learners.batched_ppo import BatchedPPO, PPOConfig
 from ials_zoo.learners.gs_vec import GSVecEnv
@@ -59,11 +60,11 @@ class Args(MultiAgentRunArgs):
 def check_args(args: Args):
     """Clear errors before anything starts; returns (domain, agents, options, worker processes)."""
     if args.env_id is None:
-        raise BadInput(f"name the domain to train on: --env, one of {', '.join(ials_domain_ids())}")
+        raise BadInput(f"name the domain to train on: --env, one of {', '.join(domain_ids())}")
     if args.simulator != "gs":
         raise BadInput(f"ippo trains on the GS (--simulator gs); every agent on its own IALS is `ials-zoo train "
                          f"dials`, not --simulator {args.simulator!r}")
-    domain = get_domain(args.env_id).require_ials("train ippo")
+    domain = get_domain(args.env_id)
     options = parse_env_options(args.env_options)
     agents = domain.check_agents(None if args.agents == "all" else args.agents, **options)
     check_seed(args.seed, "seed")
@@ -82,11 +83,12 @@ class GSCopiesLearner(JointActors):
 
     simulator, charged_seconds, reports_aip_time = "gs", 0.0, False
 
-    def __init__(self, env_id, agents, options, copies, processes, ppo, frame_stack, seed, updates, obs_size, n_actions):
+    def __init__(self, env_id, agents, options, copies, processes, ppo, frame_stack, seed, updates, sizes):
         self.env_id, self.agents, self.options, self.copies, self.processes = env_id, agents, options, copies, processes
         self.frame_stack, self.seed, self.per_update = frame_stack, seed, ppo["n_steps"] * ppo["n_envs"]
-        self.obs_size, self.n_actions = obs_size, n_actions
-        self.learner = BatchedPPO(agents, obs_size * frame_stack, n_actions, PPOConfig(**ppo), seed, updates)
+        self.obs_size, self.n_actions, self.action_counts = sizes.obs_size, sizes.n_actions, sizes.action_counts
+        self.learner = BatchedPPO(agents, self.obs_size * frame_stack, self.n_actions, PPOConfig(**ppo), seed, updates,
+                                  action_counts=self.action_counts)
         self.env = self.trainer = self.episode_state = None
 
     def load(self, state, info):
@@ -149,7 +151,7 @@ def main(args: Args | None = None) -> dict:
                                            "gs_processes")),
                    training, args.resume, args.overwrite, args.progress, args.submitter, args.notes)
     learner = GSCopiesLearner(args.env_id, agents, options, args.n_envs, processes, ppo, frame_stack, args.seed,
-                              total // per_update, int(np.prod(domain.observation_space.shape)), domain.n_actions)
+                              total // per_update, joint_sizes(domain, agents, options))
     copies = f"{args.n_envs} GS cop{'ies' if args.n_envs > 1 else 'y'}"
     return run(plan, learner, f"ippo: {len(agents)} agents of {args.env_id} learn at once on the GS ({copies}, "
                f"{processes} worker process{'es' if processes != 1 else ''})", domain)

@@ -148,13 +148,14 @@ def ppo_config(args, copies: int, frame_stack: int = 1) -> dict:
             **({"recurrent_hidden": args.recurrent_hidden, "frames": frame_stack} if args.recurrent_hidden else {})}
 
 
-def joint_policy(agents, layers, obs_size: int, n_actions: int, frame_stack: int, metadata: dict):
+def joint_policy(agents, layers, obs_size: int, n_actions: int, frame_stack: int, metadata: dict,
+                 action_counts=None):
     """The agents' actors (:meth:`~ials_zoo.learners.batched_ppo.BatchedPPO.actor_layers`: a
     GRU's four tensors first where the policy is recurrent) as one
-    :class:`~ials_zoo.policy.PolicyNetwork`."""
+    :class:`~ials_zoo.policy.PolicyNetwork` (``action_counts``: agents with their own)."""
     gru = layers[0] if len(layers[0]) == 4 else None
     return PolicyNetwork(agents, obs_size, n_actions, layers[1:] if gru else layers, "tanh", frame_stack, metadata,
-                         recurrent=gru)
+                         recurrent=gru, action_counts=action_counts)
 
 
 class JointActor:

@@ -105,15 +105,23 @@ class BatchedPPO:
         cfg: :class:`PPOConfig`.
         seed: the run seed (with each agent's name: its weights, minibatches and actions).
         total_updates: updates over the whole run, for the learning-rate decay.
+        action_counts: per agent, how many of the ``n_actions`` it has (agents with their own
+            action spaces; the others are masked out), or None (all).
     """
 
     def __init__(self, agents, input_size: int, n_actions: int, cfg: PPOConfig, seed: int = 0,
-                 total_updates: int = 1):
+                 total_updates: int = 1, action_counts=None):
         import torch
 
         self.agents = list(agents)
         self.cfg, self.seed = cfg, int(seed)
         self.input_size, self.n_actions = int(input_size), int(n_actions)
+        self.action_counts = None if action_counts is None else [int(c) for c in action_counts]
+        self._mask = None
+        if self.action_counts is not None:
+            # a large finite penalty, not -inf: the entropy's p * log p stays 0 * finite
+            missing = np.arange(self.n_actions)[None, :] >= np.asarray(self.action_counts)[:, None]
+            self._mask = torch.from_numpy(np.where(missing, -1e9, 0.0).astype(np.float32))[:, None, :]
         self.total_updates, self.updates = max(1, int(total_updates)), 0
         A = len(self.agents)
         params = {}
@@ -216,7 +224,10 @@ class BatchedPPO:
 
     def forward(self, x):
         """``x [A, B, padded input]`` -> ``(logits [A, B, n_actions], values [A, B])``."""
-        return self._mlp("pi", x)[..., :self.n_actions], self._mlp("vf", x)[..., 0]
+        logits = self._mlp("pi", x)[..., :self.n_actions]
+        if self._mask is not None:
+            logits = logits + self._mask
+        return logits, self._mlp("vf", x)[..., 0]
 
     def act(self, obs: np.ndarray):
         """``obs [A, n_envs, input]`` -> ``(actions, values, log-probabilities)``, each ``[A, n_envs]``."""
@@ -228,7 +239,8 @@ class BatchedPPO:
             probs = logp_all.exp().numpy().astype(np.float64)
         cum = np.cumsum(probs, axis=-1)
         u = self.streams.next().reshape(cum.shape[0], cum.shape[1], 1)
-        actions = np.minimum((cum < u * cum[..., -1:]).sum(axis=-1), self.n_actions - 1)
+        last = self.n_actions - 1 if self.action_counts is None else np.asarray(self.action_counts)[:, None] - 1
+        actions = np.minimum((cum < u * cum[..., -1:]).sum(axis=-1), last)
         logp = np.take_along_axis(logp_all.numpy(), actions[..., None], axis=-1)[..., 0]
         return actions, values.numpy(), logp
 

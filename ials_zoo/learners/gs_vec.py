@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from ials_zoo.core.domains import get_domain
+from ials_zoo.core.spaces import sizes_of_env, stack_observations
 from ials_zoo.core.streams import derived_seed
 from ials_zoo.errors import BadInput
 from ials_zoo.processes import Worker, call_all, start_all
@@ -25,6 +26,8 @@ class _Copies:
     def __init__(self, env_id, agents, options, seeds):
         self.envs = [get_domain(env_id).parallel_env(learners=agents, **options) for _ in seeds]
         self.agents, self.seeds = list(agents), list(seeds)
+        # agents with observations of their own lengths are zero-padded to the longest
+        self.width = sizes_of_env(self.envs[0], self.agents).obs_size
 
     def reset(self, seeds=None):
         if seeds is not None:
@@ -32,7 +35,7 @@ class _Copies:
         obs = []
         for env, seed in zip(self.envs, self.seeds):
             o, _ = env.reset(seed=seed)
-            obs.append(np.stack([o[a] for a in self.agents]))
+            obs.append(stack_observations(o, self.agents, self.width))
         self.seeds = [None] * len(self.envs)
         return np.stack(obs, axis=1)  # [A, copies, obs]
 
@@ -40,7 +43,7 @@ class _Copies:
         obs, rew, done = [], [], False
         for j, env in enumerate(self.envs):
             o, r, _, trunc, _ = env.step({a: int(actions[i, j]) for i, a in enumerate(self.agents)})
-            obs.append(np.stack([o[a] for a in self.agents]))
+            obs.append(stack_observations(o, self.agents, self.width))
             rew.append([r[a] for a in self.agents])
             done = all(trunc.values())
         return np.stack(obs, axis=1), np.array(rew).T, done

@@ -250,6 +250,11 @@ class SimHandle:
             worker.close(kill=True)
         _live_workers.discard(self)
 
+    def restart(self) -> None:
+        """End this handle's worker (if any): the next ``reset`` call starts a fresh process."""
+        if self.mode == "worker":
+            self._kill()
+
     @property
     def worker_pid(self) -> int | None:
         return self._worker.pid if self._worker is not None else None

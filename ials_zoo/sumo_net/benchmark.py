@@ -23,7 +23,7 @@ DEFAULT_MAPS = ("cologne8", "grid4x4", "ingolstadt21")
 
 def bench_map(net: str, repeats: int = 3, max_cycles: int | None = None) -> dict:
     """One map's figures: GS decisions/s, µs per agent-decision, SUMO steps/s, share of raw."""
-    env = SumoNetEnv(net=net, max_cycles=max_cycles, backend="inprocess")
+    env = SumoNetEnv(net=net, max_cycles=max_cycles, backend="inprocess", fresh_process=False)
     rng = np.random.default_rng(0)
     shares, decisions_per_s, raw_steps_per_s = [], [], []
     try:

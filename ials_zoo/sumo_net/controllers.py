@@ -93,17 +93,15 @@ def run_episode(controller: str, seed: int, **options) -> dict[str, float]:
     """One episode of ``controller`` on the network ``options`` name; its metrics (and its
     wall-clock ``seconds``). Detection uses RESCO's distance for the controller.
 
-    The episode runs in a fresh SUMO worker process (``backend="worker"`` unless given): with
-    SUMO 1.28, the second and later libsumo simulations of one process can differ from a fresh
-    process's on maps of ``<trip>`` routes (cologne1, seed 3: 43.30 or 44.31 s of delay, run to
-    run), while a fresh process always gives plain ``sumo``'s episode."""
+    The episode runs in a fresh SUMO worker process, as every ``sumo_net_v0`` episode does by
+    default (the env's ``fresh_process``): it is then plain ``sumo``'s episode."""
     import time
 
     from ials_zoo.sumo_net.env import SumoNetEnv
 
     check_controller(controller)
     rule_based = controller in ("greedy", "max_pressure", "random")
-    options = {"backend": "worker", **options, "max_distance": CONTROLLERS[controller]}
+    options = {**options, "max_distance": CONTROLLERS[controller]}
     if not rule_based:
         options["learners"] = []
     env = SumoNetEnv(**options)

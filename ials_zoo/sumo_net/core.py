@@ -65,10 +65,11 @@ class _Signal:
                                          raw.vehicle_getWaitingTime, raw.vehicle_getSpeed)
         for lane, length in zip(self.lanes, self.lengths):
             approach = total = queue = speeds = longest = 0.0
+            far = length > max_distance  # a shorter lane is all within detection
             for veh in ids(lane):
                 # RESCO reads getNextTLS(veh)[0] distance; on a lane that ends at this light that
                 # is the distance to the lane's end, which the lane position gives at a tenth of the cost
-                if length - position(veh) > max_distance:
+                if far and length - position(veh) > max_distance:
                     continue
                 now.add(veh)
                 if veh in waits:

@@ -24,7 +24,8 @@ SUMO_SEED_MAX = 2**31 - 2
 SCENARIO_OPTIONS = ("net", "sumocfg", "net_file", "route_files", "begin", "end", "decision_seconds", "yellow_seconds",
                     "max_cycles")
 DEFAULT_NET = "cologne8"
-OPTIONS = (*SCENARIO_OPTIONS, "learners", "max_distance", "observation", "reward", "backend", "render_mode")
+OPTIONS = (*SCENARIO_OPTIONS, "learners", "max_distance", "observation", "reward", "backend", "fresh_process",
+           "render_mode")
 
 
 def scenario_of(net=None, sumocfg=None, net_file=None, route_files=None, begin=None, end=None,
@@ -116,8 +117,13 @@ class SumoNetEnv(ParallelEnv):
     **State** (``state()``): every light's observation, concatenated in network order.
 
     **Seeding**: ``reset(seed=s)`` runs SUMO with ``--seed s``; the same seed and actions give
-    the same episode. **SUMO**: one core call per decision through
-    :class:`ials_zoo.sumo.lease.SimHandle` (``backend`` ``"auto"``, ``"inprocess"``, ``"worker"``).
+    the same episode, the one a plain ``sumo`` process gives. **SUMO**: one core call per
+    decision through :class:`ials_zoo.sumo.lease.SimHandle`. By default (``fresh_process=True``,
+    ``backend="worker"``) every episode runs in a new worker process: with SUMO 1.28 a second
+    libsumo simulation in one process can differ from the first on maps of ``<trip>`` routes
+    (cologne1, seed 3: 43.30 or 44.31 s of delay, at random), so only a fresh process makes
+    episodes reproducible. ``fresh_process=False`` with ``backend="auto"``/``"inprocess"`` saves
+    the process start (about a second per episode) at that price.
 
     **Rendering**: ``"rgb_array"`` (a top view: roads, vehicles, each incoming lane's signal,
     learners ringed; :mod:`ials_zoo.sumo_net.render`), ``"ansi"`` (one line per light: its phase
@@ -131,7 +137,8 @@ class SumoNetEnv(ParallelEnv):
 
     def __init__(self, net=None, sumocfg=None, net_file=None, route_files=None, begin=None, end=None,
                  decision_seconds=None, yellow_seconds=None, max_cycles=None, learners=None, max_distance=200.0,
-                 observation="drq_norm", reward="wait_norm", backend="auto", render_mode=None, **unknown):
+                 observation="drq_norm", reward="wait_norm", backend="worker", fresh_process=True, render_mode=None,
+                 **unknown):
         if unknown:
             raise BadInputType(f"unknown option(s) {sorted(unknown)} for {ENV_ID}; valid options: {', '.join(OPTIONS)}")
         if render_mode not in (None, *self.metadata["render_modes"]):
@@ -152,6 +159,12 @@ class SumoNetEnv(ParallelEnv):
         self.action_spaces = {x.id: spaces.Discrete(x.n_actions) for x in lights}
         self.state_space = spaces.Box(0.0, np.inf, (int(self._rows[-1]) * N_FEATURES,), np.float32)
         self._tmp = tempfile.mkdtemp(prefix="ials_zoo_sumo_net_")
+        if not isinstance(fresh_process, (bool, np.bool_)):
+            raise BadInputType(f"fresh_process must be a bool, got {fresh_process!r}")
+        if fresh_process and backend != "worker":
+            raise BadInput(f"fresh_process=True runs every episode in a new worker: backend must be 'worker', "
+                           f"not {backend!r} (or pass fresh_process=False)")
+        self.fresh_process = bool(fresh_process)
         self._sim = SimHandle("ials_zoo.sumo_net.core:NetCore", self._core_config(), backend)
         self.backend = self._sim.mode
         self._seed_rng = np.random.default_rng()
@@ -210,6 +223,8 @@ class SumoNetEnv(ParallelEnv):
         self._episodes += 1
         self._metrics = None
         tripinfo = os.path.join(self._tmp, f"tripinfo_{self._episodes}.xml")
+        if self.fresh_process:
+            self._sim.restart()
         self._store(self._sim.call("reset", seed, tripinfo))
         self.agents = list(self.possible_agents)
         return {a: self.observe(a) for a in self.agents}, {a: {} for a in self.agents}
