@@ -227,7 +227,7 @@ class PolicyNetwork:
         z = self.logits(x)
         if self.action_counts is not None:  # an agent's missing actions get probability 0
             missing = np.arange(self.n_actions) >= np.asarray(self.action_counts)[:, None]
-            z[missing[:, None, :] if z.ndim == 3 else missing] = -np.inf
+            z = np.where(missing[:, None, :] if z.ndim == 3 else missing, -np.inf, z)
         z = z - z.max(axis=-1, keepdims=True)
         np.exp(z, out=z)
         return z / z.sum(axis=-1, keepdims=True)

@@ -82,6 +82,11 @@ class Domain:
         metrics: the physical metrics of an episode, ``{name: "lower" | "higher"}`` (which
             way is better); the GS then has ``enable_metrics()`` (record from the next
             reset on) and ``episode_metrics() -> {name: float}`` for the episode just run.
+        score_metric: the metric that ranks this domain's entries on the board (e.g. RESCO's
+            ``"delay"``, which way is better as in :attr:`metrics`), or None: the score (the
+            mean return) ranks them.
+        track_options: GS options that name a board track of their own (e.g. ``("net",)``:
+            one track per network); other options make an entry a protocol variant.
         description: one line for listings.
         extras: what one subsystem alone reads, keyed by it (:mod:`ials_zoo.core.extras`:
             ``"study"``, ``"dials"``, ``"viewer"``, ``"bench"``, ``"tools"``); a domain
@@ -106,6 +111,8 @@ class Domain:
     untrained_probs: tuple | None = None
     replay_agreement: float = 0.9
     metrics: dict = field(default_factory=dict)
+    score_metric: str | None = None
+    track_options: tuple[str, ...] = ()
     description: str = ""
     extras: dict = field(default_factory=dict)
 
@@ -124,6 +131,10 @@ class Domain:
         bad = {k: v for k, v in self.metrics.items() if v not in ("lower", "higher")}
         if bad:
             raise BadInput(f"{self.env_id}: metrics must map names to 'lower' or 'higher' (better), got {bad}")
+        if self.score_metric is not None and self.score_metric not in self.metrics:
+            raise BadInput(f"{self.env_id}: score_metric {self.score_metric!r} is not one of its metrics")
+        if not set(self.track_options) <= set(self.gs_options):
+            raise BadInput(f"{self.env_id}: track_options must be GS options, got {list(self.track_options)}")
 
     def agents(self, **options) -> list[str]:
         """Every agent id under ``options`` (only :attr:`agent_options` are looked at)."""

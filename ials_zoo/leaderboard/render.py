@@ -4,6 +4,7 @@ archive."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 from ials_zoo.core.domains import get_domain
@@ -52,11 +53,17 @@ def _row(d: dict) -> list[str]:
             d["created"][:10]]
 
 
+def ranking_metric(env_id: str) -> str | None:
+    """The metric that ranks a domain's entries (:attr:`Domain.score_metric`), or None: the score."""
+    return get_domain(env_id).score_metric
+
+
 def sort_key(sort: str):
-    """Best first by the score, or by a physical metric (its domain says which way is better;
-    entries without it last)."""
+    """Best first by the score (by the domain's ranking metric where it has one), or by a
+    physical metric (its domain says which way is better; entries without it last)."""
     if sort == "score":
-        return lambda d: (0, -d["score"]["mean"])
+        return lambda d: (0, -d["score"]["mean"]) if ranking_metric(d["env_id"]) is None else (
+            sort_key(ranking_metric(d["env_id"]))(d))
 
     def key(d):
         metric = (d.get("metrics") or {}).get(sort)
@@ -76,6 +83,10 @@ def group_entries(entries, sort: str = "score") -> dict:
     for p, d in entries:
         section = d["track"] if d["evaluation"]["protocol"] == OFFICIAL else "variants"
         who = d["agent"] if d["track"] == SINGLE else f"{len(d['agents'])} agents"
+        tracked = [f"{k}={v}" for k, v in sorted(d["evaluation"]["options"].items())
+                   if k in get_domain(d["env_id"]).track_options]
+        if tracked:  # e.g. one track per network
+            who = f"{', '.join(tracked)}: {who}"
         groups.setdefault((section, d["env_id"], who), []).append(dict(d, _file=p.name))
     order = {SINGLE: 0, MULTI: 1, "variants": 2}
     for rows in groups.values():
@@ -84,6 +95,8 @@ def group_entries(entries, sort: str = "score") -> dict:
 
 
 def _text_table(rows: list[dict], sort: str = "score") -> list[str]:
+    if sort == "score" and ranking_metric(rows[0]["env_id"]) is not None:
+        sort = ranking_metric(rows[0]["env_id"])  # that metric's column first, ranked by it
     if sort == "score":
         table = [HEADER] + [_row(d) for d in rows]
     else:
@@ -91,7 +104,9 @@ def _text_table(rows: list[dict], sort: str = "score") -> list[str]:
             m = (d.get("metrics") or {}).get(sort)
             return "-" if m is None else f"{m['mean']:.2f} [{m['ci_low']:.2f}, {m['ci_high']:.2f}]"
 
-        table = [[*HEADER[:2], sort, *HEADER[2:]]] + [[*_row(d)[:2], metric(d), *_row(d)[2:]] for d in rows]
+        better = get_domain(rows[0]["env_id"]).metrics.get(sort, "higher")
+        table = [[*HEADER[:2], f"{sort} ({better} is better)", *HEADER[2:]]] + [
+            [*_row(d)[:2], metric(d), *_row(d)[2:]] for d in rows]
     widths = [max(len(r[i]) for r in table) for i in range(len(table[0]))]
     return ["  " + "  ".join(c.ljust(w) for c, w in zip(r, widths)) for r in table]
 
@@ -197,7 +212,8 @@ def _save_figure(fig, board: Path, key: tuple, suffix: str) -> str:
     section, env_id, who = key
     fig.axes[0].legend(fontsize=7)
     fig.tight_layout()
-    name = f"{env_id}__{who.replace(' ', '-')}{'__multi' if section == MULTI else ''}{suffix}.png"
+    safe = re.sub(r'[^A-Za-z0-9._-]+', '-', who)
+    name = f"{env_id}__{safe}{'__multi' if section == MULTI else ''}{suffix}.png"
     with atomic_path(board / "plots" / name, suffix=".png") as tmp:
         fig.savefig(tmp, dpi=100, format="png")
     plt.close(fig)
@@ -236,10 +252,18 @@ def _profile_plot(board: Path, key: tuple, rows: list[dict]) -> str | None:
 
 
 def _md_table(rows, link: str | None = "results") -> list[str]:
+    rank = ranking_metric(rows[0]["env_id"]) if rows else None
     head = HEADER + (["file"] if link else [])
+    if rank is not None:  # the ranking metric first, with which way is better
+        better = get_domain(rows[0]["env_id"]).metrics[rank]
+        head = [*head[:2], f"{rank} [95% CI] ({better} is better)", *head[2:]]
     out = ["| " + " | ".join(head) + " |\n", "|" + "---|" * len(head) + "\n"]
     for d in rows:
         cells = [markdown_cell(c) for c in _row(d)] + ([f"[json]({link}/{d['_file']})"] if link else [])
+        if rank is not None:
+            m = (d.get("metrics") or {}).get(rank)
+            cells = [*cells[:2], "-" if m is None else f"{m['mean']:.2f} [{m['ci_low']:.2f}, {m['ci_high']:.2f}]",
+                     *cells[2:]]
         out.append("| " + " | ".join(cells) + " |\n")
     return out
 

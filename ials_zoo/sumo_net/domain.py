@@ -42,6 +42,8 @@ DOMAIN = Domain(
     one_simulation_per_process=True,
     metrics={"delay": "lower", "delay_all": "lower", "trip_time": "lower", "waiting_time": "lower",
              "throughput": "higher", "queue": "lower"},
+    score_metric="delay",  # RESCO's average delay per vehicle ranks the board, lower first
+    track_options=("net",),  # one board track per RESCO map
     extras={"tools": TOOLS, "bench": BenchSettings(gs_runner=bench_gs),
             "viewer": ViewerSettings(legend=_legend(), episode_summary=episode_summary)},
 )

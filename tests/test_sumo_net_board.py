@@ -1,0 +1,104 @@
+"""sumo_net_v0 on the board and in the learners: a track per map ranked by RESCO's delay,
+policies for agents with spaces of their own (padded observations, masked actions), re-measured
+exactly."""
+
+import json
+
+import numpy as np
+import pytest
+
+from ials_zoo import leaderboard as lb
+from ials_zoo.core.domains import get_domain
+from ials_zoo.core.spaces import JointSizes, joint_sizes, stack_observations
+from ials_zoo.evaluation import eval_seeds, evaluate_joint
+from ials_zoo.learners.batched_ppo import BatchedPPO, PPOConfig
+from ials_zoo.policy import PolicyFileError, PolicyNetwork, load_policy_file, save_policy
+
+ENV = "sumo_net_v0"
+
+
+def _masked_policy(agents, sizes: JointSizes, seed: int) -> PolicyNetwork:
+    rng = np.random.default_rng(seed)
+    A = len(agents)
+    layers = [(rng.normal(size=(A, sizes.obs_size, 16)).astype(np.float32), np.zeros((A, 16), np.float32)),
+              (rng.normal(size=(A, 16, sizes.n_actions)).astype(np.float32), np.zeros((A, sizes.n_actions), np.float32))]
+    return PolicyNetwork(agents, sizes.obs_size, sizes.n_actions, layers, metadata={"env_id": ENV},
+                         action_counts=sizes.action_counts)
+
+
+def test_cologne8_agents_are_padded_and_masked():
+    domain = get_domain(ENV)
+    agents = domain.agents(net="cologne8")
+    sizes = joint_sizes(domain, agents, {"net": "cologne8"})
+    assert sizes.obs_size == 30 and sizes.n_actions == 4 and sorted(sizes.action_counts) == [2, 2, 3, 3, 3, 4, 4, 4]
+    x = stack_observations({"a": np.ones(2), "b": np.ones(3)}, ["a", "b"], 4)
+    np.testing.assert_array_equal(x, [[1, 1, 0, 0], [1, 1, 1, 0]])
+
+
+def test_a_masked_policy_file_never_picks_a_missing_action_and_round_trips(tmp_path):
+    sizes = JointSizes(6, 4, (2, 4, 3))
+    net = _masked_policy(["a", "b", "c"], sizes, 0)
+    loaded = load_policy_file(save_policy(net, tmp_path / "p.safetensors"))
+    assert loaded.action_counts == (2, 4, 3) and loaded.header()["format_version"] == 2
+    x = np.random.default_rng(1).normal(size=(3, 500, 6))
+    p = loaded.probs(x)
+    assert (p[0, :, 2:] == 0).all() and (p[2, :, 3:] == 0).all() and np.allclose(p.sum(-1), 1)
+    acts = loaded.act(x, np.random.default_rng(2))
+    assert acts[0].max() <= 1 and acts[2].max() <= 2 and acts[1].max() == 3
+    assert loaded.subset(["c", "a"]).action_counts == (3, 2)
+    # a version-2 header without its counts, or counts out of range, is refused
+    with pytest.raises(PolicyFileError, match="action_counts"):
+        PolicyNetwork(["a"], 6, 4, [(np.zeros((1, 6, 4), np.float32), np.zeros((1, 4), np.float32))],
+                      action_counts=[5])
+
+
+def test_batched_ppo_masks_and_learns_only_the_actions_an_agent_has():
+    cfg = PPOConfig(n_steps=32, n_envs=2, batch_size=32, n_epochs=2)
+    ppo = BatchedPPO(["a", "b"], 6, 4, cfg, seed=0, action_counts=[2, 4])
+    obs = np.random.default_rng(0).normal(size=(2, 2, 6)).astype(np.float32)
+    seen = set()
+    for _ in range(200):
+        actions, _, logp = ppo.act(obs)
+        seen |= {(0, int(a)) for a in actions[0]} | {(1, int(a)) for a in actions[1]}
+        assert np.isfinite(logp).all()
+    assert {a for k, a in seen if k == 0} == {0, 1} and {a for k, a in seen if k == 1} == {0, 1, 2, 3}
+    import torch
+
+    probs = torch.softmax(ppo.forward(ppo._input(obs))[0], dim=-1).detach().numpy()
+    assert (probs[0, :, 2:] == 0).all() and (probs[1] > 0).all()  # the learner's own distribution is masked
+
+
+def test_the_protocol_of_a_map_is_official_with_every_light_and_only_the_net_option():
+    agents = get_domain(ENV).agents(net="cologne8")
+    assert lb.protocol_of("multi-agent", ENV, agents, eval_seeds(), {"net": "cologne8"}) == "official"
+    assert lb.protocol_of("multi-agent", ENV, agents[:3], eval_seeds(), {"net": "cologne8"}) == "variant"
+    assert lb.protocol_of("multi-agent", ENV, agents, eval_seeds(), {"net": "cologne8", "max_cycles": 9}) == "variant"
+
+
+def _entry(tmp_path, policy: PolicyNetwork, name: str) -> dict:
+    path = save_policy(policy, tmp_path / f"{name}.safetensors")
+    ev = evaluate_joint(ENV, str(path), episodes=2, net="cologne8", max_cycles=30)
+    return lb.make_result([ev], algorithm=name, training_seeds=[0], training={
+        "simulator": "gs", "aip": None, "seeds": [0], "env_steps": 1000, "wall_clock_seconds": 1.0,
+        "aip_seconds": 0.0, "hyperparameters": {}})
+
+
+def test_a_map_is_a_track_ranked_by_delay_and_its_entries_re_measure_exactly(tmp_path):
+    board = tmp_path / "board"
+    (board / "results").mkdir(parents=True)
+    domain = get_domain(ENV)
+    agents = domain.agents(net="cologne8")
+    sizes = joint_sizes(domain, agents, {"net": "cologne8"})
+    entries = [_entry(tmp_path, _masked_policy(agents, sizes, s), f"net{s}") for s in (0, 1)]
+    for d in entries:
+        assert d["metrics"]["delay"]["mean"] > 0
+        (tmp_path / f"{d['algorithm']}.json").write_text(json.dumps(d))
+        lb.submit(tmp_path / f"{d['algorithm']}.json", board)
+    best, worst = sorted(entries, key=lambda d: d["metrics"]["delay"]["mean"])
+    table = lb.show(board)
+    assert "net=cologne8: 8 agents" in table and "delay (lower is better)" in table
+    assert table.index(best["algorithm"] + " ") < table.index(worst["algorithm"] + " ")
+    readme = lb.render(board).read_text()
+    assert "delay [95% CI] (lower is better)" in readme
+    for p in (board / "results").glob("*.json"):
+        assert lb.verify(p, directory=board)[0]["ok"]
