@@ -196,6 +196,7 @@ class SimHandle:
         self.unresponsive_after = float(unresponsive_after)
         self._core = None
         self._worker: Worker | None = None
+        self._spare: Worker | None = None  # a worker started ahead of the next restart(spare=True)
         self.closed = False
         if backend == "auto":
             backend = "inprocess" if inprocess_available() else "worker"
@@ -210,9 +211,13 @@ class SimHandle:
         return self._core
 
     # -- worker
+    def _new_worker(self) -> Worker:
+        return Worker(_WorkerCore, (self.core_name, self.config), name="SUMO worker",
+                      unresponsive_after=self.unresponsive_after)
+
     def _spawn(self):
-        self._worker = Worker(_WorkerCore, (self.core_name, self.config), name="SUMO worker",
-                              unresponsive_after=self.unresponsive_after)
+        # a spare started earlier (restart(spare=True)) has done its imports meanwhile
+        self._worker, self._spare = (self._spare or self._new_worker()), None
         _live_workers.add(self)
         try:
             self._ask(self._worker.started, self.timeout)
@@ -245,15 +250,27 @@ class SimHandle:
                                           "lost: call reset() to start a new worker") from None
 
     def _kill(self):
+        for worker in (self._worker, self._spare):
+            if worker is not None:
+                worker.close(kill=True)
+        self._worker = self._spare = None
+        _live_workers.discard(self)
+
+    def restart(self, spare: bool = False) -> None:
+        """End this handle's worker (if any): the next ``reset`` call runs in a fresh process.
+        ``spare``: that process is one started beforehand, and a new spare starts now, so that
+        its interpreter start overlaps the episode about to run (not the next reset)."""
+        if self.mode != "worker":
+            return
         worker, self._worker = self._worker, None
         if worker is not None:
             worker.close(kill=True)
-        _live_workers.discard(self)
-
-    def restart(self) -> None:
-        """End this handle's worker (if any): the next ``reset`` call starts a fresh process."""
-        if self.mode == "worker":
-            self._kill()
+        if spare:
+            if self._spare is None:
+                self._spare = self._new_worker()
+            self._spawn()
+            self._spare = self._new_worker()
+            _live_workers.add(self)
 
     @property
     def worker_pid(self) -> int | None:
@@ -295,9 +312,10 @@ class SimHandle:
                 self._core = None
                 _release(id(self))
         else:
-            worker, self._worker = self._worker, None
-            if worker is not None:
-                worker.close()
+            workers, self._worker, self._spare = (self._worker, self._spare), None, None
+            for worker in workers:
+                if worker is not None:
+                    worker.close()
             _live_workers.discard(self)
 
     def __del__(self):

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from ials_zoo.core.domains import Domain
-from ials_zoo.core.extras import BenchSettings, ViewerSettings
+from ials_zoo.core.extras import BenchSettings, StudySettings, ViewerSettings
 from ials_zoo.sumo_net.env import ENV_ID, SCENARIO_OPTIONS, parallel_env, possible_agents
 
 
@@ -27,6 +27,10 @@ def _legend():
     return LEGEND
 
 
+# IPPO on RESCO's maps: 100 episodes of 360 decisions per agent (RESCO's IDQN budget); about
+# 500 agent-decisions/s of training on cologne8 with 2 GS copies on 2 cores (the first runs)
+STUDY = StudySettings(multi_agent_budget=36_000, multi_agent_steps_per_second={"gs": 500.0, "ials": 500.0})
+
 TOOLS = {"resco-controllers": ("ials_zoo.sumo_net.study",
                                "fixed time, max pressure, greedy and actuated lights on RESCO's maps, beside RESCO's table")}
 
@@ -44,6 +48,6 @@ DOMAIN = Domain(
              "throughput": "higher", "queue": "lower"},
     score_metric="delay",  # RESCO's average delay per vehicle ranks the board, lower first
     track_options=("net",),  # one board track per RESCO map
-    extras={"tools": TOOLS, "bench": BenchSettings(gs_runner=bench_gs),
+    extras={"tools": TOOLS, "study": STUDY, "bench": BenchSettings(gs_runner=bench_gs),
             "viewer": ViewerSettings(legend=_legend(), episode_summary=episode_summary)},
 )

@@ -223,8 +223,8 @@ class SumoNetEnv(ParallelEnv):
         self._episodes += 1
         self._metrics = None
         tripinfo = os.path.join(self._tmp, f"tripinfo_{self._episodes}.xml")
-        if self.fresh_process:
-            self._sim.restart()
+        if self.fresh_process:  # a new process, started during the last episode
+            self._sim.restart(spare=True)
         self._store(self._sim.call("reset", seed, tripinfo))
         self.agents = list(self.possible_agents)
         return {a: self.observe(a) for a in self.agents}, {a: {} for a in self.agents}
