@@ -102,3 +102,23 @@ def test_a_map_is_a_track_ranked_by_delay_and_its_entries_re_measure_exactly(tmp
     assert "delay [95% CI] (lower is better)" in readme
     for p in (board / "results").glob("*.json"):
         assert lb.verify(p, directory=board)[0]["ok"]
+
+
+def test_ippo_trains_every_light_of_a_map_with_its_own_actions(tmp_path):
+    """cologne3: lights with 3, 4 and 4 greens, observations of 19 lanes in all: the run's
+    policy file masks each light's missing greens and the board re-measures it exactly."""
+    from ials_zoo.baselines import ippo
+
+    out = tmp_path / "run"
+    args = ippo.Args(env_id=ENV, env_options='{"net": "cologne3", "max_cycles": 32}', total_timesteps=256,
+                     samples_per_update=128, batch_size=64, n_envs=1, eval_every=256, eval_episodes=1,
+                     final_eval_episodes=1, out_dir=str(out), progress=False)
+    result = ippo.main(args)
+    net = load_policy_file(out / "policy.safetensors")
+    domain = get_domain(ENV)
+    agents = domain.agents(net="cologne3")
+    assert list(net.agents) == agents and net.action_counts == joint_sizes(domain, agents, {"net": "cologne3"}).action_counts
+    assert sorted(net.action_counts) == [3, 4, 4]
+    assert result["metrics"]["delay"]["mean"] > 0
+    (tmp_path / "r.json").write_text(json.dumps(result))
+    assert lb.verify(tmp_path / "r.json", policies=[out / "policy.safetensors"])[0]["ok"]

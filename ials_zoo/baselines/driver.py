@@ -232,6 +232,11 @@ def run(plan: RunPlan, learner: Learner, description: str, domain, scoring: Scor
     split = (f" (of which AIP collection and training {format_seconds(training['aip_seconds'])})"
              if learner.reports_aip_time else "")
     det = "" if deterministic is None else f"; deterministic {deterministic['score']['mean']:.3f}"
+    rank = domain.score_metric  # a domain ranked by a metric (RESCO's delay): say it first
+    if rank is not None and rank in (result.get("metrics") or {}):
+        m = result["metrics"][rank]
+        print(f"{plan.algorithm}: {rank} {m['mean']:.3f} [{m['ci_low']:.3f}, {m['ci_high']:.3f}] "
+              f"({domain.metrics[rank]} is better; it ranks the board)", flush=True)
     print(f"{plan.algorithm}: GS score ({scoring.subject}) {s['mean']:.3f} "
           f"[{s['ci_low']:.3f}, {s['ci_high']:.3f}] after {steps:,} {UNITS.get(plan.unit, plan.unit + 's')}; "
           f"wall-clock {format_seconds(seconds)}{split}{det}; wrote {out}/", flush=True)

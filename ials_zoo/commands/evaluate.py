@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from ials_zoo.baselines.arguments import parse_env_options
 from ials_zoo.commands import CommandError
+from ials_zoo.core.domains import get_domain
 from ials_zoo.evaluation import PROTOCOL_EPISODES
 from ials_zoo.leaderboard import write_result
 from ials_zoo.leaderboard.build import result_for
@@ -66,6 +67,11 @@ def run(args) -> int:
     print(f"{result['env_id']} {who}, policy {result['policy']['name']} ({result['policy']['kind']}): GS mean "
           f"return {s['mean']:.3f}, 95% CI [{s['ci_low']:.3f}, {s['ci_high']:.3f}] over "
           f"{result['evaluation']['episodes']} episodes ({result['evaluation']['protocol']} protocol)")
+    rank = get_domain(result["env_id"]).score_metric
+    if rank is not None and rank in (result.get("metrics") or {}):
+        m = result["metrics"][rank]
+        print(f"  {rank} (ranks the board, {get_domain(result['env_id']).metrics[rank]} is better): {m['mean']:.3f}, "
+              f"95% CI [{m['ci_low']:.3f}, {m['ci_high']:.3f}]")
     if args.out:
         write_result(args.out, result)
         print(f"wrote {args.out}")
