@@ -329,3 +329,18 @@ def test_resco_maps_have_rescos_lights_and_actions():
     assert sorted(counts["cologne8"]) == [2, 2, 3, 3, 3, 4, 4, 4]
     assert sorted(counts["ingolstadt21"]) == [2] + [3] * 16 + [4] * 4
     assert make_scenario(net="arterial4x4").decision_seconds == 5 and make_scenario(net="cologne3").begin == 25200
+
+
+def test_the_controller_study_stores_episodes_resumes_and_reports_beside_resco(tmp_path, capsys):
+    from ials_zoo.cli import main
+
+    argv = ["resco-controllers", "--maps", "cologne1", "--controllers", "fixed,plain_sumo", "--episodes", "1",
+            "--seed-base", "7", "--out", str(tmp_path)]
+    assert main(argv) == 0
+    first = capsys.readouterr().out
+    stored = sorted(p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*.json"))
+    assert stored == ["cologne1/fixed/seed_7.json", "cologne1/plain_sumo/seed_7.json"]
+    rows = [line for line in first.splitlines() if line.startswith("| cologne1")]
+    assert len(rows) == 2 and rows[0].split("|")[4] == rows[1].split("|")[4]  # the env's delay is plain SUMO's
+    assert "FIXED: 56.61 / 56.85" in rows[0]
+    assert main(argv) == 0 and "2 already stored" in capsys.readouterr().out  # resumed: nothing re-run
