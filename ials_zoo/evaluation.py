@@ -485,6 +485,16 @@ def evaluate(env_id: str, agent: str, policy, episodes: int = PROTOCOL_EPISODES,
     )
 
 
+def _check_fits(pol: NetworkPolicy, sizes, agents) -> None:
+    """A BadInput unless the policy reads these agents' (padded) observations and has each one's actions."""
+    net = pol.net
+    have = tuple(net.action_counts or (net.n_actions,) * len(agents))
+    need = tuple(sizes.action_counts or (sizes.n_actions,) * len(agents))
+    if net.obs_size != sizes.obs_size or have != need:
+        raise BadInput(f"policy {pol.name!r} reads observations of {net.obs_size} with {list(have)} actions per agent; "
+                       f"these agents have observations of {sizes.obs_size} and {list(need)} actions")
+
+
 def evaluate_joint(env_id: str, policy, agents=None, episodes: int = PROTOCOL_EPISODES,
                    seeds: Sequence[int] | None = None, deterministic: bool = False,
                    progress: bool = False, **options) -> EvaluationResult:
@@ -509,14 +519,16 @@ def evaluate_joint(env_id: str, policy, agents=None, episodes: int = PROTOCOL_EP
     seeds = _check_seeds(seeds, episodes)
     scripted = {"scripted_learners": True} if pol.kind == "scripted" else {}
     env = domain.parallel_env(learners=agents, **scripted, **options)
+    try:
+        sizes = sizes_of_env(env, agents)  # agents with spaces of their own: padded, each its own actions
+        if isinstance(pol, NetworkPolicy):
+            _check_fits(pol, sizes, agents)
+    except BaseException:
+        env.close()
+        raise
     recorder = _MetricRecorder(domain, env)
     stack = FrameStack(pol.frame_stack)
-    sizes = sizes_of_env(env, agents)  # agents with spaces of their own: padded, each its own actions
-    width = pol.net.obs_size if isinstance(pol, NetworkPolicy) else sizes.obs_size
-    if isinstance(pol, NetworkPolicy) and pol.net.action_counts is not None and (
-            tuple(pol.net.action_counts) != sizes.action_counts):
-        raise BadInput(f"policy {pol.name!r} has {list(pol.net.action_counts)} actions per agent; "
-                       f"these agents have {list(sizes.action_counts or [])}")
+    width = sizes.obs_size
     # the shared-space draw stays as it was (entries on the board re-measure bitwise)
     counts = sizes.n_actions if sizes.action_counts is None else np.asarray(sizes.action_counts)
     start = time.perf_counter()

@@ -92,14 +92,14 @@ def test_one_env_repeats_an_episode_exactly_reset_after_reset():
     however many episodes the env ran before (in one libsumo process they drifted)."""
     env = sumo_net_v0.parallel_env(net="cologne1", learners=[])
     try:
-        runs = []
+        runs, pids = [], []
         for _ in range(3):
             env.reset(seed=3)
+            pids.append(env._sim.worker_pid)
             runs.append(env.run_uncontrolled())
-        pids = env._sim.worker_pid
     finally:
         env.close()
-    assert runs[0] == runs[1] == runs[2] and pids is not None
+    assert runs[0] == runs[1] == runs[2] and len(set(pids)) == 3  # three processes
     with pytest.raises(BadInput, match="fresh_process"):
         sumo_net_v0.parallel_env(net="cologne1", backend="inprocess")
 
@@ -318,6 +318,16 @@ def test_a_network_without_lights_or_a_missing_route_file_is_refused(tmp_path):
                    '</input></configuration>')
     with pytest.raises(BadInput, match="route-files: no such file"):
         sumo_net_v0.parallel_env(sumocfg=str(cfg))
+    cfg.write_text('<configuration><input><net-file value="plain.net.xml"/><route-files value="r.rou.xml"/>'
+                   '<additional-files value="detectors.add.xml"/></input></configuration>')
+    with pytest.raises(BadInput, match="sets additional-files, which this env would ignore"):
+        sumo_net_v0.parallel_env(sumocfg=str(cfg))
+    bad = tmp_path / "bad.net.xml"
+    bad.write_text('<net><edge id="e"><lane id="e_0" length="abc" shape="0,0 1,1"/></edge></net>')
+    with pytest.raises(BadInput, match="bad.net.xml is not a valid SUMO network"):
+        sumo_net_v0.parallel_env(net_file=str(bad), route_files=[str(routes)])
+    with pytest.raises(BadInput, match="no scripted controller"):
+        sumo_net_v0.parallel_env(net="cologne1", scripted_learners=True)
 
 
 def test_resco_maps_have_rescos_lights_and_actions():

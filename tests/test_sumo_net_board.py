@@ -47,6 +47,18 @@ def test_a_masked_policy_file_never_picks_a_missing_action_and_round_trips(tmp_p
     assert acts[0].max() <= 1 and acts[2].max() <= 2 and acts[1].max() == 3
     assert loaded.subset(["c", "a"]).action_counts == (3, 2)
     # a version-2 header without its counts, or counts out of range, is refused
+    import json as _json
+
+    from safetensors import safe_open
+    from safetensors.numpy import save
+
+    path = tmp_path / "p.safetensors"
+    with safe_open(str(path), framework="np") as f:
+        header, tensors = _json.loads(f.metadata()["ials_zoo.policy"]), {k: f.get_tensor(k) for k in f.keys()}
+    del header["action_counts"]
+    (tmp_path / "q.safetensors").write_bytes(save(tensors, metadata={"ials_zoo.policy": _json.dumps(header)}))
+    with pytest.raises(PolicyFileError, match="reads version 1, and 2 with action_counts"):
+        load_policy_file(tmp_path / "q.safetensors")
     with pytest.raises(PolicyFileError, match="action_counts"):
         PolicyNetwork(["a"], 6, 4, [(np.zeros((1, 6, 4), np.float32), np.zeros((1, 4), np.float32))],
                       action_counts=[5])
@@ -71,6 +83,7 @@ def test_batched_ppo_masks_and_learns_only_the_actions_an_agent_has():
 def test_the_protocol_of_a_map_is_official_with_every_light_and_only_the_net_option():
     agents = get_domain(ENV).agents(net="cologne8")
     assert lb.protocol_of("multi-agent", ENV, agents, eval_seeds(), {"net": "cologne8"}) == "official"
+    assert lb.protocol_of("multi-agent", ENV, agents, eval_seeds(), {}) == "variant"  # the map is named, not defaulted
     assert lb.protocol_of("multi-agent", ENV, agents[:3], eval_seeds(), {"net": "cologne8"}) == "variant"
     assert lb.protocol_of("multi-agent", ENV, agents, eval_seeds(), {"net": "cologne8", "max_cycles": 9}) == "variant"
 

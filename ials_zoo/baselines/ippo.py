@@ -66,6 +66,10 @@ def check_args(args: Args):
                          f"dials`, not --simulator {args.simulator!r}")
     domain = get_domain(args.env_id)
     options = parse_env_options(args.env_options)
+    unknown = sorted(set(options) - set(domain.gs_options))
+    if unknown:  # a result records only options the board can re-measure (no file paths)
+        raise BadInput(f"--env-options: {unknown} cannot be part of a scored run of {args.env_id}; its options: "
+                       f"{', '.join(domain.gs_options) or 'none'}")
     agents = domain.check_agents(None if args.agents == "all" else args.agents, **options)
     check_seed(args.seed, "seed")
     check_multi_ppo(args, domain)

@@ -67,7 +67,7 @@ def configure(parser):
                              "network's cost is a trained one's, but a local simulator whose cost follows the "
                              "influence, SUMO's inserted vehicles, runs at untrained arrival rates)")
     parser.add_argument("--net", default=None, metavar="NAME[,NAME]",
-                        help="a domain with a GS only (sumo_net_v0): the networks to measure, its GS against raw "
+                        help="a domain with a GS only and several networks: the networks to measure, its GS against raw "
                              "SUMO (default: the domain's)")
     parser.add_argument("--out", default=None, help="write the figures (and the machine) as JSON here")
     parser.add_argument("--plot", default="bench_scaling.png",
@@ -493,7 +493,13 @@ def run(args) -> int:
     if gs_only and bench_of(args.domain).gs_runner is None:
         raise CommandError(f"--domain {args.domain} has no IALS and no benchmark of its GS")
     if args.net is not None and not gs_only:
-        raise CommandError("--net is for a domain with a GS only (e.g. --domain sumo_net_v0)")
+        raise CommandError("--net is for a domain with a GS only (--domain one of "
+                           f"{', '.join(d for d in domain_ids() if not get_domain(d).has_ials) or 'none'})")
+    ials_flags = [f for f, on in (("--ppo", args.ppo), ("--scaling", args.scaling), ("--versus", args.versus),
+                                  ("--aip-archs", args.aip_archs), ("--steps", args.steps is not None)) if on]
+    if gs_only and ials_flags:
+        raise CommandError(f"{', '.join(ials_flags)}: --domain {args.domain} has no IALS to measure; "
+                           "its benchmark takes --net and --repeats")
     nets = None if args.net is None else [x.strip() for x in args.net.split(",") if x.strip()]
     machine = machine_info()
     print(f"machine: {machine['cpu']}, {machine['cores']} cores; python {machine['python']}, torch {machine['torch']}, "

@@ -29,7 +29,7 @@ def configure(parser):
     parser.add_argument("--agent", default=None,
                         help="the randomly acting agent (default: the domain's first paper agent)")
     parser.add_argument("--net", default=None, metavar="NAME",
-                        help="the network, for a domain that takes one (sumo_net_v0: a RESCO map, e.g. cologne8)")
+                        help="the network, for a domain whose tracks are networks (its `net` option, e.g. a RESCO map)")
     parser.add_argument("--gif", default=None, metavar="PATH",
                         help="save the episode as an animated GIF here")
 
@@ -44,7 +44,7 @@ def run(args) -> int:
         raise CommandError(f"--seed must be >= 0, got {args.seed}")
     network = {}
     if args.net is not None:
-        if "net" not in domain.agent_options:
+        if "net" not in domain.track_options:
             raise CommandError(f"--net: {domain.env_id} takes no network")
         network = {"net": args.net}
     try:

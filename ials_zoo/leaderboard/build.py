@@ -108,7 +108,8 @@ def protocol_of(track: str, env_id: str, agents, seeds, options) -> str:
     episode count, no GS options but the domain's track options (e.g. the network), and on the
     multi-agent track every agent -- else ``variant``."""
     domain = get_domain(env_id)
-    if list(seeds) != eval_seeds() or set(options) - set(domain.track_options):
+    # the track options are named, not left to their defaults (one track per network), and no other
+    if list(seeds) != eval_seeds() or set(options) != set(domain.track_options):
         return VARIANT
     tracked = {k: v for k, v in options.items() if k in domain.track_options}
     if track == MULTI and list(agents) != domain.agents(**tracked):

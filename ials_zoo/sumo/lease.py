@@ -260,6 +260,8 @@ class SimHandle:
         """End this handle's worker (if any): the next ``reset`` call runs in a fresh process.
         ``spare``: that process is one started beforehand, and a new spare starts now, so that
         its interpreter start overlaps the episode about to run (not the next reset)."""
+        if self.closed:
+            raise SimulationError("this simulation handle is closed")
         if self.mode != "worker":
             return
         worker, self._worker = self._worker, None

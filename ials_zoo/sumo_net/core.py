@@ -21,6 +21,7 @@ Lights that are not controlled run their own program from the network file.
 
 from __future__ import annotations
 
+import os
 import time
 
 import numpy as np
@@ -45,6 +46,15 @@ def yellow_program(greens: list[str], yellow_seconds: int) -> tuple[list[tuple[i
                 yellows.append((yellow_seconds, "".join("y" if n else x for n, x in zip(need, a))))
                 index[(i, j)] = len(greens) + len(yellows) - 1
     return yellows, index
+
+
+def episode_command(net_file, route_files, begin: int, end: int, seed: int, tripinfo: str | None = None,
+                    extra=()) -> list[str]:
+    """The SUMO command of one episode: RESCO's (no teleports), its tripinfo as RESCO writes it."""
+    options = ["--begin", str(begin), "--end", str(end), "--time-to-teleport", "-1", *extra]
+    if tripinfo:
+        options += ["--tripinfo-output", tripinfo, "--tripinfo-output.write-unfinished", "true"]
+    return sumo_command(seed, net=net_file, routes=route_files, extra=options)
 
 
 class _Signal:
@@ -125,10 +135,7 @@ class NetCore:
 
     def _command(self, seed: int, tripinfo: str | None) -> list[str]:
         net, routes = self.files
-        extra = ["--begin", str(self.begin), "--end", str(self.end), "--time-to-teleport", "-1", *self.extra]
-        if tripinfo:
-            extra += ["--tripinfo-output", tripinfo, "--tripinfo-output.write-unfinished", "true"]
-        return sumo_command(seed, net=net, routes=routes, extra=extra)
+        return episode_command(net, routes, self.begin, self.end, seed, tripinfo, self.extra)
 
     def _install(self, tls: str) -> None:
         """Replace the light's program by RESCO's: its greens, then the yellows."""
@@ -199,7 +206,10 @@ class NetCore:
         close_any_simulation(self)
         out = {"queue": float(np.mean(self._queues[1:])) if len(self._queues) > 1 else 0.0}
         if self.tripinfo:
-            out.update(episode_metrics(self.tripinfo, self.files[1], self.end))
+            try:
+                out.update(episode_metrics(self.tripinfo, self.files[1], self.end))
+            finally:  # read once: a long run keeps no episode's file
+                os.remove(self.tripinfo)
         return out
 
     def render_data(self) -> dict:
@@ -218,4 +228,4 @@ class NetCore:
         close_any_simulation(self)
 
 
-__all__ = ["MEASURES", "NetCore", "yellow_program"]
+__all__ = ["MEASURES", "NetCore", "episode_command", "yellow_program"]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from ials_zoo.core.domains import Domain
 from ials_zoo.core.extras import BenchSettings, StudySettings, ViewerSettings
-from ials_zoo.sumo_net.env import ENV_ID, SCENARIO_OPTIONS, parallel_env, possible_agents
+from ials_zoo.sumo_net.env import BOARD_OPTIONS, ENV_ID, SCENARIO_OPTIONS, parallel_env, possible_agents
 
 
 def bench_gs(nets, repeats: int) -> list[dict]:
@@ -42,7 +42,7 @@ DOMAIN = Domain(
     default_agents=("cluster_1098574052_1098574061_247379905",),  # cologne8's 4-green junction
     episode_length=360,
     agent_options=SCENARIO_OPTIONS,
-    gs_options=(*SCENARIO_OPTIONS, "max_distance", "observation", "reward"),
+    gs_options=BOARD_OPTIONS,
     one_simulation_per_process=True,
     metrics={"delay": "lower", "delay_all": "lower", "trip_time": "lower", "waiting_time": "lower",
              "throughput": "higher", "queue": "lower"},

@@ -26,6 +26,10 @@ SCENARIO_OPTIONS = ("net", "sumocfg", "net_file", "route_files", "begin", "end",
 DEFAULT_NET = "cologne8"
 OPTIONS = (*SCENARIO_OPTIONS, "learners", "max_distance", "observation", "reward", "backend", "fresh_process",
            "render_mode")
+# what a board entry's evaluation may set: no file paths (a result file never makes us read a
+# path it names), so networks of your own are scored off the board
+BOARD_OPTIONS = ("net", "begin", "end", "decision_seconds", "yellow_seconds", "max_cycles", "max_distance",
+                 "observation", "reward")
 
 
 def scenario_of(net=None, sumocfg=None, net_file=None, route_files=None, begin=None, end=None,
@@ -138,7 +142,10 @@ class SumoNetEnv(ParallelEnv):
     def __init__(self, net=None, sumocfg=None, net_file=None, route_files=None, begin=None, end=None,
                  decision_seconds=None, yellow_seconds=None, max_cycles=None, learners=None, max_distance=200.0,
                  observation="drq_norm", reward="wait_norm", backend="worker", fresh_process=True, render_mode=None,
-                 **unknown):
+                 scripted_learners=False, **unknown):
+        if scripted_learners is not False:  # the zoo's single-agent scoring passes False
+            raise BadInput(f"{ENV_ID} has no scripted controller for learners: pass learners=[] to run every light "
+                           "on its own program, or see ials_zoo.sumo_net.controllers")
         if unknown:
             raise BadInputType(f"unknown option(s) {sorted(unknown)} for {ENV_ID}; valid options: {', '.join(OPTIONS)}")
         if render_mode not in (None, *self.metadata["render_modes"]):
@@ -158,13 +165,13 @@ class SumoNetEnv(ParallelEnv):
             x.id: spaces.Box(0.0, np.inf, (N_FEATURES * len(x.lanes),), np.float32) for x in lights}
         self.action_spaces = {x.id: spaces.Discrete(x.n_actions) for x in lights}
         self.state_space = spaces.Box(0.0, np.inf, (int(self._rows[-1]) * N_FEATURES,), np.float32)
-        self._tmp = tempfile.mkdtemp(prefix="ials_zoo_sumo_net_")
         if not isinstance(fresh_process, (bool, np.bool_)):
             raise BadInputType(f"fresh_process must be a bool, got {fresh_process!r}")
         if fresh_process and backend != "worker":
             raise BadInput(f"fresh_process=True runs every episode in a new worker: backend must be 'worker', "
                            f"not {backend!r} (or pass fresh_process=False)")
         self.fresh_process = bool(fresh_process)
+        self._tmp = tempfile.mkdtemp(prefix="ials_zoo_sumo_net_")  # the episodes' tripinfo, read and removed
         self._sim = SimHandle("ials_zoo.sumo_net.core:NetCore", self._core_config(), backend)
         self.backend = self._sim.mode
         self._seed_rng = np.random.default_rng()

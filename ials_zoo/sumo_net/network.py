@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 from ials_zoo.errors import BadInput
 
-MAX_NET_BYTES = 512 << 20  # ingolstadt21, the largest RESCO map, is 1.9 MB
+MAX_NET_BYTES = 256 << 20  # ingolstadt21, the largest RESCO map, is 1.9 MB; parsed whole, in memory
 
 
 @dataclass(frozen=True)
@@ -135,8 +135,13 @@ def _read_network(path: str, mtime: float) -> Network:
 
 
 def read_network(net_file: str) -> Network:
-    """The traffic lights of ``net_file`` (a BadInput if it has none)."""
-    net = _read_network(net_file, os.path.getmtime(net_file))
+    """The traffic lights of ``net_file`` (a BadInput if it has none or is malformed)."""
+    try:
+        net = _read_network(net_file, os.path.getmtime(net_file))
+    except (ValueError, TypeError, AttributeError) as exc:
+        if isinstance(exc, BadInput):
+            raise
+        raise BadInput(f"{net_file} is not a valid SUMO network ({type(exc).__name__}: {exc})") from None
     if not net.lights:
         raise BadInput(f"{net_file} has no traffic light that controls a lane: nothing to learn")
     return net

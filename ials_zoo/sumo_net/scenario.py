@@ -26,6 +26,7 @@ from ials_zoo.errors import BadInput
 from ials_zoo.utils import read_regular_file
 
 MAX_CONFIG_BYTES = 1 << 20  # a .sumocfg is a few hundred bytes
+SUMOCFG_KEYS = ("net-file", "route-files", "begin", "end")
 
 
 @dataclass(frozen=True)
@@ -94,6 +95,10 @@ def _read_sumocfg(path: str) -> dict:
         root = ET.fromstring(text)
     except ET.ParseError as e:
         raise BadInput(f"sumocfg: {path} is not valid XML ({e})") from None
+    dropped = sorted({el.tag for el in root.iter() if len(el) == 0 and el.tag not in SUMOCFG_KEYS})
+    if dropped:
+        raise BadInput(f"sumocfg: {path} sets {', '.join(dropped)}, which this env would ignore (it reads only "
+                       f"{', '.join(SUMOCFG_KEYS)}); give the network as net_file= and route_files= instead")
     out = {}
     for key in ("net-file", "route-files", "begin", "end"):
         node = root.find(f".//{key}")

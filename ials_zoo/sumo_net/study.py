@@ -22,9 +22,12 @@ from pathlib import Path
 import numpy as np
 
 from ials_zoo.errors import BadInput
-from ials_zoo.sumo.command import sumo_binary, sumo_command
+from ials_zoo.processes import die_with_parent
+from ials_zoo.sumo.command import sumo_binary
+from ials_zoo.sumo.lease import SimulationError
 from ials_zoo.sumo_net import resco
 from ials_zoo.sumo_net.controllers import CONTROLLERS, run_episode
+from ials_zoo.sumo_net.core import episode_command
 from ials_zoo.sumo_net.metrics import episode_metrics
 from ials_zoo.sumo_net.scenario import RESCO_MAPS, make_scenario
 from ials_zoo.utils import atomic_write_text, loads_untrusted_json, read_regular_file
@@ -38,12 +41,12 @@ def run_plain_sumo(seed: int, **options) -> dict[str, float]:
     s = make_scenario(**options)
     with tempfile.TemporaryDirectory(prefix="ials_zoo_plain_") as tmp:
         trip = os.path.join(tmp, "tripinfo.xml")
-        cmd = sumo_command(seed, net=s.net_file, routes=s.route_files, extra=[
-            "--begin", str(s.begin), "--end", str(s.end), "--time-to-teleport", "-1",
-            "--tripinfo-output", trip, "--tripinfo-output.write-unfinished", "true"])  # SUMO's defaults otherwise
+        cmd = episode_command(s.net_file, s.route_files, s.begin, s.end, seed, trip)
         cmd[0] = sumo_binary()
         start = time.perf_counter()
-        subprocess.run(cmd, check=True, capture_output=True, timeout=3600)
+        done = subprocess.run(cmd, capture_output=True, timeout=3600, preexec_fn=die_with_parent)
+        if done.returncode:
+            raise SimulationError(f"sumo exited with {done.returncode}: {done.stderr.decode(errors='replace')[-500:]}")
         out = episode_metrics(trip, s.route_files, s.end)
         out["seconds"] = time.perf_counter() - start
         return out
