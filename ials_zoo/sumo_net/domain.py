@@ -4,7 +4,21 @@ from __future__ import annotations
 
 from ials_zoo.core.domains import Domain
 from ials_zoo.core.extras import BenchSettings, StudySettings, ViewerSettings
-from ials_zoo.sumo_net.env import BOARD_OPTIONS, ENV_ID, SCENARIO_OPTIONS, parallel_env, possible_agents
+from ials_zoo.sumo_net.names import BOARD_OPTIONS, ENV_ID, SCENARIO_OPTIONS
+
+
+def parallel_env(**options):
+    """The GS (:class:`ials_zoo.sumo_net.env.SumoNetEnv`), imported when first built."""
+    from ials_zoo.sumo_net.env import parallel_env as make
+
+    return make(**options)
+
+
+def possible_agents(**options) -> list[str]:
+    """Every signalised junction of the network the options name."""
+    from ials_zoo.sumo_net.env import possible_agents as agents
+
+    return agents(**options)
 
 
 def bench_gs(nets, repeats: int) -> list[dict]:

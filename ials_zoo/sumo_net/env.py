@@ -15,21 +15,12 @@ from ials_zoo.errors import BadInput, BadInputType
 from ials_zoo.sumo.lease import SimHandle
 from ials_zoo.sumo_net.core import MEASURES
 from ials_zoo.sumo_net.mdp import N_FEATURES, observation_fn, reward_fn
+from ials_zoo.sumo_net.names import DEFAULT_NET, ENV_ID, OPTIONS, SCENARIO_OPTIONS
 from ials_zoo.sumo_net.network import read_network
 from ials_zoo.sumo_net.scenario import make_scenario
 from ials_zoo.utils import check_reset_options, check_seed
 
-ENV_ID = "sumo_net_v0"
 SUMO_SEED_MAX = 2**31 - 2
-SCENARIO_OPTIONS = ("net", "sumocfg", "net_file", "route_files", "begin", "end", "decision_seconds", "yellow_seconds",
-                    "max_cycles")
-DEFAULT_NET = "cologne8"
-OPTIONS = (*SCENARIO_OPTIONS, "learners", "max_distance", "observation", "reward", "backend", "fresh_process",
-           "render_mode")
-# what a board entry's evaluation may set: no file paths (a result file never makes us read a
-# path it names), so networks of your own are scored off the board
-BOARD_OPTIONS = ("net", "begin", "end", "decision_seconds", "yellow_seconds", "max_cycles", "max_distance",
-                 "observation", "reward")
 
 
 def scenario_of(net=None, sumocfg=None, net_file=None, route_files=None, begin=None, end=None,
