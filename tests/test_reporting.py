@@ -57,8 +57,9 @@ def test_marl_eval_export_has_marl_evals_documented_shape(tmp_path):
                            "--out", str(out)], capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
     data = json.loads(out.read_text())
-    assert set(data) == {"traffic_grid_v0", "warehouse_v0"}
+    assert set(data) == {"traffic_grid_v0", "warehouse_v0", "sumo_net_v0"}
     assert "25-agents" in data["traffic_grid_v0"] and "36-agents" in data["warehouse_v0"]
+    assert {"net=cologne8/8-agents", "net=grid4x4/16-agents"} <= set(data["sumo_net_v0"])  # a task per map
     runs_seen = 0
     for tasks in data.values():
         for algorithms in tasks.values():

@@ -8,7 +8,8 @@
                                              "absolute_metrics": {"episode_return": [float, ...]}}}}}}
 
 Here ``env`` is the domain's id (``traffic_grid_v0``), ``task`` the agents evaluated (an agent's
-name on the single-agent track, ``"<n>-agents"`` on the multi-agent one), ``algorithm`` the
+name on the single-agent track, ``"<n>-agents"`` on the multi-agent one, after the domain's
+track options: ``net=cologne8/8-agents``), ``algorithm`` the
 entry's algorithm and training simulator (``dials/dials-once``, ``ippo/gs``; a sampled entry
 and a ``deterministic`` one are two algorithms), ``run_<seed>`` one training seed. A step
 is one point of that seed's learning curve: its ``episode_return`` holds the curve point's mean
@@ -20,6 +21,7 @@ are exported; references (scripted, random) have no training run and are left ou
 
 from __future__ import annotations
 
+from ials_zoo.core.domains import get_domain
 from ials_zoo.errors import BadInput
 from ials_zoo.leaderboard.store import load_entries
 from ials_zoo.stats import iqm_interval, probability_of_improvement
@@ -34,9 +36,12 @@ def algorithm_label(data: dict) -> str:
 
 
 def task_label(data: dict) -> str:
-    if data.get("track") == "multi-agent":
-        return f"{len(data['agents'])}-agents"
-    return str(data["agent"])
+    """The agents evaluated, after the domain's track options where it has any (one task per
+    network: ``net=cologne8/8-agents``)."""
+    label = f"{len(data['agents'])}-agents" if data.get("track") == "multi-agent" else str(data["agent"])
+    tracked = [f"{k}={v}" for k, v in sorted(data["evaluation"]["options"].items())
+               if k in get_domain(data["env_id"]).track_options]
+    return "/".join([*tracked, label])
 
 
 def marl_eval(entries) -> dict:
