@@ -37,7 +37,6 @@ from __future__ import annotations
 import copy
 import hashlib
 import importlib
-import json
 import os
 import sys
 import time
@@ -48,7 +47,7 @@ from typing import Any
 
 import numpy as np
 
-from ials_zoo.core.domains import get_domain
+from ials_zoo.core.domains import domain_ids, get_domain
 from ials_zoo.core.spaces import sizes_of_env, stack_observations
 from ials_zoo.errors import BadInput, BadInputType
 from ials_zoo.policy import (
@@ -59,7 +58,7 @@ from ials_zoo.policy import (
 )
 from ials_zoo.single_agent import SingleAgentGS
 from ials_zoo.stats import CI_LEVEL, EPISODES_METHOD, bootstrap_interval
-from ials_zoo.utils import check_seed
+from ials_zoo.utils import check_seed, read_json_object
 
 EVAL_SEED_BASE = 10_000
 """Episode ``i`` of an evaluation is reset with seed ``EVAL_SEED_BASE + i``."""
@@ -236,6 +235,39 @@ class NetworkPolicy(Policy):
         return self.net.act(obs, self._rng, self.deterministic)
 
 
+SB3_META_MAX_BYTES = 1 << 20
+MAX_FRAME_STACK = 64
+
+
+def read_sb3_meta(path: Path, agent: str | None = None) -> dict:
+    """An SB3 model's sidecar (``.meta.json``), read as a file someone else may have made
+    (:func:`~ials_zoo.utils.read_json_object`) and checked field by field before any of it is
+    used: ``sb3_class`` PPO, ``env_id`` a domain, ``agent`` one of its agents (or ``agent``
+    given), ``frame_stack`` a whole number in [1, :data:`MAX_FRAME_STACK`]."""
+    meta = read_json_object(path, SB3_META_MAX_BYTES, what="SB3 metadata")
+    where = f"SB3 metadata {str(path)!r}"
+    if meta.get("sb3_class", "PPO") != "PPO":
+        raise BadInput(f"{where}: sb3_class {meta.get('sb3_class')!r} is not supported (PPO actor-critic MLP "
+                       "policies only)")
+    env_id = meta.get("env_id")
+    if not isinstance(env_id, str) or env_id not in domain_ids():
+        raise BadInput(f"{where}: env_id {env_id!r} is not a domain (known: {', '.join(domain_ids())})")
+    frame_stack = meta.get("frame_stack", 1)
+    if isinstance(frame_stack, bool) or not isinstance(frame_stack, int) or not 1 <= frame_stack <= MAX_FRAME_STACK:
+        raise BadInput(f"{where}: frame_stack must be a whole number in [1, {MAX_FRAME_STACK}], got {frame_stack!r}")
+    who = meta.get("agent") or agent
+    if not isinstance(who, str) or not who:
+        raise BadInput(f"{where}: agent must name an agent of {env_id}, got {meta.get('agent')!r}")
+    options = meta.get("env_options") or {}
+    try:
+        known = get_domain(env_id).agents(**options) if isinstance(options, dict) else ()
+    except Exception:  # options the domain refuses: the agent is checked when the policy is used
+        known = ()
+    if known and who not in known:
+        raise BadInput(f"{where}: agent {who!r} is not an agent of {env_id}")
+    return meta
+
+
 def load_model(path: str | os.PathLike, agent: str | None = None) -> NetworkPolicy:
     """A policy file or an SB3 model zip (with its sidecar), loaded without running code."""
     path = Path(path)
@@ -248,18 +280,11 @@ def load_model(path: str | os.PathLike, agent: str | None = None) -> NetworkPoli
         if not mpath.is_file():
             raise BadInput(f"policy file {str(path)!r} has no metadata sidecar {str(mpath)!r} (written by the "
                              "baselines next to the model)")
-        try:
-            meta = json.loads(mpath.read_text())
-        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-            raise BadInput(f"metadata {str(mpath)!r} is not valid JSON: {exc}") from None
-        if meta.get("sb3_class", "PPO") != "PPO":
-            raise BadInput(f"metadata {str(mpath)!r}: sb3_class {meta.get('sb3_class')!r} is not supported "
-                             "(PPO actor-critic MLP policies only)")
-        env_id = meta.get("env_id")
-        obs = get_domain(env_id).observation_space
+        meta = read_sb3_meta(mpath, agent)
         provenance = {k: v for k, v in meta.items() if k not in ("format", "sb3_class", "model_sha256", "agents")}
+        obs = get_domain(meta["env_id"]).observation_space
         net = policy_from_sb3_zip(path, meta.get("agent") or agent, int(np.prod(obs.shape)),
-                                  int(meta.get("frame_stack", 1)), metadata=provenance)
+                                  meta.get("frame_stack", 1), metadata=provenance)
     else:
         raise BadInput(f"policy file {str(path)!r}: expected a .safetensors policy or an SB3 .zip model")
     return NetworkPolicy(net, name=path.name, file=str(path))

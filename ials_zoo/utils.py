@@ -127,6 +127,35 @@ def read_regular_file(path: str | os.PathLike, max_bytes: int, follow_links: boo
     return b"".join(chunks)
 
 
+def read_json_object(path: str | os.PathLike, max_bytes: int = 1 << 20, what: str = "file",
+                     follow_links: bool = True) -> dict:
+    """The JSON object in the file at ``path``, read as a file someone else may have made: a
+    regular file of at most ``max_bytes``, parsed by :func:`loads_untrusted_json` (depth,
+    integer and NaN limits), and an object at the top. Anything else is a :class:`BadInput`
+    naming ``what`` and the file (never a ``RecursionError``, ``AttributeError`` or
+    ``TypeError`` later)."""
+    raw = read_regular_file(path, max_bytes, follow_links=follow_links)
+    try:
+        value = loads_untrusted_json(raw)
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise BadInput(f"{what} {str(path)!r} is not valid JSON: {exc}") from None
+    if not isinstance(value, dict):
+        raise BadInput(f"{what} {str(path)!r} must hold a JSON object, not a {type(value).__name__}")
+    return value
+
+
+def parse_untrusted_json_object(text: str | bytes, what: str) -> dict:
+    """:func:`read_json_object` for JSON text already in hand (an archive's member, a
+    header): an object at the top, within the limits, or a :class:`BadInput` naming ``what``."""
+    try:
+        value = loads_untrusted_json(text)
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise BadInput(f"{what} is not valid JSON: {exc}") from None
+    if not isinstance(value, dict):
+        raise BadInput(f"{what} must be a JSON object, not a {type(value).__name__}")
+    return value
+
+
 def parse_json_object(text: str | None, name: str) -> dict:
     """Parse a command-line option holding a JSON object (empty -> ``{}``); a ValueError
     naming the option otherwise."""

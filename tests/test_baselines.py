@@ -337,6 +337,10 @@ def test_a_checkpoint_without_the_state_of_an_exact_resume_is_refused_by_name(tm
     state = torch.load(out / "checkpoint.pt", weights_only=True)
     torch.save({"policy": state["models"]["policy"]["policy"]}, out / "checkpoint.pt")
     status = json.loads((out / "status.json").read_text())
+    status.pop("run_id")  # a run of that version: its checkpoints carried no binding either
+    info = json.loads((out / "checkpoint.json").read_text())
+    info.pop("run")
+    (out / "checkpoint.json").write_text(json.dumps(info))
     (out / "status.json").write_text(json.dumps(dict(status, state="failed")))
     with pytest.raises(ValueError, match="earlier version"):
         ppo_single.main(ppo_single.Args(simulator="gs", out_dir=str(out), resume=True, **args))

@@ -36,7 +36,7 @@ from tqdm.auto import tqdm
 
 import ials_zoo
 from ials_zoo.baselines.multiagent import TrainingLog, final_results, joint_policy, policy_file, write_curve
-from ials_zoo.baselines.runs import Clock, RunFolder, load_training_state, save_training_state
+from ials_zoo.baselines.runs import Clock, RunFolder, check_binding, load_training_state, save_training_state
 from ials_zoo.core.extras import study_of
 from ials_zoo.errors import BadInput
 from ials_zoo.evaluation import evaluate_joint
@@ -71,6 +71,7 @@ class RunPlan:
     checkpoint_every: int | None = None  # checkpoints between evaluations too (steps per agent)
     steps_per_second: float | None = None  # the study's speed, for the opening estimate (None: the multi-agent runs')
     unit: str = "step/agent"  # the progress bar's
+    binding: dict = field(default_factory=dict)  # the run folder's (RunFolder.binding), in every checkpoint
 
 
 UNITS = {"step/agent": "steps per agent", "transition": "agent transitions"}
@@ -191,6 +192,7 @@ def run(plan: RunPlan, learner: Learner, description: str, domain, scoring: Scor
     out = plan.out
     scoring = scoring or JointScoring(plan)
     folder = RunFolder(out, resume=plan.resume, overwrite=plan.overwrite, settings=plan.settings)
+    plan.binding = folder.binding()
     print(f"{description}\n  {estimate_text(plan, learner, domain)}; writing {out}/"
           + (" (resuming)" if folder.resuming else ""), flush=True)
     meta = dict({"algorithm": plan.algorithm, "env_id": plan.env_id, "env_options": plan.options, "seed": plan.seed,
@@ -204,7 +206,7 @@ def run(plan: RunPlan, learner: Learner, description: str, domain, scoring: Scor
             try:
                 # inside: a load or start that fails half-way still closes what it started
                 if folder.resuming:
-                    state, info = _load_checkpoint(out)
+                    state, info = _load_checkpoint(out, plan.binding)
                     learner.load(state, info)
                     steps, curve = int(info["steps"]), info["curve"]
                     log.truncate(steps)
@@ -304,12 +306,20 @@ def _curve_point(plan: RunPlan, learner, scoring: Scoring, policy, steps: int, c
 def _checkpoint(plan: RunPlan, learner, steps: int, curve: list, clock: Clock) -> None:
     tensors, info = learner.checkpoint(plan.out)
     # the steps in both files: a run killed between the two writes leaves them apart
-    save_training_state(plan.out, dict(tensors, driver_steps=steps),
-                        dict(info, steps=steps, curve=curve, clock=clock.seconds))
+    save_training_state(plan.out, dict(tensors, driver_steps=steps, run_id=plan.binding.get("run_id")),
+                        dict(info, steps=steps, curve=curve, clock=clock.seconds, run=plan.binding))
 
 
-def _load_checkpoint(out: Path) -> tuple[dict, dict]:
+def _load_checkpoint(out: Path, binding: dict) -> tuple[dict, dict]:
+    """The checkpoint in ``out``, if it is this run's (:func:`check_binding`) and whole."""
     state, info = load_training_state(out)
+    check_binding(out, state, info, binding)
+    steps, curve, clock = info.get("steps"), info.get("curve"), info.get("clock")
+    if (isinstance(steps, bool) or not isinstance(steps, int) or steps < 0 or not isinstance(curve, list)
+            or not all(isinstance(p, dict) and isinstance(p.get("env_steps"), int) for p in curve)
+            or isinstance(clock, bool) or not isinstance(clock, (int, float)) or not clock >= 0):
+        raise BadInput(f"{out}: checkpoint.json is not a checkpoint of ours (steps, curve and clock); it cannot be "
+                       "resumed: start the run again with --overwrite")
     if int(state.pop("driver_steps", info["steps"])) != int(info["steps"]):
         raise BadInput(f"{out}: checkpoint.pt and checkpoint.json are from different checkpoints (the run was killed "
                        "while writing them); it cannot continue exactly: start it again with --overwrite")

@@ -25,18 +25,22 @@ atomically, so a crash never leaves half a file.
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
 import os
 import shutil
 import socket
 import sys
 import time
+import uuid
 from pathlib import Path
 
 from ials_zoo.errors import BadInput
-from ials_zoo.utils import atomic_path, atomic_write_text, remove_stale_temporaries
+from ials_zoo.utils import atomic_path, atomic_write_text, read_json_object, remove_stale_temporaries
 
 STATUS = "status.json"
+STATUS_MAX_BYTES = 1 << 20
+CHECKPOINT_INFO_MAX_BYTES = 64 << 20  # the curve, and a learner's episodes in progress
 LOCK = ".lock"
 DETERMINISTIC_RESULT = "result_deterministic.json"
 FINISHED, RUNNING, FAILED, INTERRUPTED, KILLED = "finished", "running", "failed", "interrupted", "killed"
@@ -57,7 +61,7 @@ def run_state(folder) -> str | None:
     if not path.is_file():
         return None
     try:
-        status = json.loads(path.read_text())
+        status = read_json_object(path, STATUS_MAX_BYTES, what="run status")
     except (OSError, ValueError):
         return FAILED
     state = status.get("state")
@@ -81,6 +85,7 @@ class RunFolder:
         if resume and overwrite:
             raise BadInput("choose one of resume and overwrite")
         self.path = Path(path)
+        self.run_id = None  # set by _open: this run's, or the resumed run's
         self.settings = json.loads(json.dumps(settings or {}, default=str))
         if self.path.exists() and not self.path.is_dir():
             raise BadInput(f"--out-dir {str(self.path)!r} is a file, not a folder")
@@ -98,6 +103,7 @@ class RunFolder:
         dies with the process however it dies."""
         import fcntl
 
+        self._created = not self.path.exists()
         self.path.mkdir(parents=True, exist_ok=True)
         fd = os.open(self.path / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
         try:
@@ -133,6 +139,7 @@ class RunFolder:
                 diff = sorted(k for k in set(old) | set(self.settings) if old.get(k) != self.settings.get(k))
                 raise BadInput(f"cannot resume {self.path} with other settings ({', '.join(diff)})")
             self.resuming = True
+            self.run_id = self._status().get("run_id")  # None: a run from before checkpoints were bound
         elif used:
             what = f"a {state} run" if state else "files"
             if not overwrite:
@@ -143,29 +150,46 @@ class RunFolder:
                     shutil.rmtree(p) if p.is_dir() and not p.is_symlink() else p.unlink()
         self.path.mkdir(parents=True, exist_ok=True)
         remove_stale_temporaries(self.path, max_age_seconds=0)
+        if not self.resuming:
+            self.run_id = uuid.uuid4().hex
         self._started = time.time()
         self.set_state(RUNNING)
 
     def _status(self) -> dict:
         try:
-            return json.loads((self.path / STATUS).read_text())
+            return read_json_object(self.path / STATUS, STATUS_MAX_BYTES, what="run status")
         except (OSError, ValueError):
             return {}
 
     def set_state(self, state: str, **extra) -> None:
         status = {"state": state, "pid": os.getpid(), "host": socket.gethostname(),
                   "command": " ".join(sys.argv), "started": self._started, "updated": time.time(),
-                  "settings": self.settings, **extra}
+                  "settings": self.settings, "run_id": self.run_id, **extra}
         atomic_write_text(self.path / STATUS, json.dumps(status, indent=2, default=str) + "\n")
+
+    def binding(self) -> dict:
+        """What ties a checkpoint to this run: its id (made when the folder was claimed for a
+        new run, kept by every resume) and a digest of its settings (seed included).
+        :func:`check_binding` refuses a checkpoint whose binding is another's."""
+        digest = hashlib.sha256(json.dumps(self.settings, sort_keys=True).encode()).hexdigest()
+        return {"run_id": self.run_id, "settings_sha256": digest, "seed": self.settings.get("seed")}
 
     @contextlib.contextmanager
     def running(self):
         """Mark the run finished when the block ends normally, interrupted on Ctrl-C/SIGTERM,
-        failed on an error."""
+        failed on an error. Bad input found before the new run's first checkpoint (an option
+        the GS refuses, an AIP set that does not fit) leaves no run behind: the folder is as
+        if never claimed, so that the corrected command needs no ``--overwrite``."""
         try:
             yield self
         except KeyboardInterrupt:
             self.set_state(INTERRUPTED)
+            raise
+        except BadInput as exc:
+            if self.resuming or (self.path / "checkpoint.json").exists():
+                self.set_state(FAILED, error=f"{type(exc).__name__}: {exc}")
+            else:
+                self._discard()
             raise
         except BaseException as exc:
             self.set_state(FAILED, error=f"{type(exc).__name__}: {exc}")
@@ -174,6 +198,18 @@ class RunFolder:
             self.set_state(FINISHED)
         finally:
             self.release()
+
+    def _discard(self) -> None:
+        """Remove what this new run wrote (the folder too, if the claim made it)."""
+        for p in self.path.iterdir():
+            if p.name != LOCK:
+                shutil.rmtree(p) if p.is_dir() and not p.is_symlink() else p.unlink()
+        self.release()
+        with contextlib.suppress(FileNotFoundError):
+            (self.path / LOCK).unlink()
+        if self._created:
+            with contextlib.suppress(OSError):
+                self.path.rmdir()
 
 
 class Clock:
@@ -224,7 +260,7 @@ def load_training_state(folder) -> tuple[dict, dict]:
     folder = Path(folder)
     try:
         state = torch.load(folder / "checkpoint.pt", map_location="cpu", weights_only=True)
-        info = json.loads((folder / "checkpoint.json").read_text())
+        info = read_json_object(folder / "checkpoint.json", CHECKPOINT_INFO_MAX_BYTES, what="checkpoint")
     except FileNotFoundError:
         raise BadInput(f"{folder} has no checkpoint to resume from (it was killed before the first one)") from None
     except Exception as exc:
@@ -232,7 +268,27 @@ def load_training_state(folder) -> tuple[dict, dict]:
     return state, info
 
 
+def check_binding(folder, state: dict, info: dict, binding: dict) -> None:
+    """Refuse a checkpoint that is not this run's (``binding``: :meth:`RunFolder.binding`):
+    files copied from another run's folder (another seed, other settings), or a
+    ``checkpoint.pt`` and a ``checkpoint.json`` of two runs. A run from before checkpoints
+    were bound (its status has no run id) resumes from an unbound checkpoint as before."""
+    theirs, tensor_id = info.get("run"), state.pop("run_id", None)
+    if binding["run_id"] is None and theirs is None and tensor_id is None:
+        return
+    if not isinstance(theirs, dict) or theirs.get("run_id") != binding["run_id"] or tensor_id != binding["run_id"]:
+        whose = theirs.get("seed") if isinstance(theirs, dict) else None
+        seed = f" (written by a run of seed {whose!r}; this run's seed is {binding['seed']!r})" if whose != binding["seed"] else ""
+        raise BadInput(f"{folder}: the checkpoint belongs to another run{seed}: its run id "
+                       f"{(theirs or {}).get('run_id') if isinstance(theirs, dict) else None!r} in checkpoint.json and "
+                       f"{tensor_id!r} in checkpoint.pt, this folder's run is {binding['run_id']!r}; a checkpoint "
+                       "resumes only the run that wrote it (start this one again with --overwrite)")
+    if theirs.get("settings_sha256") != binding["settings_sha256"]:
+        raise BadInput(f"{folder}: the checkpoint was written with other settings than this run's; it cannot resume it")
+
+
 __all__ = [
+    "check_binding",
     "Clock",
     "RunFolder",
     "load_training_state",

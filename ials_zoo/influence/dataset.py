@@ -38,7 +38,7 @@ from ials_zoo.core.domains import get_domain
 from ials_zoo.core.region import DSET_KINDS, INFLUENCE_KEY, RegionSpec, dset_key
 from ials_zoo.errors import BadInput, BadInputType
 from ials_zoo.processes import shutdown_pool, spawn_pool
-from ials_zoo.utils import atomic_path, check_seed
+from ials_zoo.utils import atomic_path, check_seed, parse_untrusted_json_object
 
 FORMAT = "ials_zoo.influence_dataset"
 FORMAT_VERSION = 1
@@ -150,7 +150,7 @@ class InfluenceDataset:
                 why = "not an .npz archive of arrays; pickled content is never loaded"
             raise BadInput(f"not an ials_zoo influence data set: {path} ({why})") from None
         try:
-            meta = json.loads(str(arrays["metadata"]))
+            meta = parse_untrusted_json_object(str(arrays["metadata"]), "its metadata")
             if meta.get("format") != FORMAT:
                 raise BadInput(f"no {FORMAT!r} tag")
             if meta.get("format_version") != FORMAT_VERSION:
