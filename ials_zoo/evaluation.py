@@ -235,6 +235,18 @@ class NetworkPolicy(Policy):
         return self.net.act(obs, self._rng, self.deterministic)
 
 
+def estimate_evaluation_seconds(env_id: str, episodes: int, **options) -> float:
+    """About how long ``episodes`` GS episodes under ``options`` take on 2 cores: their
+    agent-steps (:meth:`~ials_zoo.core.domains.Domain.steps_of_episode` times the agents) at
+    the training speed the domain's study measured, which evaluation beats (an upper
+    estimate; what a re-measure or a long command is bounded by before it starts)."""
+    from ials_zoo.core.extras import study_of
+
+    domain = get_domain(env_id)
+    rate = max(float(study_of(domain).multi_agent_steps_per_second.get("gs", 10_000.0)), 1.0)
+    return float(episodes) * domain.steps_of_episode(**options) * len(domain.agents(**options)) / rate
+
+
 SB3_META_MAX_BYTES = 1 << 20
 MAX_FRAME_STACK = 64
 
@@ -626,6 +638,7 @@ __all__ = [
     "load_model",
     "load_policy",
     "mean_ci",
+    "estimate_evaluation_seconds",
     "meta_path",
     "sha256_file",
 ]

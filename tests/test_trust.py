@@ -85,7 +85,7 @@ def test_a_training_record_is_bound_to_its_policy_file(tmp_path, board):
         lb.submit(_write(tmp_path, faked), board)
     honest = _model_result(tmp_path)
     entry = lb.load_result(lb.submit(_write(tmp_path, honest, "h.json"), board))
-    assert entry["provenance"] == "ials_zoo"
+    assert entry["provenance"] == "header-agrees"
     assert all(r["ok"] for r in lb.verify(board / "results" / next(iter(os.listdir(board / "results"))),
                                           directory=board))
 

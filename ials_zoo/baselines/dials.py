@@ -76,6 +76,7 @@ from ials_zoo.baselines.multiagent import (
     settings_of,
     whole_updates,
 )
+from ials_zoo.baselines.retrain import training_command
 from ials_zoo.core.domains import get_domain, ials_domain_ids
 from ials_zoo.core.extras import dials_of, study_of
 from ials_zoo.dials.backends import BACKENDS, InProcessBackend, check_ray_address, make_backend
@@ -428,7 +429,7 @@ def main(args: Args | None = None) -> dict:
                                         learner=args.learner)}
     plan = RunPlan("dials", args.env_id, agents, options, args.seed, total, per_update, eval_every, args.eval_episodes,
                    args.final_eval_episodes, frame_stack, out, settings_of(args), training, args.resume,
-                   args.overwrite, args.progress, args.submitter, args.notes)
+                   args.overwrite, args.progress, args.submitter, args.notes, command=training_command("dials", args))
     learner = ShardsLearner(args, domain, agents, options, refresh, copies, workers, ppo, frame_stack,
                             total // per_update, training, out)
     refresh_text = {None: "never", 0: "once, at the start"}.get(refresh) or f"every {refresh:,} steps"

@@ -36,6 +36,7 @@ from tqdm.auto import tqdm
 
 import ials_zoo
 from ials_zoo.baselines.multiagent import TrainingLog, final_results, joint_policy, policy_file, write_curve
+from ials_zoo.baselines.retrain import reproduce_record
 from ials_zoo.baselines.runs import Clock, RunFolder, check_binding, load_training_state, save_training_state
 from ials_zoo.core.extras import study_of
 from ials_zoo.errors import BadInput
@@ -72,6 +73,7 @@ class RunPlan:
     steps_per_second: float | None = None  # the study's speed, for the opening estimate (None: the multi-agent runs')
     unit: str = "step/agent"  # the progress bar's
     binding: dict = field(default_factory=dict)  # the run folder's (RunFolder.binding), in every checkpoint
+    command: str = ""  # the `ials-zoo train` command of these settings (retrain.training_command)
 
 
 UNITS = {"step/agent": "steps per agent", "transition": "agent transitions"}
@@ -198,6 +200,8 @@ def run(plan: RunPlan, learner: Learner, description: str, domain, scoring: Scor
     meta = dict({"algorithm": plan.algorithm, "env_id": plan.env_id, "env_options": plan.options, "seed": plan.seed,
                  "package_version": ials_zoo.__version__, "created": now_iso()}, **plan.meta)
     training = plan.training
+    if plan.command:  # what re-trains it (ials-zoo leaderboard verify --retrain)
+        training["reproduce"] = reproduce_record(plan.command)
     ok = False
     with folder.running():
         log = TrainingLog(out / "progress.csv")

@@ -37,6 +37,7 @@ from ials_zoo.baselines.multiagent import (
     settings_of,
     whole_updates,
 )
+from ials_zoo.baselines.retrain import training_command
 from ials_zoo.core.domains import domain_ids, get_domain
 from ials_zoo.core.extras import study_of
 from ials_zoo.core.spaces import joint_sizes
@@ -153,7 +154,7 @@ def main(args: Args | None = None) -> dict:
                    args.final_eval_episodes, frame_stack, out,
                    settings_of(args, skip=("resume", "overwrite", "progress", "out_dir", "submitter", "notes",
                                            "gs_processes")),
-                   training, args.resume, args.overwrite, args.progress, args.submitter, args.notes)
+                   training, args.resume, args.overwrite, args.progress, args.submitter, args.notes, command=training_command("ippo", args))
     learner = GSCopiesLearner(args.env_id, agents, options, args.n_envs, processes, ppo, frame_stack, args.seed,
                               total // per_update, joint_sizes(domain, agents, options))
     copies = f"{args.n_envs} GS cop{'ies' if args.n_envs > 1 else 'y'}"

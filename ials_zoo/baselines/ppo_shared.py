@@ -42,6 +42,7 @@ from ials_zoo.baselines.arguments import PPOSettings, arg, hidden_sizes, parse_e
 from ials_zoo.baselines.driver import RunPlan, run
 from ials_zoo.baselines.multiagent import settings_of, whole_updates
 from ials_zoo.baselines.ppo_single import check_ppo_args
+from ials_zoo.baselines.retrain import training_command
 from ials_zoo.baselines.sb3_run import (
     CHECKPOINT_EVERY,
     RUN_ONLY,
@@ -186,7 +187,7 @@ def main(args: Args | None = None) -> list[dict]:
                    settings_of(args, skip=RUN_ONLY), training, args.resume, args.overwrite, args.progress,
                    args.submitter, args.notes, meta={"agent": eval_agents[0], "frame_stack": frame_stack},
                    checkpoint_every=CHECKPOINT_EVERY,
-                   steps_per_second=ppo_speed(dom, "gs"), unit="transition")
+                   steps_per_second=ppo_speed(dom, "gs"), unit="transition", command=training_command("ppo_shared", args))
     all_agents = dom.agents(**options)
 
     def make_env(training):

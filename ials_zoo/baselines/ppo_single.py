@@ -71,6 +71,7 @@ from ials_zoo.baselines.arguments import (
 )
 from ials_zoo.baselines.driver import RunPlan, run
 from ials_zoo.baselines.multiagent import settings_of, whole_updates
+from ials_zoo.baselines.retrain import training_command
 from ials_zoo.baselines.runs import DETERMINISTIC_RESULT
 from ials_zoo.baselines.sb3_run import (
     CHECKPOINT_EVERY,
@@ -224,7 +225,7 @@ def main(args: Args | None = None) -> dict:
                    settings_of(args, skip=RUN_ONLY), training, args.resume, args.overwrite, args.progress,
                    args.submitter, args.notes, meta={"agent": agent, "frame_stack": frame_stack},
                    checkpoint_every=CHECKPOINT_EVERY,
-                   steps_per_second=ppo_speed(dom, args.simulator), unit="step")
+                   steps_per_second=ppo_speed(dom, args.simulator), unit="step", command=training_command("ppo_single", args))
 
     def make_env(training):
         venv, aip = make_training_env(args, agent)

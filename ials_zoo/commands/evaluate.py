@@ -20,8 +20,8 @@ from ials_zoo.commands import CommandError
 from ials_zoo.core.domains import get_domain
 from ials_zoo.evaluation import PROTOCOL_EPISODES
 from ials_zoo.leaderboard import write_result
-from ials_zoo.leaderboard.build import result_for
-from ials_zoo.utils import check_output_file
+from ials_zoo.leaderboard.build import external_training, result_for
+from ials_zoo.utils import check_output_file, check_seed
 
 
 def configure(parser):
@@ -46,6 +46,14 @@ def configure(parser):
                         help="GS options as a JSON object, e.g. '{\"item_lifetime\": 8}' "
                              "(default: the model's training options; any option makes a protocol variant)")
     parser.add_argument("--out", default=None, help="write the result JSON here (atomic)")
+    parser.add_argument("--algorithm", default=None,
+                        help="for a policy trained elsewhere (no training record in its file): the algorithm that "
+                             "trained it; with --env-steps, --out writes an entry labelled external")
+    parser.add_argument("--env-steps", type=int, default=None,
+                        help="for a policy trained elsewhere: the environment steps its training took (claimed)")
+    parser.add_argument("--training-seconds", type=float, default=0.0,
+                        help="for a policy trained elsewhere: its training wall-clock (claimed)")
+    parser.add_argument("--training-seed", type=int, default=0, help="for a policy trained elsewhere: its seed")
     parser.add_argument("--submitter", default="", help="submitter name in the result")
     parser.add_argument("--notes", default="", help="notes in the result")
     parser.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
@@ -60,8 +68,16 @@ def run(args) -> int:
     if args.out:
         check_output_file(args.out, "--out")
     options = parse_env_options(args.env_options) if args.env_options else None
+    external = None
+    if args.algorithm is not None or args.env_steps is not None:
+        if args.algorithm is None or args.env_steps is None:
+            raise CommandError("--algorithm and --env-steps go together (the training claims of a policy trained "
+                               "elsewhere)")
+        check_seed(args.training_seed, "--training-seed")
+        external = external_training(args.algorithm, args.env_steps, args.training_seconds, args.training_seed)
     result = result_for(args.env_id, args.agent, args.policy, args.episodes, args.deterministic,
-                        args.frame_stack, args.submitter, args.notes, args.progress, options, args.joint)
+                        args.frame_stack, args.submitter, args.notes, args.progress, options, args.joint,
+                        external=external, need_record=bool(args.out))
     s = result["score"]
     who = result["agent"] or f"{len(result['agents'])} agents (mean over agents)"
     print(f"{result['env_id']} {who}, policy {result['policy']['name']} ({result['policy']['kind']}): GS mean "

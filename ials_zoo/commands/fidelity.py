@@ -13,9 +13,13 @@ import math
 
 from ials_zoo.core.domains import get_domain
 from ials_zoo.errors import BadInput
+from ials_zoo.evaluation import estimate_evaluation_seconds
+from ials_zoo.influence.base import MAX_INFLUENCE_LAGS
 from ials_zoo.influence.fidelity import ON_POLICY, fidelity_report, markdown
 from ials_zoo.influence.train import LR_SCHEDULES
-from ials_zoo.utils import atomic_write_text, check_output_file, check_seed
+from ials_zoo.utils import atomic_write_text, check_output_file, check_seed, format_seconds
+
+MAX_EPISODES = 100_000  # per policy and simulator: 10**12 is a typo, not a study
 
 
 def configure(parser):
@@ -65,6 +69,10 @@ def run(args) -> int:
         raise BadInput(f"--tolerance must be >= 0, got {args.tolerance}")
     check_seed(args.seed, "--seed")
     policies = [p.strip() for p in args.policies.split(",") if p.strip()]
+    if not policies:
+        raise BadInput(f"--policies names no policy ({args.policies!r}); give e.g. random,constant,scripted")
+    if args.episodes > MAX_EPISODES:
+        raise BadInput(f"--episodes must be <= {MAX_EPISODES:,}, got {args.episodes:,}")
     for p in policies:
         if p not in ("random", "constant", "scripted") and not os.path.isfile(p):
             raise BadInput(f"--policies: {p!r} is neither random, constant, scripted nor a policy file")
@@ -72,6 +80,9 @@ def run(args) -> int:
     for name in ("collect_steps", "aip_epochs", "aip_seeds", "aip_influence_lags"):
         if getattr(args, name) is not None and getattr(args, name) < 1:
             raise BadInput(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
+    if args.aip_influence_lags is not None and args.aip_influence_lags > MAX_INFLUENCE_LAGS:
+        raise BadInput(f"--aip-influence-lags must be <= {MAX_INFLUENCE_LAGS} (past draws an AIP reads; the "
+                       f"domains use 1-3), got {args.aip_influence_lags:,}")
     if args.aip_lr is not None and not (math.isfinite(args.aip_lr) and args.aip_lr > 0):
         raise BadInput(f"--aip-lr must be a finite number > 0, got {args.aip_lr}")
     if args.aip_lr_schedule is not None and args.aip_lr_schedule not in LR_SCHEDULES:
@@ -86,6 +97,10 @@ def run(args) -> int:
                        f"on-policy-autoregressive, got {args.aip_clock_horizon} with {args.predictor!r}")
     if args.out:
         check_output_file(args.out)
+    gs_seconds = estimate_evaluation_seconds(args.env, args.episodes)
+    print(f"fidelity {args.env}: {len(policies)} joint polic{'ies' if len(policies) > 1 else 'y'} x {args.episodes:,} "
+          f"episodes on the GS and on the IALS: about {format_seconds(2 * len(policies) * gs_seconds)} on 2 cores "
+          "(the GS's share at its training speed, twice; AIP training extra)", flush=True)
     report = fidelity_report(args.env, policies, episodes=args.episodes, seed=args.seed, watched=watched,
                              predictor=args.predictor, tolerance=args.tolerance, collect_steps=args.collect_steps,
                              aip_lr=args.aip_lr, aip_epochs=args.aip_epochs, aip_seeds=args.aip_seeds,

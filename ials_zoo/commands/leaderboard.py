@@ -3,6 +3,7 @@
     ials-zoo leaderboard show                                   # where the board is, and its tables
     ials-zoo leaderboard submit result.json
     ials-zoo leaderboard verify leaderboard/results/<file>.json
+    ials-zoo leaderboard verify --retrain [--seeds 1] [--record] leaderboard/results/<file>.json
     ials-zoo leaderboard render
     ials-zoo leaderboard merge run_s0/result.json run_s1/result.json --out merged.json
     ials-zoo leaderboard validate result.json
@@ -11,17 +12,22 @@
     ials-zoo leaderboard compare results/a.json results/b.json       # IQM, P(a improves on b)
 
 The board is ``--dir``, else ``$IALS_ZOO_LEADERBOARD``, else ``./leaderboard``. See
-:mod:`ials_zoo.leaderboard` and ``leaderboard/SCHEMA.md``. A rejected submission or a failed
-verification exits with status 1, bad input with 2.
+:mod:`ials_zoo.leaderboard` and ``leaderboard/SCHEMA.md``.
+
+Exit status: 0 done; 1 a result was read and rejected (or a verification failed); 2 bad
+input: an argument, or a file that does not exist or cannot be read (as every ``ials-zoo``
+command).
 """
 
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 from ials_zoo import leaderboard as lb
 from ials_zoo.errors import BadInput
 from ials_zoo.evaluation import load_model
+from ials_zoo.leaderboard.remeasure import MAX_REMEASURE_SECONDS, mismatch_text
 from ials_zoo.policy import save_policy
 from ials_zoo.utils import atomic_write_text, check_output_file
 
@@ -32,9 +38,15 @@ def configure(parser):
     def board(p):
         p.add_argument("--dir", default=None, help="the board folder (default: $IALS_ZOO_LEADERBOARD or ./leaderboard)")
 
+    def cost(p):
+        p.add_argument("--max-remeasure-hours", type=float, default=MAX_REMEASURE_SECONDS / 3600,
+                       help="refuse, before it starts, a re-measure estimated to take longer (hours; default "
+                            f"{MAX_REMEASURE_SECONDS / 3600:g})")
+
     p = sub.add_parser("submit", help="validate a result and add it to the board")
     p.add_argument("file")
     board(p)
+    cost(p)
     p = sub.add_parser("show", help="print the board")
     p.add_argument("--sort", default="score", help="best first by 'score' (default) or a physical metric, e.g. "
                    "delay, throughput, items_per_robot (each domain knows which way is better)")
@@ -45,7 +57,14 @@ def configure(parser):
     p.add_argument("file")
     p.add_argument("--policy", action="append", default=None,
                    help="policy file (one per training seed) when the recorded one is not found")
+    p.add_argument("--retrain", action="store_true",
+                   help="instead of re-scoring, re-run the entry's recorded training command and pass only if each "
+                        "re-trained policy file is the submitted one, bit for bit")
+    p.add_argument("--seeds", type=int, default=1, help="with --retrain: how many of its training seeds (the first)")
+    p.add_argument("--record", action="store_true",
+                   help="with --retrain: when every seed passes, write it into the entry (shown as re-trained)")
     board(p)
+    cost(p)
     p = sub.add_parser("validate", help="check a result file without submitting it")
     p.add_argument("file")
     p = sub.add_parser("merge", help="combine single-seed results of one experiment")
@@ -64,11 +83,41 @@ def configure(parser):
     p.add_argument("--out", required=True, help="the .safetensors policy file to write")
 
 
-def run(args) -> int:
+def _existing_inputs(args) -> None:
+    """Bad input, exit 2, before any work: a file argument that is not there."""
+    files = [getattr(args, k) for k in ("file", "first", "second") if getattr(args, k, None) is not None]
+    for f in files + list(getattr(args, "files", None) or []):
+        if not Path(f).exists():
+            raise BadInput(f"{f!r} does not exist")
+    hours = getattr(args, "max_remeasure_hours", None)
+    if hours is not None and not hours > 0:
+        raise BadInput(f"--max-remeasure-hours must be > 0, got {hours}")
 
+
+def _retrain(args) -> int:
+    from ials_zoo.baselines.retrain import record_retrained, retrain
+
+    if args.policy:
+        raise BadInput("--policy goes with a re-score, not --retrain (the entry's own policy files are compared)")
+    reports = retrain(args.file, args.seeds, args.dir, progress=True)
+    for r in reports:
+        status = "OK (the policy file re-made bit for bit)" if r["ok"] else f"FAILED: first difference: {r['difference']}"
+        print(f"seed {r['seed']}: re-trained: {status}")
+    if not all(r["ok"] for r in reports) and reports[0]["platform"] != reports[0]["entry_platform"]:
+        print(f"  (trained on: {reports[0]['entry_platform']}\n   re-trained on: {reports[0]['platform']})")
+    ok = all(r["ok"] for r in reports)
+    if ok and args.record:
+        record_retrained(args.file, reports)
+        print(f"recorded: {args.file} shows as re-trained")
+    return 0 if ok else 1
+
+
+def run(args) -> int:
+    _existing_inputs(args)
+    max_seconds = getattr(args, "max_remeasure_hours", 0) * 3600
     try:
         if args.action == "submit":
-            print(f"accepted: {lb.submit(args.file, args.dir)}")
+            print(f"accepted: {lb.submit(args.file, args.dir, max_remeasure_seconds=max_seconds)}")
         elif args.action == "validate":
             lb.load_result(args.file)
             print(f"{args.file}: valid")
@@ -106,11 +155,15 @@ def run(args) -> int:
             pol = load_model(args.file)
             save_policy(pol.net, args.out)
             print(f"wrote {args.out} ({pol.net!r})")
+        elif args.action == "verify" and args.retrain:
+            return _retrain(args)
         elif args.action == "verify":
-            reports = lb.verify(args.file, args.policy, progress=True, directory=args.dir)
+            if args.record:
+                raise BadInput("--record goes with --retrain")
+            reports = lb.verify(args.file, args.policy, progress=True, directory=args.dir, max_seconds=max_seconds)
             ok = True
             for r in reports:
-                status = "OK (every episode re-measured exactly)" if r["ok"] else f"FAILED (episodes differ: {r['differences'][:10]})"
+                status = "OK (every episode re-measured exactly)" if r["ok"] else f"FAILED ({mismatch_text(r)})"
                 print(f"seed {'-' if r['seed'] is None else r['seed']}: claimed {r['claimed']:.6f}, re-measured "
                       f"{r['measured']:.6f}: {status}")
                 ok &= r["ok"]

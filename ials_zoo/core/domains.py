@@ -82,11 +82,17 @@ class Domain:
         metrics: the physical metrics of an episode, ``{name: "lower" | "higher"}`` (which
             way is better); the GS then has ``enable_metrics()`` (record from the next
             reset on) and ``episode_metrics() -> {name: float}`` for the episode just run.
+        metric_ranges: ``{name: (low, high)}``, the values a metric can take (an episode's
+            mean); a metric not named is a count, a time or a length: ``[0, inf)``.
+            Results are checked against them (:meth:`metric_range`).
         score_metric: the metric that ranks this domain's entries on the board (e.g. RESCO's
             ``"delay"``, which way is better as in :attr:`metrics`), or None: the score (the
             mean return) ranks them.
         track_options: GS options that name a board track of their own (e.g. ``("net",)``:
             one track per network); other options make an entry a protocol variant.
+        episode_steps: the steps of an episode under GS options (a network's hour of
+            decisions, say), or None: ``max_cycles`` if given, else :attr:`episode_length`
+            (:meth:`steps_of_episode`; what an evaluation's cost is estimated from).
         description: one line for listings.
         extras: what one subsystem alone reads, keyed by it (:mod:`ials_zoo.core.extras`:
             ``"study"``, ``"dials"``, ``"viewer"``, ``"bench"``, ``"tools"``); a domain
@@ -111,8 +117,10 @@ class Domain:
     untrained_probs: tuple | None = None
     replay_agreement: float = 0.9
     metrics: dict = field(default_factory=dict)
+    metric_ranges: dict = field(default_factory=dict)
     score_metric: str | None = None
     track_options: tuple[str, ...] = ()
+    episode_steps: Callable[..., int] | None = None
     description: str = ""
     extras: dict = field(default_factory=dict)
 
@@ -135,6 +143,17 @@ class Domain:
             raise BadInput(f"{self.env_id}: score_metric {self.score_metric!r} is not one of its metrics")
         if not set(self.track_options) <= set(self.gs_options):
             raise BadInput(f"{self.env_id}: track_options must be GS options, got {list(self.track_options)}")
+
+    def metric_range(self, name: str) -> tuple[float, float]:
+        """The values metric ``name`` can take (:attr:`metric_ranges`; default ``[0, inf)``)."""
+        low, high = self.metric_ranges.get(name, (0.0, float("inf")))
+        return float(low), float(high)
+
+    def steps_of_episode(self, **options) -> int:
+        """Steps of one episode under GS ``options`` (:attr:`episode_steps`)."""
+        if self.episode_steps is not None:
+            return int(self.episode_steps(**options))
+        return int(options.get("max_cycles", self.episode_length))
 
     def agents(self, **options) -> list[str]:
         """Every agent id under ``options`` (only :attr:`agent_options` are looked at)."""

@@ -273,10 +273,15 @@ def previous_influences(u: np.ndarray, offsets, lags: int = 1) -> np.ndarray:
     return out
 
 
+MAX_INFLUENCE_LAGS = 64
+"""The most past draws an autoregressive AIP reads (the networks' input grows with each: our
+domains use 1-3; 100,000 would ask for tens of GiB)."""
+
+
 def check_influence_lags(lags) -> int:
-    """``lags`` as an int >= 1, else :class:`BadInput` naming it."""
-    if isinstance(lags, bool) or not isinstance(lags, (int, np.integer)) or lags < 1:
-        raise BadInput(f"influence_lags must be an int >= 1, got {lags!r}")
+    """``lags`` as an int in [1, :data:`MAX_INFLUENCE_LAGS`], else :class:`BadInput` naming it."""
+    if isinstance(lags, bool) or not isinstance(lags, (int, np.integer)) or not 1 <= lags <= MAX_INFLUENCE_LAGS:
+        raise BadInput(f"influence_lags must be an int in [1, {MAX_INFLUENCE_LAGS}], got {lags!r}")
     return int(lags)
 
 

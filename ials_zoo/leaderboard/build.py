@@ -15,6 +15,7 @@ with a Student-t interval over seeds (:mod:`ials_zoo.stats`).
 from __future__ import annotations
 
 import datetime as _dt
+import math
 import os
 import platform
 import re
@@ -200,12 +201,38 @@ def reference_result(env_id: str, agent: str | None, policy: str, episodes: int 
     return make_result([ev], algorithm=policy, submitter=submitter, notes=notes)
 
 
+def external_training(algorithm: str, env_steps: int, seconds: float = 0.0, seed: int = 0) -> dict:
+    """The training claims of a policy our trainers did not make (SCHEMA.md's ``external``):
+    what its submitter says, labelled on the board as unverified."""
+    if not isinstance(algorithm, str) or not algorithm.strip():
+        raise BadInput("--algorithm must name the algorithm that trained the policy")
+    if isinstance(env_steps, bool) or not isinstance(env_steps, int) or env_steps < 0:
+        raise BadInput(f"--env-steps must be a whole number >= 0, got {env_steps!r}")
+    if not (math.isfinite(seconds) and seconds >= 0):
+        raise BadInput(f"--training-seconds must be a finite number >= 0, got {seconds!r}")
+    return {"algorithm": algorithm.strip(), "seed": int(seed),
+            "training": {"simulator": "external", "aip": None, "seeds": [int(seed)], "env_steps": env_steps,
+                         "wall_clock_seconds": float(seconds), "aip_seconds": 0.0, "hyperparameters": {}}}
+
+
 def result_for(env_id, agent, policy, episodes, deterministic=False, frame_stack=None,
-               submitter="", notes="", progress=False, options: dict | None = None, joint: bool = False) -> dict:
+               submitter="", notes="", progress=False, options: dict | None = None, joint: bool = False,
+               external: dict | None = None, need_record: bool = False) -> dict:
     """Evaluate ``policy`` and build its leaderboard result (training record from a model's
-    metadata; none for reference policies and callables)."""
+    metadata; none for reference policies and callables). A model without a training record
+    takes ``external`` (:func:`external_training`); with ``need_record`` (the result is to be
+    written) and neither, a :class:`BadInput` before any episode."""
     pol = load_policy(policy, env_id, agent, deterministic=deterministic, frame_stack=frame_stack)
     meta = pol.metadata if pol.kind == "model" else {}
+    if pol.kind == "model" and meta.get("training") and external is not None:
+        raise BadInput("the policy file carries its trainer's record; --algorithm/--env-steps are for policies "
+                       "trained elsewhere")
+    if pol.kind == "model" and not meta.get("training"):
+        if external is None and need_record:
+            raise BadInput(f"{policy!r} carries no training record (not trained by ials_zoo's baselines): give "
+                           "--algorithm and --env-steps (and --training-seconds, --training-seed) to write a result; "
+                           "it is labelled external, its training claims unverified")
+        meta = dict(meta, **(external or {}))
     env_id = env_id or meta.get("env_id")
     if env_id is None:
         raise BadInput("--env is required unless the policy is a model that names its domain")
@@ -238,6 +265,7 @@ __all__ = [
     "SCHEMA_VERSION",
     "SINGLE",
     "VARIANT",
+    "external_training",
     "hardware_info",
     "make_result",
     "now_iso",

@@ -72,6 +72,13 @@ def compare_entries(first: dict, second: dict) -> str:
     for field in ("env_id", "agents"):
         if first[field] != second[field]:
             raise BadInput(f"the entries differ in {field}: {first[field]!r} vs {second[field]!r}")
+    for name, d in (("first", first), ("second", second)):
+        if d["training"] is None:
+            raise BadInput(f"the {name} entry is a reference entry ({d['algorithm']}): compare needs two trained "
+                           "entries, each with at least 2 training seeds (their spread is what is compared)")
+        if len(d["scores"]) < 2:
+            raise BadInput(f"the {name} entry has {len(d['scores'])} training seed: compare needs at least 2 per "
+                           "entry (merge single-seed results with `ials-zoo leaderboard merge`)")
     lines = []
     seeds = []
     for name, d in (("first", first), ("second", second)):

@@ -41,16 +41,25 @@ def _iqm(d: dict) -> str:
     return f"{point:.2f} [{lo:.2f}, {hi:.2f}]"
 
 
+def console_text(text) -> str:
+    """User text for a terminal: every character that is not printable (a newline, a carriage
+    return, an escape sequence's ESC) written as its escape, so that no entry can add or
+    rewrite console rows."""
+    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in str(text))
+
+
 def _row(d: dict) -> list[str]:
     s, t = d["score"], d["training"]
     total = _total_seconds(d)
     label = d["algorithm"] + (" (deterministic)" if d["evaluation"].get("deterministic") else "")
     if d.get("provenance") == "external":
         label += " [external: training claims unverified]"
-    return [label, _training_label(d), f"{s['mean']:.2f}", f"[{s['ci_low']:.2f}, {s['ci_high']:.2f}]", _iqm(d),
-            str(len(d["scores"])) if t else "-", str(d["evaluation"]["episodes"]),
-            f"{t['env_steps']:,}" if t else "-", format_duration(total) if total is not None else "-",
-            d["created"][:10]]
+    if d.get("retrained"):
+        label += " [re-trained]"
+    return [console_text(label), console_text(_training_label(d)), f"{s['mean']:.2f}",
+            f"[{s['ci_low']:.2f}, {s['ci_high']:.2f}]", _iqm(d), str(len(d["scores"])) if t else "-",
+            str(d["evaluation"]["episodes"]), f"{t['env_steps']:,}" if t else "-",
+            format_duration(total) if total is not None else "-", console_text(d["created"][:10])]
 
 
 def ranking_metric(env_id: str) -> str | None:
@@ -130,10 +139,10 @@ def show(directory=None, sort: str = "score") -> str:
                          f"{', '.join(f'{k} ({v} is better)' for k, v in known.items()) or 'none'}")
     lines = [f"leaderboard: {board.resolve()}"]
     for p, why in problems:
-        lines.append(f"  skipped {p.name}: {why}")
+        lines.append(f"  skipped {console_text(p.name)}: {console_text(why)}")
     lines.append("")
     for (section, env_id, who), rows in group_entries(entries, sort).items():
-        lines.append(f"[{section}] {env_id} / {who}")
+        lines.append(f"[{section}] {env_id} / {console_text(who)}")
         lines += _text_table(rows, sort)
         lines.append("")
     if not entries:

@@ -30,7 +30,7 @@ from pathlib import Path
 
 from ials_zoo.errors import BadInput
 from ials_zoo.evaluation import load_model, sha256_file
-from ials_zoo.leaderboard.remeasure import remeasure_result
+from ials_zoo.leaderboard.remeasure import MAX_REMEASURE_SECONDS, check_remeasure_cost, mismatch_text, remeasure_result
 from ials_zoo.leaderboard.validate import ResultError, load_result, validate_result
 from ials_zoo.policy import PolicyFileError, save_policy
 from ials_zoo.utils import atomic_path, remove_stale_temporaries
@@ -97,15 +97,17 @@ def resolve_policy_file(spec: str, result_path: Path, board: Path | None = None)
     return None
 
 
-PROVENANCE_OURS = "ials_zoo"
+PROVENANCE_HEADER = "header-agrees"
 PROVENANCE_EXTERNAL = "external"
 
 
 def training_provenance(data: dict, networks: list) -> str:
     """Whether our trainers produced the policies of ``data``: each policy file's header holds
     the training record its trainer wrote (algorithm, seed, simulator, steps, wall-clock).
-    ``"ials_zoo"`` when every header has one and the result repeats it; ``"external"`` when a
-    header has none (the result's training claims cannot be checked). A header whose record
+    ``"header-agrees"`` when every header has one and the result repeats it: the header and
+    the result agree, and no more (whoever can write a result can write a header; what makes
+    a training claim checked is ``ials-zoo leaderboard verify --retrain``, :mod:`.retrain`);
+    ``"external"`` when a header has none. A header whose record
     contradicts the result is a :class:`ResultError`: the result claims another training."""
     training = data["training"] or {}
     headers = [net.metadata for net in networks]
@@ -125,7 +127,7 @@ def training_provenance(data: dict, networks: list) -> str:
     if not math.isclose(sum(walls) / len(walls), claimed_wall, rel_tol=1e-6, abs_tol=1e-6):
         raise ResultError("training.wall_clock_seconds", f"{claimed_wall!r} in the result, but the policy files "
                           f"record {walls} (the result's is their mean)")
-    return PROVENANCE_OURS
+    return PROVENANCE_HEADER
 
 
 def _check_policies(data: dict, path: Path, board: Path) -> tuple[list, list]:
@@ -180,14 +182,15 @@ def _board_lock(board: Path):
         os.close(fd)
 
 
-def submit(path, directory=None, remeasure: bool = True) -> Path:
+def submit(path, directory=None, remeasure: bool = True, max_remeasure_seconds: float = MAX_REMEASURE_SECONDS) -> Path:
     """Validate the result at ``path`` and add it to the board; return its new path.
 
     Raises :class:`ResultError` for a malformed, inconsistent or duplicate result, for code,
     for a policy file that is missing, does not have its recorded sha256 or does not load as a
     policy of the entry, for training claims its policy files contradict, and (``remeasure``)
     for scores that the GS does not reproduce exactly; the board is left untouched in every
-    failure (atomic writes, never an overwrite, one submission at a time)."""
+    failure (atomic writes, never an overwrite, one submission at a time). A re-measure whose
+    estimated cost is over ``max_remeasure_seconds`` is refused before anything else."""
     path = Path(path)
     board = board_path(directory)
     results = board / RESULTS_SUBDIR
@@ -198,6 +201,8 @@ def submit(path, directory=None, remeasure: bool = True) -> Path:
     if kind == "callable":
         raise ResultError("policy.kind", "a callable policy is code; the board holds policy files (weights + JSON) "
                           "and reference policies only")
+    if remeasure:
+        check_remeasure_cost(data, max_remeasure_seconds)
     copies, converted = [], []
     try:
         if kind == "model":
@@ -208,12 +213,10 @@ def submit(path, directory=None, remeasure: bool = True) -> Path:
             data.pop("provenance", None)
         validate_result(data)
         if remeasure:
-            reports = remeasure_result(data, [str(c) for c, _ in copies] or None)
+            reports = remeasure_result(data, [str(c) for c, _ in copies] or None, max_seconds=max_remeasure_seconds)
             bad = [r for r in reports if not r["ok"]]
             if bad:
-                raise ResultError("scores", f"re-measured on the GS, seed {bad[0]['seed']} scores "
-                                  f"{bad[0]['measured']!r}, not the claimed {bad[0]['claimed']!r} (episodes "
-                                  f"{bad[0]['differences'][:5]} differ)")
+                raise ResultError("scores", f"re-measured on the GS, {mismatch_text(bad[0])}")
         with _board_lock(board):
             entries, _ = load_entries(board)
             mine = identity(data)
@@ -237,6 +240,6 @@ def submit(path, directory=None, remeasure: bool = True) -> Path:
     return dest
 
 
-__all__ = ["ARCHIVE_SUBDIR", "BOARD_ENV", "POLICIES_SUBDIR", "PROVENANCE_EXTERNAL", "PROVENANCE_OURS",
+__all__ = ["ARCHIVE_SUBDIR", "BOARD_ENV", "POLICIES_SUBDIR", "PROVENANCE_EXTERNAL", "PROVENANCE_HEADER",
            "RESULTS_SUBDIR", "board_path", "entry_name", "identity", "load_entries", "resolve_policy_file", "submit",
            "training_provenance"]

@@ -124,7 +124,7 @@ def validate_result(data) -> dict:
         raise ResultError("provenance", "only trained policies have a provenance")
     _check_seed_scores(data, kind)
     _check_overall_score(data)
-    _check_metrics(data, domain.metrics)
+    _check_metrics(data, domain)
     _check_training(data, kind)
     return data
 
@@ -245,9 +245,11 @@ def _check_training(data: dict, kind: str) -> None:
             raise ResultError(f"learning_curves.{i}.points", "env_steps must not decrease")
 
 
-def _check_metrics(data: dict, known: dict) -> None:
-    """Physical metrics: only the domain's names, an interval around each mean, and the
-    top level recomputed from the seeds (as the score)."""
+def _check_metrics(data: dict, domain) -> None:
+    """Physical metrics: only the domain's names, each within the values it can take
+    (:meth:`~ials_zoo.core.domains.Domain.metric_range`: a negative age is refused), an
+    interval around each mean, and the top level recomputed from the seeds (as the score)."""
+    known = domain.metrics
     places = [(f"scores.{i}.metrics", s.get("metrics")) for i, s in enumerate(data["scores"])]
     for where, metrics in places + [("metrics", data.get("metrics"))]:
         for name, value in (metrics or {}).items():
@@ -256,6 +258,14 @@ def _check_metrics(data: dict, known: dict) -> None:
                                   f"{', '.join(known) or 'none'})")
             if not value["ci_low"] <= value["mean"] <= value["ci_high"]:
                 raise ResultError(f"{where}.{name}", "the mean must lie in [ci_low, ci_high]")
+            low, high = domain.metric_range(name)
+            # a seed's interval is over its episodes (inside the range); the top level's is a
+            # t interval over seeds, which may reach past it
+            checked = ("mean",) if where == "metrics" else ("mean", "ci_low", "ci_high")
+            for key in checked:
+                if not low <= value[key] <= high:
+                    raise ResultError(f"{where}.{name}.{key}", f"{value[key]!r} is not a value {name} can take "
+                                      f"([{low:g}, {high:g}])")
     want = overall_metrics(data["scores"])
     got = data.get("metrics")
     if (want is None) != (got is None) or (want is not None and (list(want) != list(got) or not all(

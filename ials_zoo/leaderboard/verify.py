@@ -10,12 +10,13 @@ from pathlib import Path
 
 from ials_zoo.errors import BadInput
 from ials_zoo.evaluation import load_model, sha256_file
-from ials_zoo.leaderboard.remeasure import remeasure_result
+from ials_zoo.leaderboard.remeasure import MAX_REMEASURE_SECONDS, check_remeasure_cost, remeasure_result
 from ials_zoo.leaderboard.store import board_path, resolve_policy_file, training_provenance
 from ials_zoo.leaderboard.validate import ResultError, load_result
 
 
-def verify(path, policies=None, progress: bool = False, directory=None) -> list[dict]:
+def verify(path, policies=None, progress: bool = False, directory=None,
+           max_seconds: float = MAX_REMEASURE_SECONDS) -> list[dict]:
     """Re-score the result at ``path``; one report per training seed: ``seed``, ``claimed``,
     ``measured``, ``ok`` (every episode equal, every physical metric equal), ``differences``
     (what differs). The training record in each policy file must agree with the result's
@@ -28,6 +29,7 @@ def verify(path, policies=None, progress: bool = False, directory=None) -> list[
     kind = data["policy"]["kind"]
     if kind == "callable":
         raise ResultError("policy.kind", "a callable policy is code; verify never imports or runs it")
+    check_remeasure_cost(data, max_seconds)
     if policies is not None and len(policies) != len(data["scores"]):
         raise BadInput(f"{len(policies)} policy files given for {len(data['scores'])} per-seed scores")
     try:
@@ -50,7 +52,7 @@ def verify(path, policies=None, progress: bool = False, directory=None) -> list[
         provenance = training_provenance(data, [load_model(f, data["agent"]).net for f in files])
         if data.get("provenance", provenance) != provenance:
             raise ResultError("provenance", f"the entry says {data['provenance']!r}, its policy files say {provenance!r}")
-    return remeasure_result(data, files, progress)
+    return remeasure_result(data, files, progress, max_seconds)
 
 
 __all__ = ["verify"]

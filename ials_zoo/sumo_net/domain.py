@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from ials_zoo.core.domains import Domain
 from ials_zoo.core.extras import BenchSettings, StudySettings, ViewerSettings
-from ials_zoo.sumo_net.names import BOARD_OPTIONS, ENV_ID, SCENARIO_OPTIONS
+from ials_zoo.sumo_net.names import BOARD_OPTIONS, DEFAULT_NET, ENV_ID, SCENARIO_OPTIONS
 
 
 def parallel_env(**options):
@@ -48,6 +48,18 @@ STUDY = StudySettings(multi_agent_budget=36_000, multi_agent_steps_per_second={"
 TOOLS = {"resco-controllers": ("ials_zoo.sumo_net.study",
                                "fixed time, max pressure, greedy and actuated lights on RESCO's maps, beside RESCO's table")}
 
+def episode_steps(**options) -> int:
+    """Decisions of one episode: the scenario's (``begin`` to ``end``), or ``max_cycles`` if fewer."""
+    from ials_zoo.sumo_net.scenario import make_scenario
+
+    chosen = {k: v for k, v in options.items() if k in SCENARIO_OPTIONS and k != "max_cycles"}
+    if not {"net", "sumocfg", "net_file"} & set(chosen):
+        chosen["net"] = DEFAULT_NET
+    scenario = make_scenario(**chosen)
+    cap = options.get("max_cycles")
+    return scenario.decisions if cap is None else min(scenario.decisions, int(cap))
+
+
 DOMAIN = Domain(
     env_id=ENV_ID,
     description="any SUMO network, RESCO's eight city and grid maps by name (libsumo; GS only)",
@@ -55,6 +67,7 @@ DOMAIN = Domain(
     possible_agents=possible_agents,
     default_agents=("cluster_1098574052_1098574061_247379905",),  # cologne8's 4-green junction
     episode_length=360,
+    episode_steps=episode_steps,
     agent_options=SCENARIO_OPTIONS,
     gs_options=BOARD_OPTIONS,
     one_simulation_per_process=True,

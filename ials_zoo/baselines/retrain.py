@@ -1,0 +1,257 @@
+"""Re-training an entry: its recorded training command is run again for some of its training
+seeds, and the check passes only when each re-trained policy file is the submitted one.
+
+Our training is bitwise reproducible for a seed on one platform (``tests/test_exact_resume.py``
+holds it across resumes), so a training claim can be re-executed, not only read. A result's
+``training.reproduce`` records the command (``ials-zoo train ...`` with every argument that
+differs from its default, without the run's folder), the package version and commit, and the
+platform (:func:`reproduce_record`). :func:`retrain` runs that command for the first ``seeds``
+training seeds, in a temporary folder, and compares each policy file with the entry's:
+
+* every tensor bit for bit (name, dtype, shape, bytes);
+* every header field but those that record when and where (``created``, wall-clock and AIP
+  seconds, the curve's wall-clock, the platform record, the run flags among the
+  hyper-parameters: its folder, progress bar, submitter and notes).
+
+A difference is named where it first appears (a tensor and its first differing element, or a
+header field). On another platform than the entry's, floating-point libraries may differ: the
+report says both platforms beside the first difference.
+
+The command is a result's text, so it is parsed, not run: it must be ``ials-zoo train`` with
+one of our baselines, its options are read by that baseline's own parser into its arguments
+(nothing is imported or run by name), and no value may name a file (``/`` or ``\\``): a result
+never makes us read a path it names.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import dataclasses
+import io
+import json
+import shlex
+import subprocess
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+import ials_zoo
+from ials_zoo.errors import BadInput
+from ials_zoo.leaderboard.build import hardware_info, now_iso
+from ials_zoo.leaderboard.validate import ResultError, load_result, validate_result
+from ials_zoo.utils import atomic_write_text
+
+RUN_FLAGS = ("out_dir", "resume", "overwrite", "progress", "submitter", "notes", "ray_address")
+"""Arguments that say where and how a run is watched, not what it computes: never recorded."""
+
+VOLATILE_HEADER = ("created", "training.wall_clock_seconds", "training.aip_seconds", "training.reproduce",
+                   "training.aip.collection_seconds", "training.aip.training_seconds", "package_version")
+"""Header fields that record when and where a policy was trained, not what it is."""
+
+
+def training_command(baseline: str, args) -> str:
+    """The ``ials-zoo train`` command of a run's arguments (a baseline's ``Args``): every
+    argument that differs from its default, the seed always, the run flags never."""
+    parts = ["ials-zoo", "train", baseline]
+    for f in dataclasses.fields(args):
+        value = getattr(args, f.name)
+        if f.name in RUN_FLAGS or (f.name != "seed" and f.default is not dataclasses.MISSING and value == f.default):
+            continue
+        flag = "--" + f.name.replace("_", "-")
+        if isinstance(value, bool):
+            parts.append(flag if value else "--no-" + flag[2:])
+        else:
+            parts += [flag, str(value)]
+    return shlex.join(parts)
+
+
+def package_commit() -> str | None:
+    """The git commit of the installed package (``-dirty`` with local changes), or None."""
+    try:
+        out = subprocess.run(["git", "describe", "--always", "--dirty", "--abbrev=40"],
+                             cwd=Path(ials_zoo.__file__).parent, capture_output=True, text=True, timeout=5)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return out.stdout.strip() or None if out.returncode == 0 else None
+
+
+def platform_text() -> str:
+    """What floating-point results depend on: OS, processor, Python, torch, numpy."""
+    hw = hardware_info()
+    return (f"{hw['platform']}; {hw['processor']}; python {hw['python']}; torch {hw['torch']}; "
+            f"numpy {hw['numpy']}")[:400]
+
+
+def reproduce_record(command: str) -> dict:
+    """``training.reproduce`` of a result trained by ``command`` here and now."""
+    return {"command": command, "package_version": ials_zoo.__version__, "commit": package_commit(),
+            "platform": platform_text()}
+
+
+def command_without_seed(command: str) -> list[str]:
+    """The recorded command's words without its ``--seed N`` (the same for every seed)."""
+    words = shlex.split(command)
+    out, skip = [], False
+    for w in words:
+        if skip:
+            skip = False
+        elif w == "--seed":
+            skip = True
+        elif not w.startswith("--seed="):
+            out.append(w)
+    return out
+
+
+def parse_command(command: str, seed: int):
+    """``(baseline module, Args)`` of a recorded command for ``seed``, checked as above."""
+    import importlib
+
+    from ials_zoo.baselines import BASELINES
+    from ials_zoo.baselines.arguments import add_dataclass_args, dataclass_from_namespace
+
+    words = command_without_seed(command)
+    if words[:2] != ["ials-zoo", "train"] or len(words) < 3 or words[2] not in BASELINES:
+        raise ResultError("training.reproduce.command", f"{command[:200]!r} is not `ials-zoo train <baseline>` with "
+                          f"one of {', '.join(BASELINES)}")
+    named = [w for w in words[3:] if "/" in w or "\\" in w]
+    if named:
+        raise ResultError("training.reproduce.command", f"{named[0][:100]!r} names a file; re-training runs only "
+                          "commands that read no file")
+    module = importlib.import_module(BASELINES[words[2]])
+    parser = argparse.ArgumentParser(prog="recorded command", allow_abbrev=False, add_help=False)
+    add_dataclass_args(parser, module.Args)
+    err = io.StringIO()
+    try:
+        with contextlib.redirect_stderr(err):
+            ns = parser.parse_args(words[3:] + ["--seed", str(seed)])
+    except SystemExit:
+        raise ResultError("training.reproduce.command", f"not a valid {words[2]} command: "
+                          f"{err.getvalue().strip().splitlines()[-1][:300]}") from None
+    forbidden = [k for k in RUN_FLAGS if k in vars(ns) and getattr(ns, k) != parser.get_default(k)]
+    if forbidden:
+        raise ResultError("training.reproduce.command", f"sets {forbidden}, which a recorded command never does")
+    return module, dataclass_from_namespace(module.Args, ns)
+
+
+def _header(path: Path) -> dict:
+    from safetensors import safe_open
+
+    from ials_zoo.policy import HEADER_KEY
+    from ials_zoo.utils import parse_untrusted_json_object
+
+    with safe_open(str(path), framework="np") as f:
+        return parse_untrusted_json_object((f.metadata() or {}).get(HEADER_KEY, "{}"), f"the header of {path}")
+
+
+def _strip(header: dict) -> dict:
+    """``header`` without :data:`VOLATILE_HEADER` fields and the curve's wall-clock."""
+    out = json.loads(json.dumps(header))
+    for dotted in VOLATILE_HEADER:
+        *parents, leaf = dotted.split(".")
+        node = out
+        for p in parents:
+            node = node.get(p) if isinstance(node, dict) else None
+        if isinstance(node, dict):
+            node.pop(leaf, None)
+    for point in out.get("learning_curve") or []:
+        if isinstance(point, dict):
+            point.pop("wall_clock_seconds", None)
+    hyper = (out.get("training") or {}).get("hyperparameters")
+    for key in RUN_FLAGS if isinstance(hyper, dict) else ():
+        hyper.pop(key, None)
+    return out
+
+
+def _first_difference(a, b, where: str = "") -> str | None:
+    """The first path at which two JSON values differ, or None."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        for k in sorted(set(a) | set(b)):
+            if k not in a or k not in b:
+                return f"{where}{k} (only in the {'re-trained' if k in a else 'submitted'} file)"
+            found = _first_difference(a[k], b[k], f"{where}{k}.")
+            if found:
+                return found
+        return None
+    if isinstance(a, list) and isinstance(b, list):
+        if len(a) != len(b):
+            return f"{where.rstrip('.')} ({len(a)} items re-trained, {len(b)} submitted)"
+        for i, (x, y) in enumerate(zip(a, b)):
+            found = _first_difference(x, y, f"{where}{i}.")
+            if found:
+                return found
+        return None
+    return None if a == b else f"{where.rstrip('.')} ({a!r} re-trained, {b!r} submitted)"
+
+
+def policy_difference(retrained: Path, submitted: Path) -> str | None:
+    """Where two policy files first differ (module docstring), or None when they are the same."""
+    from safetensors.numpy import load_file
+
+    a, b = load_file(str(retrained)), load_file(str(submitted))
+    if sorted(a) != sorted(b):
+        return f"tensors {sorted(a)} re-trained, {sorted(b)} submitted"
+    for name in sorted(a):
+        x, y = a[name], b[name]
+        if x.dtype != y.dtype or x.shape != y.shape:
+            return f"tensor {name}: {x.dtype}{list(x.shape)} re-trained, {y.dtype}{list(y.shape)} submitted"
+        differ = np.flatnonzero(x.reshape(-1).view(np.uint8) != y.reshape(-1).view(np.uint8))
+        if differ.size:
+            i = int(differ[0]) // x.itemsize
+            return (f"tensor {name} element {i}: {x.reshape(-1)[i]!r} re-trained, {y.reshape(-1)[i]!r} submitted "
+                    f"({differ.size} differing bytes)")
+    found = _first_difference(_strip(_header(retrained)), _strip(_header(submitted)))
+    return None if found is None else f"header field {found}"
+
+
+def retrain(path, seeds: int = 1, directory=None, progress: bool = False) -> list[dict]:
+    """Re-run the training of the first ``seeds`` training seeds of the entry at ``path``; one
+    report per seed: ``seed``, ``ok`` (the policy file re-made bit for bit, as above),
+    ``difference`` (where it first differs, or None), ``platform`` (this one) and
+    ``entry_platform``."""
+    from ials_zoo.leaderboard.store import board_path, resolve_policy_file
+
+    path = Path(path)
+    data = load_result(path)
+    record = (data["training"] or {}).get("reproduce")
+    if data["policy"]["kind"] != "model" or record is None:
+        raise ResultError("training.reproduce", "the entry records no training command (a reference entry, or "
+                          "trained before commands were recorded): it can be re-scored (verify), not re-trained")
+    if isinstance(seeds, bool) or not isinstance(seeds, int) or seeds < 1:
+        raise BadInput(f"--seeds must be a whole number >= 1, got {seeds!r}")
+    try:
+        board = board_path(directory)
+    except ValueError:
+        board = None
+    jobs = []
+    for i, s in enumerate(data["scores"][:seeds]):
+        module, args = parse_command(record["command"], int(s["seed"]))  # every seed checked before any runs
+        found = resolve_policy_file(s["policy_file"], path, board)
+        if found is None:
+            raise BadInput(f"scores.{i}: policy file {s['policy_file']!r} not found")
+        jobs.append((s["seed"], module, args, found))
+    reports = []
+    for seed, module, args, submitted in jobs:
+        with tempfile.TemporaryDirectory(prefix="ials-zoo-retrain-") as tmp:
+            args.out_dir, args.progress = str(Path(tmp) / "run"), progress
+            module.main(args)
+            difference = policy_difference(Path(args.out_dir) / "policy.safetensors", submitted)
+        reports.append({"seed": seed, "ok": difference is None, "difference": difference,
+                        "platform": platform_text(), "entry_platform": record["platform"]})
+    return reports
+
+
+def record_retrained(path, reports: list[dict]) -> None:
+    """Write ``retrained`` into the entry at ``path`` (every report passed; atomic)."""
+    if not reports or not all(r["ok"] for r in reports):
+        raise BadInput("only an entry whose re-trained seeds all passed is recorded as re-trained")
+    data = load_result(path)
+    data["retrained"] = {"seeds": [int(r["seed"]) for r in reports], "package_version": ials_zoo.__version__,
+                         "platform": platform_text(), "date": now_iso()[:10]}
+    validate_result(data)  # the entry stays valid
+    atomic_write_text(path, json.dumps(data, indent=2, allow_nan=False) + "\n")
+
+
+__all__ = ["VOLATILE_HEADER", "command_without_seed", "package_commit", "parse_command", "platform_text",
+           "policy_difference", "record_retrained", "reproduce_record", "retrain", "training_command"]
