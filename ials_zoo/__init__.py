@@ -20,9 +20,37 @@ Your own domain: build an :class:`ials_zoo.core.Domain` and :func:`register_doma
 declare it in the ``ials_zoo.domains`` entry point group).
 """
 
-from ials_zoo._version import __version__
-from ials_zoo.core.domains import Domain, domain_ids, get_domain, ials_domain_ids, register_domain
-from ials_zoo.core.gym_ids import register_ials
+def _quiet_interrupts_while_starting() -> None:
+    """Ctrl-C while the ``ials-zoo`` command is still importing (about 0.6 s, longer on a busy
+    machine) ends it with status 130 and one line, not a traceback. Only for the command line
+    (the ``ials-zoo`` script, ``python -m ials_zoo.<module>``): a program that imports the
+    package keeps Python's own Ctrl-C. ``ials_zoo.cli.main`` gives Python's handler back first
+    thing."""
+    import os
+    import signal
+    import sys
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return
+    if not (sys.argv[:1] == ["-m"] or os.path.basename(sys.argv[0] if sys.argv else "") == "ials-zoo"):
+        return
+    if signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        return  # someone else's handler: theirs
+
+    def interrupted(signum, frame):
+        sys.stderr.write("ials-zoo: interrupted\n")
+        raise SystemExit(130)
+
+    interrupted.ials_zoo_startup = True
+    signal.signal(signal.SIGINT, interrupted)
+
+
+_quiet_interrupts_while_starting()
+
+from ials_zoo._version import __version__  # noqa: E402
+from ials_zoo.core.domains import Domain, domain_ids, get_domain, ials_domain_ids, register_domain  # noqa: E402
+from ials_zoo.core.gym_ids import register_ials  # noqa: E402
 
 
 def make_ials(*args, **kwargs):

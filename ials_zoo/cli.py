@@ -101,10 +101,20 @@ def _sigterm_interrupts() -> None:
         signal.signal(signal.SIGTERM, interrupt)
 
 
+def _python_interrupts() -> None:
+    """Give Ctrl-C back to Python (a KeyboardInterrupt, handled below) from the quiet exit of
+    the start-up (``ials_zoo._quiet_interrupts_while_starting``)."""
+    import signal
+
+    if threading_main() and getattr(signal.getsignal(signal.SIGINT), "ials_zoo_startup", False):
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     command = next((a for a in argv if not a.startswith("-")), None)
     try:
+        _python_interrupts()
         parser = build_parser(load=command)
         args, extra = parser.parse_known_args(argv)
     except KeyboardInterrupt:  # Ctrl-C while starting up: no traceback
