@@ -169,6 +169,10 @@ JSON (no code: no pickle, no `module:function`) whose sha256 matches, and is not
 of an entry (same policies, agents and protocol). The policy files are copied into
 [`policies/`](policies), so `ials-zoo leaderboard verify results/<file>.json` re-scores any
 entry from this folder alone and fails unless every episode's return is re-measured exactly.
+A trained entry says what made it (`training.reproduce`); `verify --retrain` runs that training
+again and passes only if the policy file comes out bit for bit the same: such entries are marked
+**re-trained**. Without that check, an entry's training claims are what its policy files' headers
+say (`header-agrees`), or unverified (`external`).
 
 Regenerate this page with `ials-zoo leaderboard render` (do not edit it by hand; its write-up
 section is copied from [writeup.md](writeup.md)).

@@ -36,7 +36,7 @@ from ials_zoo.core.domains import get_domain
 from ials_zoo.errors import BadInput
 from ials_zoo.evaluation import evaluate_joint
 from ials_zoo.stats import t_interval
-from ials_zoo.utils import atomic_write_text
+from ials_zoo.utils import atomic_write_text, read_json_object
 
 OLD_DEFAULTS = {k: v for k, v in PREVIOUS_PPO_SETTINGS.items() if k != "frame_stack"}
 """The multi-agent PPO settings before the ablation (SPEC §3 with the authors' buffer of 128)."""
@@ -104,7 +104,7 @@ def run_cell(env_id: str, cell: str, seed: int, budget: int, episodes: int, out:
     folder = out / env_id / _slug(cell) / f"s{seed}"
     record_path = folder / "record.json"
     if record_path.is_file():
-        return json.loads(record_path.read_text())
+        return read_json_object(record_path, what="ablation record")
     settings = cell_settings(env_id, cell)
     args = Args(env_id=env_id, seed=seed, total_timesteps=budget, eval_every=max(budget // 4, 1),
                 eval_episodes=episodes, final_eval_episodes=episodes, out_dir=str(folder / "run"),
@@ -112,7 +112,7 @@ def run_cell(env_id: str, cell: str, seed: int, budget: int, episodes: int, out:
     result = train_ippo(args)
     det_path = folder / "run" / DETERMINISTIC_RESULT
     if det_path.is_file():
-        det_mean = json.loads(det_path.read_text())["score"]["mean"]
+        det_mean = read_json_object(det_path, 4 << 20, what="result")["score"]["mean"]
     else:
         det_mean = evaluate_joint(env_id, str(folder / "run" / "policy.safetensors"), episodes=episodes,
                                   deterministic=True).mean
@@ -129,7 +129,7 @@ def scripted_score(env_id: str, episodes: int, out: Path) -> float:
 
     path = out / env_id / "scripted.json"
     if path.is_file():
-        cached = json.loads(path.read_text())
+        cached = read_json_object(path, 4 << 20, what="scripted result")
         if cached["episodes"] == episodes:
             return float(cached["score"])
     score = evaluate_joint(env_id, "scripted", episodes=episodes).mean
@@ -141,7 +141,7 @@ def table(env_id: str, out: Path, scripted: float | None) -> str:
     """The Markdown table of every finished cell of ``env_id``."""
     records: dict[str, list[dict]] = {}
     for path in sorted((out / env_id).glob("*/s*/record.json")):
-        rec = json.loads(path.read_text())
+        rec = read_json_object(path, what="ablation record")
         records.setdefault(rec["cell"], []).append(rec)
     lines = [f"IPPO on `{env_id}`, every agent learning, one setting changed from `base` at a time "
              f"(`base`: {_describe(BASE)}). Score: mean over agents of the GS return, sampled actions; "

@@ -16,7 +16,6 @@ A claim is a dict ``{"claim": text, "measured": ..., "holds": True | False | Non
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +23,7 @@ import numpy as np
 from ials_zoo.leaderboard import load_entries
 from ials_zoo.reproduce.plan import DIALS_VARIANTS, KNOWN_SIMULATORS
 from ials_zoo.stats import t_interval as mean_ci
+from ials_zoo.utils import read_json_object
 
 # SPEC §4 (authors' plotting notebooks).
 PAPER = {
@@ -44,7 +44,7 @@ CE_ROWS = (("untrained", "untrained (randomly initialised network, the paper's)"
 
 def _load(path: Path):
     try:
-        return json.loads(Path(path).read_text())
+        return read_json_object(path, 4 << 20, what="run file")
     except (OSError, ValueError):
         return None
 

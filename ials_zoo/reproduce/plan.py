@@ -32,7 +32,7 @@ from pathlib import Path
 from ials_zoo.core.domains import domain_of_agent, get_domain, ials_domain_ids
 from ials_zoo.core.extras import dials_of, study_of
 from ials_zoo.errors import BadInput
-from ials_zoo.utils import atomic_write_text
+from ials_zoo.utils import atomic_write_text, read_json_object
 
 EXPERIMENTS = ("training", "memory", "dset", "dials")
 # The multi-agent study (issue: every agent learning at once): GS-IPPO and the DIALS variants,
@@ -199,7 +199,7 @@ class Job:
         if not path.is_file():
             return None
         try:
-            old = json.loads(path.read_text())
+            old = read_json_object(path, what="job record")
         except (OSError, ValueError):
             return f"{path} is unreadable"
         if old.get("kind") != self.kind or old.get("params") != json.loads(json.dumps(self.params)):
