@@ -517,3 +517,13 @@ def get_region():
     from ials_zoo.core.domains import get_domain
 
     return get_domain(ENV).region_spec("robot_0", **OPTIONS)
+
+
+def test_every_committed_board_file_is_valid():
+    """The board's entries and archive all load (a schema change migrates them, or they would
+    silently drop off the page)."""
+    from ials_zoo import leaderboard as lb
+
+    for subdir in ("results", "archive"):
+        entries, problems = lb.load_entries(subdir=subdir)
+        assert entries and not problems, problems[:3]
