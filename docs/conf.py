@@ -1,0 +1,35 @@
+"""Sphinx configuration of the ials_zoo documentation site.
+
+Build it with ``python -m sphinx -W --keep-going -b html docs docs/_build/html`` (the
+``docs`` extra installs Sphinx, furo and MyST). Warnings are errors: a broken reference or a
+docstring that does not parse fails the build. The environment pages are the env classes'
+docstrings (autodoc), the guides are Markdown (MyST).
+"""
+
+from __future__ import annotations
+
+import ials_zoo
+
+project = "ials_zoo"
+author = "the ials_zoo developers"
+release = version = ials_zoo.__version__
+copyright = "the ials_zoo developers"
+
+extensions = ["myst_parser", "sphinx.ext.autodoc", "sphinx.ext.napoleon"]
+source_suffix = {".md": "markdown", ".rst": "restructuredtext"}
+root_doc = "index"
+exclude_patterns = ["_build", "fidelity_diagnostics", "Thumbs.db", ".DS_Store"]
+
+myst_heading_anchors = 4  # the guides link to their sections by GitHub's anchors
+myst_enable_extensions = ["colon_fence"]
+
+autodoc_member_order = "bysource"
+autodoc_typehints = "description"
+autodoc_default_options = {"members": False}
+napoleon_google_docstring = True
+napoleon_numpy_docstring = False
+
+html_theme = "furo"
+html_title = f"ials_zoo {release}"
+html_static_path: list[str] = []
+html_show_sourcelink = False
