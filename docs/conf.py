@@ -33,3 +33,22 @@ html_theme = "furo"
 html_title = f"ials_zoo {release}"
 html_static_path: list[str] = []
 html_show_sourcelink = False
+
+
+REPOSITORY_FILES = "https://github.com/ials-zoo/ials-zoo/blob/main/"
+
+
+def _write_board(app, exception) -> None:
+    """The leaderboard's web page (``ials_zoo.leaderboard.site``) as ``board.html`` of the
+    site, its links to the entries' files pointing at the repository."""
+    from pathlib import Path
+
+    from ials_zoo.leaderboard.site import render_site
+
+    if exception is None and app.builder.format == "html":
+        board = Path(app.srcdir).parent / "leaderboard"
+        render_site(board, out=Path(app.outdir) / "board.html", link_base=REPOSITORY_FILES + "leaderboard/")
+
+
+def setup(app):
+    app.connect("build-finished", _write_board)

@@ -55,3 +55,138 @@ def test_a_broken_reference_fails_the_build(tmp_path):
     page.write_text(page.read_text() + "\nSee [the missing page](no_such_page.md).\n")
     proc = _build(copy, tmp_path / "out")
     assert proc.returncode != 0 and "no_such_page" in proc.stderr
+
+
+# -- the site in a browser -------------------------------------------------------------------
+
+def _chromium() -> str | None:
+    """A Chromium to drive: $IALS_ZOO_CHROMIUM, or one on the PATH (Debian's `chromium`)."""
+    import os
+
+    found = os.environ.get("IALS_ZOO_CHROMIUM")
+    for name in ("chromium", "chromium-browser", "google-chrome"):
+        found = found or shutil.which(name)
+    return found
+
+
+@pytest.fixture(scope="module")
+def browser():
+    playwright = pytest.importorskip("playwright.sync_api", reason="the dev extra installs playwright")
+    executable = _chromium()
+    if executable is None:
+        pytest.skip("no Chromium on this machine (.ci/run installs Debian's `chromium`; or set IALS_ZOO_CHROMIUM)")
+    with playwright.sync_playwright() as p:
+        b = p.chromium.launch(executable_path=executable, args=["--no-sandbox"])
+        yield b
+        b.close()
+
+
+def _open(browser, path: Path):
+    page = browser.new_page(viewport={"width": 1300, "height": 900})
+    errors: list[str] = []
+    page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    page.on("requestfailed", lambda r: errors.append(f"failed: {r.url}"))
+    page.goto(path.as_uri())
+    page.wait_for_load_state("load")
+    return page, errors
+
+
+def test_every_page_loads_without_a_console_error_and_fetches_nothing_from_elsewhere(site, browser):
+    requested: list[str] = []
+    pages = sorted(site.rglob("*.html"))
+    assert len(pages) > 15 and (site / "board.html") in pages
+    for path in pages:
+        page, errors = _open(browser, path)
+        page.on("request", lambda r: requested.append(r.url))
+        page.reload()
+        assert not errors, (path.name, errors)
+        page.close()
+    assert all(u.startswith("file://") for u in requested), [u for u in requested if not u.startswith("file://")]
+
+
+def _column(page, table, header: str) -> list[str]:
+    index = table.eval_on_selector_all("thead th", f"hs => hs.findIndex(h => h.textContent.startsWith({header!r}))")
+    assert index >= 0, header
+    return table.eval_on_selector_all("tbody tr", f"rs => rs.map(r => r.cells[{index}].dataset.sort ?? '')")
+
+
+def test_the_board_sorts_by_a_clicked_header_best_first(site, browser):
+    """The GS score: highest first on the first click, lowest first on the second; RESCO's
+    delay (lower is better): lowest first on the first click."""
+    page, errors = _open(browser, site / "board.html")
+    tables = page.query_selector_all("table.board")
+    table = next(t for t in tables if len(t.query_selector_all("tbody tr")) >= 3)
+    header = table.query_selector("thead th:has-text('GS score')")
+    header.click()
+    scores = [float(v) for v in _column(page, table, "GS score")]
+    assert scores == sorted(scores, reverse=True) and scores[0] == max(scores)
+    header.click()
+    scores = [float(v) for v in _column(page, table, "GS score")]
+    assert scores == sorted(scores)
+    delay_table = next(t for t in tables if t.query_selector("thead th:has-text('delay (lower is better)')")
+                       and len(t.query_selector_all("tbody tr")) >= 2)
+    delay_table.query_selector("thead th:has-text('delay (lower is better)')").click()
+    delays = [float(v) for v in _column(page, delay_table, "delay (lower") if v != ""]
+    assert delays == sorted(delays)
+    assert not errors
+
+
+def test_a_curves_points_are_the_result_jsons_numbers(site, browser):
+    """The circles of an entry's curve hold its learning curve's own steps and means, and a
+    legend box hides them."""
+    from ials_zoo import leaderboard as lb
+
+    page, errors = _open(browser, site / "board.html")
+    points = page.eval_on_selector_all("circle.point", "cs => cs.map(c => [c.dataset.entry, c.dataset.seed, "
+                                       "c.dataset.x, c.dataset.mean, c.closest('svg').getAttribute('aria-label')])")
+    entries = {p.name: d for p, d in lb.load_entries()[0]}
+    checked = 0
+    for name, d in entries.items():
+        for curve in d["learning_curves"]:
+            want = sorted((float(p["env_steps"]), float(p["mean"])) for p in curve["points"])
+            got = sorted((float(x), float(m)) for e, s, x, m, label in points
+                         if e == name and s == str(curve["seed"]) and "env steps" in label)
+            assert got == want, (name, curve["seed"])
+            checked += 1
+    assert checked >= 10
+    box = page.query_selector(".legend input")
+    series = box.get_attribute("data-series")
+    box.click()
+    assert page.eval_on_selector_all(f'[data-series="{series}"]', "gs => gs.filter(g => g.tagName == 'g')"
+                                     ".every(g => g.style.display == 'none')")
+    assert not errors
+
+
+def test_every_internal_link_of_the_site_resolves(site):
+    """LinkChecker over the built site (external links not followed); a copy with one broken
+    link fails it. (LinkChecker drops root's privileges, so the site is checked from a folder
+    anyone can read.)"""
+    import os
+    import tempfile
+
+    linkchecker = shutil.which("linkchecker")
+    if linkchecker is None:
+        pytest.skip("LinkChecker is not installed (the dev extra installs it)")
+
+    def check(root: Path) -> subprocess.CompletedProcess:
+        return subprocess.run([linkchecker, "--no-status", "--no-warnings", str(root / "index.html")],
+                              capture_output=True, text=True, timeout=300)
+
+    readable = Path(tempfile.mkdtemp(prefix="ials-zoo-site-"))
+    try:
+        os.chmod(readable, 0o755)
+        for name in ("site", "broken"):
+            shutil.copytree(site, readable / name)
+        for folder, dirs, files in os.walk(readable):
+            for d in dirs:
+                os.chmod(Path(folder) / d, 0o755)
+            for f in files:
+                os.chmod(Path(folder) / f, 0o644)
+        proc = check(readable / "site")
+        assert proc.returncode == 0, proc.stdout[-3000:]
+        index = readable / "broken" / "index.html"
+        index.write_text(index.read_text().replace('href="board.html"', 'href="no_such_board.html"'))
+        assert check(readable / "broken").returncode != 0
+    finally:
+        shutil.rmtree(readable, ignore_errors=True)

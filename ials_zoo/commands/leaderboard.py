@@ -51,7 +51,7 @@ def configure(parser):
     p.add_argument("--sort", default="score", help="best first by 'score' (default) or a physical metric, e.g. "
                    "delay, throughput, items_per_robot (each domain knows which way is better)")
     board(p)
-    p = sub.add_parser("render", help="regenerate <board>/README.md and its plots")
+    p = sub.add_parser("render", help="regenerate <board>/README.md, its plots and the web page <board>/index.html")
     board(p)
     p = sub.add_parser("verify", help="re-score a result's policies on the GS (exact)")
     p.add_argument("file")
@@ -146,7 +146,9 @@ def run(args) -> int:
             else:
                 sys.stdout.write(text)
         elif args.action == "render":
-            print(f"wrote {lb.render(args.dir)}")
+            from ials_zoo.leaderboard.site import render_site
+
+            print(f"wrote {lb.render(args.dir)} and {render_site(args.dir)}")
         elif args.action == "convert":
 
             if not args.out.endswith(".safetensors"):
