@@ -344,3 +344,21 @@ def test_a_checkpoint_without_the_state_of_an_exact_resume_is_refused_by_name(tm
     (out / "status.json").write_text(json.dumps(dict(status, state="failed")))
     with pytest.raises(ValueError, match="earlier version"):
         ppo_single.main(ppo_single.Args(simulator="gs", out_dir=str(out), resume=True, **args))
+
+
+def test_a_run_says_this_machines_speed_after_its_first_stretch(tmp_path, capsys):
+    """The opening estimate is the study's speed; after the first stretch of training the run
+    says what it measured here and what that makes of the rest, once."""
+    import re
+
+    from ials_zoo.baselines import ippo
+
+    ippo.main(ippo.Args(env_id="warehouse_v0", agents="robot_0,robot_1", env_options='{"robots": [2, 2]}', n_envs=2,
+                        samples_per_update=128, batch_size=64, n_epochs=1, hidden="16", total_timesteps=1024,
+                        eval_every=256, eval_episodes=1, final_eval_episodes=2, progress=False,
+                        out_dir=str(tmp_path / "run")))
+    lines = [x for x in capsys.readouterr().out.splitlines() if "measured here" in x]
+    assert len(lines) == 1, lines
+    m = re.search(r"measured here: ([\d,]+) steps per agent/s \(([\d,]+) agent-steps/s\) over the first ([\d,]+)", lines[0])
+    rate, joint, first = (int(g.replace(",", "")) for g in m.groups())
+    assert first == 256 and abs(joint - 2 * rate) <= 2 and "of training left" in lines[0]

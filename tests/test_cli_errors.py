@@ -57,11 +57,11 @@ CASES = [
     (["train-aip", "--env", "warehouse_v0", "--influence-lags", "3", "--out", "{d}/o.pt"], "--influence-lags"),
     (["train-aip", "--env", "warehouse_v0", "--autoregressive", "--influence-lags", "0", "--out", "{d}/o.pt"],
      "--influence-lags"),
-    (["train", "ppo_single", "--env", "warehouse_v0", "--batch-size", "0", "--out-dir", "{d}/r"], "batch_size"),
+    (["train", "ppo_single", "--env", "warehouse_v0", "--batch-size", "0", "--out-dir", "{d}/r"], "--batch-size"),
     (["train", "ppo_single", "--env", "warehouse_v0", "--learning-rate", "-1", "--out-dir", "{d}/r"],
-     "learning_rate"),
+     "--learning-rate"),
     (["train", "ppo_single", "--env", "warehouse_v0", "--learning-rate", "nan", "--out-dir", "{d}/r"],
-     "learning_rate"),
+     "--learning-rate"),
     (["train", "ppo_single", "--env", "warehouse_v0", "--out-dir", "{d}/afile"], "is a file"),
     (["train", "dials", "--env", "warehouse_v0", "--refresh", "0", "--out-dir", "{d}/r"], "--refresh"),
     (["train", "dials", "--env", "warehouse_v0", "--agents", "robot_99", "--out-dir", "{d}/r"], "robot_99"),
@@ -133,3 +133,16 @@ def test_a_sumo_error_ends_a_baseline_run_in_one_line_on_both_entry_points(monke
     monkeypatch.setattr(sys, "argv", ["ippo", "--env", "warehouse_v0"])
     assert arguments.run_cli(ippo) == 1
     assert capsys.readouterr().err.strip() == "ippo: SUMO error (TraCIException): the network broke"
+
+
+def test_train_errors_name_the_flag_and_help_shows_each_default_once(capsys):
+    """A baseline's check says ``total_timesteps``; the command line says ``--total-timesteps``.
+    A help text that already states its default gets no second ``(default: None)``."""
+    from ials_zoo.cli import main
+
+    assert main(["train", "ippo", "--env", "warehouse_v0", "--total-timesteps", "0"]) == 2
+    assert "ials-zoo train: --total-timesteps must be >= 1, got 0" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["train", "dials", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "(default: None)" not in text and "(default: 0)" in text

@@ -31,3 +31,22 @@ def test_ppo_throughput_runs_the_baselines_ppo_on_each_simulator():
         ppo_bound(rows[:1])
     with pytest.raises(ValueError, match="unknown agent"):
         ppo_throughput("warehouse_v0", "robot_99", "gs", steps=10)
+
+
+def test_the_bench_says_what_to_take_from_its_figures():
+    """The conclusion lines read the medians: which API is cheaper than the GS and by how
+    much, and what the two ratios mean."""
+    from ials_zoo.commands.bench import conclusion
+
+    def s(m):
+        return {"median": m, "min": m, "max": m}
+
+    row = {"batch": 32, "single_agent": {"ials_vs_gs_speed": s(7.0), "ials_batched_vs_gs_speed": s(40.0)},
+           "every_agent": {"ials_parallel_env_cost_vs_gs": s(2.4), "ials_dials_cost_vs_gs": s(0.6)},
+           "learner": {"update_cost_vs_previous": s(3.1)}}
+    text = "\n".join(conclusion(row))
+    assert "7.0x as fast as the GS, 40.0x batched" in text
+    assert "costs 0.60x the GS per agent-step, cheaper than it" in text and "costs 2.40x" in text
+    row["every_agent"]["ials_dials_cost_vs_gs"] = s(1.3)
+    assert "costs 1.30x the GS per agent-step, dearer than it" in "\n".join(conclusion(row))
+    assert "within each repeat" in text and "3.10x per sample" in text

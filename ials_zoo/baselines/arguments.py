@@ -26,7 +26,9 @@ def add_dataclass_args(parser: argparse.ArgumentParser, cls) -> argparse.Argumen
         aliases = list(f.metadata.get("aliases", ()))
         default = f.default if f.default is not dataclasses.MISSING else None
         help_text = f.metadata.get("help", "")
-        help_text = f"{help_text() if callable(help_text) else help_text} (default: {default!r})"
+        help_text = help_text() if callable(help_text) else help_text
+        if "default" not in help_text and "required" not in help_text:  # a help that says it already
+            help_text = f"{help_text} (default: {default!r})"
         typ = hints[f.name]
         origin = typing.get_origin(typ)
         if origin is typing.Union or str(origin) == "<class 'types.UnionType'>":

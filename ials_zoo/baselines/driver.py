@@ -27,6 +27,7 @@ number of steps per agent, and where it must stop before that (:meth:`Learner.ne
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -283,12 +284,28 @@ def _train(plan: RunPlan, learner: Learner, scoring: Scoring, policy_net, log: T
         if stop is not None:
             target = min(target, stop // per * per)
         target = max(steps + per, target)
+        started = time.perf_counter()
         row = learner.train(steps, target, bar.advance)
+        _say_measured_speed(plan, steps, target, time.perf_counter() - started, bar)
         steps = target
         log.add(dict(row, steps_per_agent=steps, wall_clock_seconds=round(clock.seconds, 3)))
         bar.reach(steps)
     bar.close()
     return steps
+
+
+def _say_measured_speed(plan: RunPlan, start: int, end: int, seconds: float, bar) -> None:
+    """Once, after the first stretch of training: this machine's speed and what it makes of the
+    rest (the opening line's estimate is the study's speed; machines differ 2-4x)."""
+    if plan.__dict__.get("_speed_said") or end >= plan.total or seconds <= 0:
+        return
+    plan.__dict__["_speed_said"] = True
+    rate = (end - start) / seconds
+    unit = UNITS.get(plan.unit, plan.unit + "s")
+    joint = f" ({rate * len(plan.agents):,.0f} agent-steps/s)" if plan.steps_per_second is None else ""
+    text = (f"  measured here: {rate:,.0f} {unit}/s{joint} over the first {end - start:,}; about "
+            f"{format_seconds((plan.total - end) / max(rate, 1e-9))} of training left (GS evaluations extra)")
+    bar.write(text)
 
 
 def _after(steps: int, every: int) -> int:
@@ -338,6 +355,13 @@ class _Bar:
         if plan.progress:
             self.bar = tqdm(total=plan.total, initial=steps, unit=plan.unit, dynamic_ncols=True,
                             desc=plan.algorithm)
+
+    def write(self, text: str) -> None:
+        """A line above the bar (or a plain line without one)."""
+        if self.bar is not None:
+            self.bar.write(text)
+        else:
+            print(text, flush=True)
 
     def note(self, text: str) -> None:
         if self.bar is not None:

@@ -325,6 +325,30 @@ def _print_domain(row: dict) -> None:
     print(f"    update, µs per sample     {_fmt(ln['update_us_per_agent_sample'], '.2f')}   "
           f"vs previous settings {_fmt(ln['update_cost_vs_previous'], '.2f', 'x')} "
           f"({_fmt(ln['previous_settings']['update_us_per_agent_sample'], '.2f')} µs)")
+    for line in conclusion(row):
+        print(line)
+
+
+def conclusion(row: dict) -> list[str]:
+    """What to take from a domain's figures, in words (the figures' medians)."""
+    sa, ea, ln = row["single_agent"], row["every_agent"], row["learner"]
+    env_cost = ea["ials_parallel_env_cost_vs_gs"]["median"]
+    array_cost = ea["ials_dials_cost_vs_gs"]["median"]
+    faster = "cheaper than" if array_cost < 1 else "dearer than"
+    lines = [
+        "  what to take from it:",
+        f"    - one learner among scripted neighbours: its IALS steps {sa['ials_vs_gs_speed']['median']:.1f}x as fast "
+        f"as the GS, {sa['ials_batched_vs_gs_speed']['median']:.1f}x batched ({row['batch']} copies in one array).",
+        f"    - every agent learning: the array API (MultiAgentIALS, arrays [agents, copies, ...], what DIALS steps) "
+        f"costs {array_cost:.2f}x the GS per agent-step, {faster} it; the dict ParallelEnv costs {env_cost:.2f}x: it "
+        "steps one copy and builds per-agent dicts every step, so it is the compatible API, not the fast one.",
+        "    - 'cost vs GS' is computed within each repeat (IALS and GS timed back to back) and its median shown, so "
+        "it need not equal the ratio of the two medians beside it (machines swing 2-4x between repeats).",
+        f"    - 'vs previous settings': the PPO update at the multi-agent baselines' settings against the settings "
+        f"before the ablation (3 epochs of 128 samples, docs/ablation.md): {ln['update_cost_vs_previous']['median']:.2f}x "
+        "per sample.",
+    ]
+    return lines
 
 
 
