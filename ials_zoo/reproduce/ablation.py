@@ -43,7 +43,7 @@ OLD_DEFAULTS = {k: v for k, v in PREVIOUS_PPO_SETTINGS.items() if k != "frame_st
 
 BASE = dict(OLD_DEFAULTS, learning_rate=1e-3, anneal_lr=False, n_epochs=10, samples_per_update=512,
             batch_size=128)
-"""The first candidate (issue 16's first try): lr 1e-3 held, 10 epochs of 512 samples in
+"""The first candidate (the ablation's first try): lr 1e-3 held, 10 epochs of 512 samples in
 minibatches of 128."""
 
 CHANGES = {
