@@ -433,9 +433,13 @@ def main(args: Args | None = None) -> dict:
     learner = ShardsLearner(args, domain, agents, options, refresh, copies, workers, ppo, frame_stack,
                             total // per_update, training, out)
     refresh_text = {None: "never", 0: "once, at the start"}.get(refresh) or f"every {refresh:,} steps"
+    rounds = 0 if args.aip != "trained" or refresh is None else 1 + (0 if refresh == 0 else (total - 1) // refresh)
+    collect = aip_training_of(args, domain).collect_steps
+    rounds_text = (f"; {rounds} AIP round{'s' if rounds != 1 else ''} on the clock, each {collect:,} GS steps of "
+                   "data and the AIPs' training (minutes each; the measured speed below leaves them out)") if rounds else ""
     return run(plan, learner, f"dials: {len(agents)} agents of {args.env_id} learn at once, each on its own IALS "
                f"({args.learner} PPO, {workers} worker{'s' if workers != 1 else ''}, {args.backend} backend); AIPs: "
-               f"{args.aip}, retrained {refresh_text}", domain)
+               f"{args.aip}, retrained {refresh_text}{rounds_text}", domain)
 
 
 def _fixed_aip_record(aip: str, env_id: str, aips: dict) -> dict:
