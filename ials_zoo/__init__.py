@@ -67,6 +67,29 @@ def make_ials_parallel_env(*args, **kwargs):
     return _make(*args, **kwargs)
 
 
+def make_multi_agent_ials(*args, **kwargs):
+    """Every agent's IALS, ``n_envs`` copies each, stepped as one batch with arrays
+    ``[agents, n_envs, ...]``: the fast API (what DIALS trains on; docs/guide/fast_api.md).
+
+    ``make_multi_agent_ials(env_id, agents=None, n_envs=1, predictor="trained", seed=None,
+    **options)``; ``reset(seed) -> (obs, dsets)``, ``step(actions [A, n]) -> (obs, rewards,
+    dsets, influences, done)`` (every copy truncates together; the caller resets). See
+    :class:`ials_zoo.influence.multi.MultiAgentIALS`."""
+    from ials_zoo.influence.multi import make_multi_agent_ials as _make  # lazy: torch
+
+    return _make(*args, **kwargs)
+
+
+def make_gs_vector_env(env_id: str, agents=None, n_envs: int = 1, processes: int = 0, seed: int = 0, **options):
+    """``n_envs`` copies of a GS with every agent acting, arrays ``[agents, n_envs, ...]``: the
+    GS beside :func:`make_multi_agent_ials` (IPPO trains on it). ``processes`` spreads the
+    copies over worker processes. ``reset(seed) -> obs``, ``step(actions [A, n]) -> (obs,
+    rewards, done)``. See :class:`ials_zoo.learners.gs_vec.GSVecEnv`."""
+    from ials_zoo.learners.gs_vec import GSVecEnv
+
+    return GSVecEnv(env_id, agents, n_envs, processes, seed, **options)
+
+
 for _env_id in ials_domain_ids():  # every IALS domain's IALS as a Gymnasium id (ials_zoo.core.gym_ids)
     register_ials(_env_id)
 del _env_id
@@ -76,7 +99,9 @@ __all__ = [
     "__version__",
     "domain_ids",
     "get_domain",
+    "make_gs_vector_env",
     "make_ials",
     "make_ials_parallel_env",
+    "make_multi_agent_ials",
     "register_domain",
 ]

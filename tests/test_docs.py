@@ -190,3 +190,15 @@ def test_every_internal_link_of_the_site_resolves(site):
         assert check(readable / "broken").returncode != 0
     finally:
         shutil.rmtree(readable, ignore_errors=True)
+
+
+def test_the_fast_api_example_of_the_guide_runs():
+    """The guide's example, as written (its 2x2 floor keeps it quick)."""
+    import re
+
+    text = (DOCS / "guide" / "fast_api.md").read_text()
+    (code,) = re.findall(r"```python\n(.*?)```", text, re.S)
+    namespace: dict = {}
+    exec(compile(code, "fast_api.md", "exec"), namespace)
+    assert namespace["done"] is True and namespace["rewards"].shape == (4, namespace["copies"])
+    assert namespace["gs_obs"].shape[:2] == (4, 2) and namespace["gs_rewards"].shape == (4, 2)
