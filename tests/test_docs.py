@@ -40,7 +40,7 @@ def test_the_site_builds_and_each_environment_page_is_its_docstring(site):
                       ("sumo_net_v0", SumoNetEnv)):
         page = (site / "env" / f"{name}.html").read_text()
         first_line = cls.__doc__.strip().splitlines()[0].split("(")[0].strip()
-        assert first_line in page and "Observation" in page, (name, first_line)
+        assert first_line in page and "Observation" in page and "Version history" in page, (name, first_line)
     for guide in ("first_hour", "leaderboard", "aips", "dials", "networks", "own_domain"):
         assert (site / "guide" / f"{guide}.html").is_file()
     index = (site / "index.html").read_text()
