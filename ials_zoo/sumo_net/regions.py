@@ -1,0 +1,150 @@
+"""Regions cut from any SUMO network: each light's neighbourhood, from the network file alone.
+
+A light's region (:class:`NetRegion`) is what its local simulator will simulate:
+
+* **incoming chains**: for every edge that feeds one of the light's controlled lanes, that edge
+  and, upstream, the edges that lead into it one by one (through nodes that only join a road's
+  pieces), up to the upstream junction (a node where several roads meet, another light, or the
+  network's fringe) or until the chain covers :data:`CHAIN_CAP_METRES` (twice RESCO's 200 m
+  detection, so a vehicle is simulated before the light can see it);
+* **outgoing edges**: every edge a controlled link leads to, so that every link of the light's
+  program survives a cut (its phases keep their meaning) and spill-back from them is simulated.
+
+The **influence sources** are the chains' first edges: a vehicle entering one from outside the
+region (from the upstream junction, or inserted there) is what the rest of the network does to
+the region. Vehicles inserted on a region's other edges are influence as well (their routes
+start inside). :func:`cut_network` writes a region's edges as a network of their own
+(``netconvert --keep-edges.explicit``), with the light's program.
+
+Read with ``sumolib`` (SUMO's own reader of its files), once per file.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import subprocess
+from dataclasses import dataclass
+from pathlib import Path
+
+from ials_zoo.errors import BadInput
+from ials_zoo.sumo.command import sumo_binary
+
+CHAIN_CAP_METRES = 400.0
+
+
+@dataclass(frozen=True)
+class NetRegion:
+    """One light's region (module docstring).
+
+    Attributes:
+        light: the light's id (the agent).
+        incoming: the edges that feed its controlled lanes.
+        chains: per incoming edge, the chain's edges from the furthest upstream to it.
+        outgoing: the edges its controlled links lead to.
+        sources: the chains' first edges (where influence enters), in ``incoming`` order.
+        length: metres of lanes in the region (every lane of every edge).
+    """
+
+    light: str
+    incoming: tuple[str, ...]
+    chains: tuple[tuple[str, ...], ...]
+    outgoing: tuple[str, ...]
+    sources: tuple[str, ...]
+    length: float
+
+    @property
+    def edges(self) -> tuple[str, ...]:
+        """Every edge of the region, chains first."""
+        return tuple(dict.fromkeys([e for c in self.chains for e in c] + list(self.outgoing)))
+
+
+@functools.lru_cache(maxsize=8)
+def _read(path: str, mtime: float):
+    import sumolib
+
+    return sumolib.net.readNet(path, withPrograms=True, withInternal=False)
+
+
+def _reverse_of(edge, other) -> bool:
+    return edge.getFromNode() is other.getToNode() and edge.getToNode() is other.getFromNode()
+
+
+def _upstream(edge, lights: set):
+    """The edge that alone leads into ``edge`` through a node that only joins a road's pieces,
+    or None (a junction, a light or the fringe)."""
+    node = edge.getFromNode()
+    if node.getID() in lights or node.getType() == "traffic_light":
+        return None
+    feeding = [e for e in node.getIncoming() if not _reverse_of(e, edge) and e.getFunction() != "internal"]
+    leaving = [e for e in node.getOutgoing() if not _reverse_of(e, feeding[0] if feeding else edge)]
+    if len(feeding) != 1 or len(leaving) != 1:
+        return None
+    return feeding[0]
+
+
+def _chain(edge, lights: set, cap: float) -> tuple:
+    chain, covered, seen = [edge], edge.getLength(), {edge.getID()}
+    while covered < cap:
+        up = _upstream(chain[0], lights)
+        if up is None or up.getID() in seen:
+            break
+        chain.insert(0, up)
+        seen.add(up.getID())
+        covered += up.getLength()
+    return tuple(e.getID() for e in chain)
+
+
+def regions_of(net_file: str, cap: float = CHAIN_CAP_METRES) -> dict[str, NetRegion]:
+    """Every light's region of the network ``net_file`` (module docstring), by light id."""
+    if not os.path.isfile(net_file):
+        raise BadInput(f"network file {net_file!r} does not exist")
+    if not cap > 0:
+        raise BadInput(f"the chains' length cap must be > 0 m, got {cap!r}")
+    net = _read(str(net_file), os.path.getmtime(net_file))
+    lights = {t.getID() for t in net.getTrafficLights()}
+    # a light's nodes (a joint light controls several): their edges end chains too
+    light_nodes = {n.getID() for t in net.getTrafficLights() for n in _nodes_of(t)}
+    out = {}
+    for tls in net.getTrafficLights():
+        connections = tls.getConnections()
+        if not connections:
+            continue
+        incoming = tuple(dict.fromkeys(c[0].getEdge().getID() for c in connections))
+        outgoing = tuple(dict.fromkeys(c[1].getEdge().getID() for c in connections))
+        chains = tuple(_chain(net.getEdge(e), lights | light_nodes, cap) for e in incoming)
+        edges = dict.fromkeys([e for c in chains for e in c] + list(outgoing))
+        length = sum(lane.getLength() for e in edges for lane in net.getEdge(e).getLanes())
+        out[tls.getID()] = NetRegion(tls.getID(), incoming, chains, outgoing, tuple(c[0] for c in chains), length)
+    return out
+
+
+def _nodes_of(tls):
+    return {c[0].getEdge().getToNode() for c in tls.getConnections()}
+
+
+def network_size(net_file: str) -> tuple[int, float]:
+    """``(edges, metres of lanes)`` of the whole network (internal lanes left out)."""
+    net = _read(str(net_file), os.path.getmtime(net_file))
+    edges = net.getEdges(withInternal=False)
+    return len(edges), sum(lane.getLength() for e in edges for lane in e.getLanes())
+
+
+def cut_network(net_file: str, region: NetRegion, out_file: str | os.PathLike, timeout: float = 120.0) -> Path:
+    """Write ``region``'s edges as a network of their own (``netconvert --keep-edges.explicit``);
+    the light and its program come along. Returns ``out_file``."""
+    out_file = Path(out_file)
+    netconvert = Path(sumo_binary()).with_name("netconvert")
+    cmd = [str(netconvert), "--sumo-net-file", str(net_file), "--keep-edges.explicit", ",".join(region.edges),
+           "--output-file", str(out_file), "--no-warnings"]
+    try:
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        raise RuntimeError(f"netconvert did not finish within {timeout:.0f} s cutting the region of "
+                           f"{region.light}") from None
+    if proc.returncode != 0 or not out_file.is_file():
+        raise RuntimeError(f"netconvert could not cut the region of {region.light}: {proc.stderr.strip()[-500:]}")
+    return out_file
+
+
+__all__ = ["CHAIN_CAP_METRES", "NetRegion", "cut_network", "network_size", "regions_of"]

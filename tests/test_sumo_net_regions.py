@@ -1,0 +1,62 @@
+"""Regions cut from a real network (cologne8, RESCO's map from the sumo-rl wheel): each light's
+incoming chains and outgoing edges, computed from the network file, and a cut that keeps the
+light's program."""
+
+from __future__ import annotations
+
+import pytest
+
+from ials_zoo.errors import BadInput
+from ials_zoo.sumo_net.network import read_network
+from ials_zoo.sumo_net.regions import CHAIN_CAP_METRES, cut_network, network_size, regions_of
+from ials_zoo.sumo_net.scenario import make_scenario
+
+
+@pytest.fixture(scope="module")
+def cologne8():
+    return make_scenario(net="cologne8").net_file
+
+
+def test_every_light_has_a_region_holding_its_links(cologne8):
+    import sumolib
+
+    net = sumolib.net.readNet(cologne8, withInternal=False)
+    lights = read_network(cologne8)
+    regions = regions_of(cologne8)
+    assert set(regions) == set(lights.ids)
+    for light in lights.lights:
+        r = regions[light.id]
+        assert {lights.lane_edges[i] for i, _, _ in light.links} == set(r.incoming)
+        assert {lights.lane_edges[o] for _, o, _ in light.links} == set(r.outgoing)
+        assert r.sources == tuple(c[0] for c in r.chains) and [c[-1] for c in r.chains] == list(r.incoming)
+        for chain in r.chains:
+            edges = [net.getEdge(e) for e in chain]
+            assert all(a.getToNode() is b.getFromNode() for a, b in zip(edges, edges[1:]))  # contiguous
+            assert sum(e.getLength() for e in edges[1:]) < CHAIN_CAP_METRES  # the cap, past the first edge
+    edges, metres = network_size(cologne8)
+    union = {e for r in regions.values() for e in r.edges}
+    assert len(union) < edges and max(r.length for r in regions.values()) < metres / 4
+
+
+def test_a_chain_stops_at_its_cap(cologne8):
+    short = regions_of(cologne8, cap=1.0)
+    assert all(len(c) == 1 for r in short.values() for c in r.chains)
+    assert any(len(c) > 1 for r in regions_of(cologne8).values() for c in r.chains)
+
+
+def test_a_cut_region_keeps_its_lights_program(cologne8, tmp_path):
+    full = read_network(cologne8)
+    regions = regions_of(cologne8)
+    for light in full.ids[:2]:
+        cut = read_network(str(cut_network(cologne8, regions[light], tmp_path / f"{light}.net.xml")))
+        a, b = full.light(light), cut.light(light)
+        assert a.green_states() == b.green_states() and [x[2] for x in a.links] == [x[2] for x in b.links]
+        assert set(read_network(str(tmp_path / f"{light}.net.xml")).lane_edges.values()) <= set(
+            regions[light].edges) | {e for e in cut.lane_edges.values() if e.startswith(":")}
+
+
+def test_bad_input_is_named(tmp_path, cologne8):
+    with pytest.raises(BadInput, match="does not exist"):
+        regions_of(str(tmp_path / "missing.net.xml"))
+    with pytest.raises(BadInput, match="cap"):
+        regions_of(cologne8, cap=0)
