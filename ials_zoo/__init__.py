@@ -20,11 +20,20 @@ Your own domain: build an :class:`ials_zoo.core.Domain` and :func:`register_doma
 declare it in the ``ials_zoo.domains`` entry point group).
 """
 
+def _is_the_command(sys, os) -> bool:
+    """The ``ials-zoo`` script, or ``python -m ials_zoo.cli`` (not any ``-m`` module that
+    happens to import the package while Python locates it)."""
+    if os.path.basename(sys.argv[0] if sys.argv else "") == "ials-zoo":
+        return True
+    argv = list(getattr(sys, "orig_argv", []))
+    return any(a == "-m" and argv[i + 1:i + 2] == ["ials_zoo.cli"] for i, a in enumerate(argv))
+
+
 def _quiet_interrupts_while_starting() -> None:
     """Ctrl-C while the ``ials-zoo`` command is still importing (about 0.6 s, longer on a busy
     machine) ends it with status 130 and one line, not a traceback. Only for the command line
-    (the ``ials-zoo`` script, ``python -m ials_zoo.<module>``): a program that imports the
-    package keeps Python's own Ctrl-C. ``ials_zoo.cli.main`` gives Python's handler back first
+    (the ``ials-zoo`` script, ``python -m ials_zoo.cli``): a program that imports the package,
+    and ``python -m`` of any other module, keep Python's own Ctrl-C. ``ials_zoo.cli.main`` gives Python's handler back first
     thing."""
     import os
     import signal
@@ -33,7 +42,7 @@ def _quiet_interrupts_while_starting() -> None:
 
     if threading.current_thread() is not threading.main_thread():
         return
-    if not (sys.argv[:1] == ["-m"] or os.path.basename(sys.argv[0] if sys.argv else "") == "ials-zoo"):
+    if not _is_the_command(sys, os):
         return
     if signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
         return  # someone else's handler: theirs

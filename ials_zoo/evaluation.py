@@ -271,6 +271,8 @@ def read_sb3_meta(path: Path, agent: str | None = None) -> dict:
     if not isinstance(who, str) or not who:
         raise BadInput(f"{where}: agent must name an agent of {env_id}, got {meta.get('agent')!r}")
     options = meta.get("env_options") or {}
+    # only options a board entry may name (no file a sidecar could point us at)
+    options = {k: v for k, v in options.items() if k in get_domain(env_id).gs_options} if isinstance(options, dict) else {}
     try:
         known = get_domain(env_id).agents(**options) if isinstance(options, dict) else ()
     except Exception:  # options the domain refuses: the agent is checked when the policy is used

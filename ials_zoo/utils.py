@@ -79,6 +79,13 @@ def _float_sized_int(text: str) -> int:
     return value
 
 
+def _finite_float(text: str) -> float:
+    value = float(text)
+    if not np.isfinite(value):  # 1e999 parses to infinity
+        raise BadInput(f"the number {text[:20]} does not fit a float")
+    return value
+
+
 def _no_constant(name: str):
     raise BadInput(f"{name} is not a number JSON allows")
 
@@ -92,7 +99,7 @@ def loads_untrusted_json(text: str | bytes, max_depth: int = MAX_JSON_DEPTH):
     depth = json_depth(text)
     if depth > max_depth:
         raise BadInput(f"JSON nested {depth} deep; at most {max_depth} is accepted")
-    return json.loads(text, parse_int=_float_sized_int, parse_constant=_no_constant)
+    return json.loads(text, parse_int=_float_sized_int, parse_float=_finite_float, parse_constant=_no_constant)
 
 
 def read_regular_file(path: str | os.PathLike, max_bytes: int, follow_links: bool = True) -> bytes:

@@ -266,7 +266,12 @@ def test_a_forged_training_claim_is_accepted_by_submit_but_fails_retraining(tmp_
     ("python -c 'import os'", "is not `ials-zoo train"),
     ("ials-zoo train ippo --env-id warehouse_v0 --aip /etc/passwd", "names a file"),
     ("ials-zoo train ippo --env-id warehouse_v0 --out-dir x", "names a file|never does"),
-    ("ials-zoo train ippo --no-such-flag 1", "not a valid ippo command")])
+    ("ials-zoo train ippo --no-such-flag 1", "not a valid ippo command"),
+    ("ials-zoo train dials --env-id warehouse_v0 --aip x.pt", "names a file"),
+    ("ials-zoo train ppo_single --env-id warehouse_v0 --simulator evil.pt", "names a file"),
+    ("ials-zoo train ippo --env-id warehouse_v0 --n-envs 100000", "more than the 64"),
+    ("ials-zoo train dials --env-id warehouse_v0 --backend ray", "this machine's processes"),
+    ("ials-zoo train ippo --env-id sumo_net_v0 --env-options '{\"sumocfg\": \"x\"}'", "not GS options")])
 def test_a_recorded_command_is_parsed_never_run_by_name(command, match):
     from ials_zoo.baselines.retrain import parse_command
     from ials_zoo.leaderboard.validate import ResultError
@@ -527,3 +532,67 @@ def test_every_committed_board_file_is_valid():
     for subdir in ("results", "archive"):
         entries, problems = lb.load_entries(subdir=subdir)
         assert entries and not problems, problems[:3]
+
+
+def test_a_discarded_new_run_leaves_what_was_in_its_folder(tmp_path):
+    """A folder holding only hidden entries (a .git, a .env) is claimed for a new run; bad input
+    found at the start removes what the run wrote and nothing else."""
+    from ials_zoo.baselines import dials
+
+    out = tmp_path / "d"
+    (out / ".git").mkdir(parents=True)
+    (out / ".git" / "HEAD").write_text("ref: refs/heads/main\n")
+    (out / ".env").write_text("KEY=1\n")
+    with pytest.raises(BadInput):
+        dials.main(dials.Args(**dict(RUNS["dials"], env_options=json.dumps(dict(OPTIONS, itme_lifetime=3)),
+                                     total_timesteps=256), out_dir=str(out)))
+    assert sorted(p.name for p in out.iterdir()) == [".env", ".git"] and (out / ".git" / "HEAD").is_file()
+
+
+def test_retraining_checks_the_file_it_compares_and_a_claimed_re_train_is_the_boards(tmp_path, trained):
+    """The policy file at an entry's path must be the one it scored (its sha256) before a re-train
+    compares against it; a result that arrives saying 're-trained' loses the claim at submit, and
+    validate refuses one without a training command."""
+    import copy
+
+    from ials_zoo import leaderboard as lb
+    from ials_zoo.baselines.retrain import retrain
+    from ials_zoo.leaderboard.validate import ResultError
+
+    board = _board(tmp_path)
+    result = json.loads((trained / "s0" / "result.json").read_text())
+    result["retrained"] = {"seeds": [0], "package_version": "x", "platform": "x", "date": "2026-01-01"}
+    path = tmp_path / "claimed.json"
+    result["scores"][0]["policy_file"] = str(trained / "s0" / "policy.safetensors")
+    path.write_text(json.dumps(result))
+    entry = lb.submit(path, board)
+    assert "retrained" not in lb.load_result(entry)
+    swapped = json.loads(entry.read_text())
+    shutil.copyfile(trained / "s1" / "policy.safetensors", board / swapped["scores"][0]["policy_file"])
+    with pytest.raises(ResultError, match="not the file the entry scored"):
+        retrain(entry, directory=board)
+    bare = copy.deepcopy(result)
+    bare["training"].pop("reproduce")
+    with pytest.raises(ResultError, match="records its training command"):
+        lb.validate_result(bare)
+
+
+def test_the_board_page_links_only_the_boards_own_policy_files(tmp_path, trained):
+    from ials_zoo.leaderboard.site import render_site
+
+    board = _board(tmp_path)
+    entry = json.loads((trained / "s0" / "result.json").read_text())
+    entry["scores"][0]["policy_file"] = "javascript:alert(1)"
+    (board / "results" / "e.json").write_text(json.dumps(entry))
+    page = render_site(board).read_text()
+    assert 'href="javascript' not in page and "javascript:alert(1)" in page
+
+
+def test_costs_and_numbers_that_do_not_fit_are_refused():
+    """A traffic warm-up of 10**12 steps counts in a re-measure's estimate; 1e999 is no number."""
+    from ials_zoo.evaluation import estimate_evaluation_seconds
+    from ials_zoo.utils import loads_untrusted_json
+
+    assert estimate_evaluation_seconds("traffic_grid_v0", 20, warmup_steps=10**12) > 10 * 4 * 3600
+    with pytest.raises(BadInput, match="does not fit a float"):
+        loads_untrusted_json('{"clock": 1e999}')

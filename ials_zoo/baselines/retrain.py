@@ -43,8 +43,17 @@ from ials_zoo.leaderboard.build import hardware_info, now_iso
 from ials_zoo.leaderboard.validate import ResultError, load_result, validate_result
 from ials_zoo.utils import atomic_write_text
 
+FILE_SUFFIXES = (".pt", ".pth", ".safetensors", ".npz", ".zip", ".json", ".xml", ".sumocfg", ".csv", ".txt")
+"""Values that name a file: a recorded command with one is refused (it would read that file)."""
+
+MAX_PROCESSES = 64
+"""The most copies, GS processes or workers a re-trained command may ask for."""
+
 RUN_FLAGS = ("out_dir", "resume", "overwrite", "progress", "submitter", "notes", "ray_address")
 """Arguments that say where and how a run is watched, not what it computes: never recorded."""
+
+MACHINE_FLAGS = ("workers", "backend")
+"""How many processes a run used: the numbers do not depend on it (tests/test_exact_resume.py)."""
 
 VOLATILE_HEADER = ("created", "training.wall_clock_seconds", "training.aip_seconds", "training.reproduce",
                    "training.aip.collection_seconds", "training.aip.training_seconds", "package_version")
@@ -69,12 +78,19 @@ def training_command(baseline: str, args) -> str:
 
 def package_commit() -> str | None:
     """The git commit of the installed package (``-dirty`` with local changes), or None."""
+    package = Path(ials_zoo.__file__).resolve().parent
+
+    def git(*args):
+        out = subprocess.run(["git", *args], cwd=package, capture_output=True, text=True, timeout=5)
+        return out.stdout.strip() if out.returncode == 0 else ""
+
     try:
-        out = subprocess.run(["git", "describe", "--always", "--dirty", "--abbrev=40"],
-                             cwd=Path(ials_zoo.__file__).parent, capture_output=True, text=True, timeout=5)
+        top = git("rev-parse", "--show-toplevel")
+        if not top or Path(top).resolve() / "ials_zoo" != package:  # installed inside someone else's repository
+            return None
+        return git("describe", "--always", "--dirty", "--abbrev=40") or None
     except (OSError, subprocess.SubprocessError):
         return None
-    return out.stdout.strip() or None if out.returncode == 0 else None
 
 
 def platform_text() -> str:
@@ -115,7 +131,7 @@ def parse_command(command: str, seed: int):
     if words[:2] != ["ials-zoo", "train"] or len(words) < 3 or words[2] not in BASELINES:
         raise ResultError("training.reproduce.command", f"{command[:200]!r} is not `ials-zoo train <baseline>` with "
                           f"one of {', '.join(BASELINES)}")
-    named = [w for w in words[3:] if "/" in w or "\\" in w]
+    named = [w for w in words[3:] if "/" in w or "\\" in w or w.lower().endswith(FILE_SUFFIXES)]
     if named:
         raise ResultError("training.reproduce.command", f"{named[0][:100]!r} names a file; re-training runs only "
                           "commands that read no file")
@@ -132,7 +148,31 @@ def parse_command(command: str, seed: int):
     forbidden = [k for k in RUN_FLAGS if k in vars(ns) and getattr(ns, k) != parser.get_default(k)]
     if forbidden:
         raise ResultError("training.reproduce.command", f"sets {forbidden}, which a recorded command never does")
+    _check_resources(ns, words[2])
     return module, dataclass_from_namespace(module.Args, ns)
+
+
+def _check_resources(ns, baseline: str) -> None:
+    """No process count past :data:`MAX_PROCESSES`, no Ray, and GS options of the board's kind
+    only (no file paths): a recorded command asks for no more than a re-run needs."""
+    from ials_zoo.core.domains import get_domain
+    from ials_zoo.utils import parse_json_object
+
+    where = "training.reproduce.command"
+    for name in ("n_envs", "gs_processes", "workers"):
+        value = getattr(ns, name, None)
+        if isinstance(value, int) and value > MAX_PROCESSES:
+            raise ResultError(where, f"--{name.replace('_', '-')} {value} is more than the {MAX_PROCESSES} a re-train runs")
+    if getattr(ns, "backend", None) not in (None, "process"):
+        raise ResultError(where, f"--backend {ns.backend!r}: a re-train runs on this machine's processes")
+    try:
+        options = parse_json_object(getattr(ns, "env_options", None), "--env-options")
+        domain = get_domain(ns.env_id)
+    except ValueError as exc:
+        raise ResultError(where, str(exc)) from None
+    other = sorted(set(options) - set(domain.gs_options))
+    if other:
+        raise ResultError(where, f"--env-options {other} are not GS options of {ns.env_id} (a re-train reads no file)")
 
 
 def _header(path: Path) -> dict:
@@ -158,10 +198,26 @@ def _strip(header: dict) -> dict:
     for point in out.get("learning_curve") or []:
         if isinstance(point, dict):
             point.pop("wall_clock_seconds", None)
-    hyper = (out.get("training") or {}).get("hyperparameters")
-    for key in RUN_FLAGS if isinstance(hyper, dict) else ():
+    training = out.get("training") if isinstance(out.get("training"), dict) else {}
+    hyper = training.get("hyperparameters")
+    for key in RUN_FLAGS + MACHINE_FLAGS if isinstance(hyper, dict) else ():
         hyper.pop(key, None)
+    for key in MACHINE_FLAGS:
+        training.pop(key, None)
+    _drop_clocks(training.get("aip"))
     return out
+
+
+def _drop_clocks(node) -> None:
+    """Every ``*seconds*`` and ``created`` field inside ``node`` (an AIP's own records)."""
+    if isinstance(node, dict):
+        for key in [k for k in node if "seconds" in k or k == "created"]:
+            node.pop(key)
+        for value in node.values():
+            _drop_clocks(value)
+    elif isinstance(node, list):
+        for value in node:
+            _drop_clocks(value)
 
 
 def _first_difference(a, b, where: str = "") -> str | None:
@@ -182,7 +238,8 @@ def _first_difference(a, b, where: str = "") -> str | None:
             if found:
                 return found
         return None
-    return None if a == b else f"{where.rstrip('.')} ({a!r} re-trained, {b!r} submitted)"
+    same = a == b and type(a) is type(b)
+    return None if same else f"{where.rstrip('.')} ({a!r} re-trained, {b!r} submitted)"
 
 
 def policy_difference(retrained: Path, submitted: Path) -> str | None:
@@ -205,12 +262,53 @@ def policy_difference(retrained: Path, submitted: Path) -> str | None:
     return None if found is None else f"header field {found}"
 
 
-def retrain(path, seeds: int = 1, directory=None, progress: bool = False) -> list[dict]:
+def _submitted_policy(data: dict, i: int, path: Path, board) -> Path:
+    """Seed ``i``'s policy file as ``verify`` finds it: a relative path inside the board or next
+    to the entry, with its recorded sha256, whose header agrees with the entry."""
+    from ials_zoo.evaluation import load_model, sha256_file
+    from ials_zoo.leaderboard.store import resolve_policy_file, training_provenance
+
+    spec = data["scores"][i]["policy_file"]
+    if Path(spec).is_absolute() or ".." in Path(spec).parts:
+        raise ResultError(f"scores.{i}.policy_file", f"{spec!r}: only a path inside the board or next to the entry")
+    found = resolve_policy_file(spec, path, board)
+    if found is None:
+        raise BadInput(f"scores.{i}: policy file {spec!r} not found")
+    if sha256_file(found) != data["scores"][i]["policy_sha256"]:
+        raise ResultError(f"scores.{i}.policy_sha256", f"{str(found)!r} is not the file the entry scored")
+    training_provenance(dict(data, scores=[data["scores"][i]]), [load_model(found, data["agent"]).net])
+    return found
+
+
+def _check_cost(data: dict, jobs: list, max_seconds: float) -> None:
+    """Refuse, before any training, a re-train estimated to take over ``max_seconds``: the
+    entry's own training wall-clock per seed (AIP included), three times over, or what its
+    command's steps take at the domain's study speed, whichever is longer."""
+    from ials_zoo.core.domains import get_domain
+    from ials_zoo.core.extras import study_of
+    from ials_zoo.utils import format_seconds
+
+    t = data["training"]
+    claimed = 3.0 * (float(t["wall_clock_seconds"]) + float(t["aip_seconds"]))
+    # and from the command itself (a result can claim any wall-clock): its steps of every agent
+    # at the slowest training speed the domain's study measured
+    study = study_of(get_domain(data["env_id"]))
+    rate = max(min(list(study.multi_agent_steps_per_second.values()) + list(study.ppo_steps_per_second.values())), 1.0)
+    steps = max(float(getattr(args, "total_timesteps", 0) or 0) for _, _, args, _ in jobs)
+    seconds = len(jobs) * max(claimed, steps * len(data["agents"]) / rate)
+    if seconds > max_seconds:
+        raise ResultError("training", f"re-training {len(jobs)} seed(s) would take about {format_seconds(seconds)} "
+                          f"(from its command's steps or its recorded wall-clock), over the limit of "
+                          f"{format_seconds(max_seconds)} (--max-remeasure-hours allows more)")
+
+
+def retrain(path, seeds: int = 1, directory=None, progress: bool = False,
+            max_seconds: float = 4 * 3600.0) -> list[dict]:
     """Re-run the training of the first ``seeds`` training seeds of the entry at ``path``; one
     report per seed: ``seed``, ``ok`` (the policy file re-made bit for bit, as above),
     ``difference`` (where it first differs, or None), ``platform`` (this one) and
     ``entry_platform``."""
-    from ials_zoo.leaderboard.store import board_path, resolve_policy_file
+    from ials_zoo.leaderboard.store import board_path
 
     path = Path(path)
     data = load_result(path)
@@ -226,11 +324,11 @@ def retrain(path, seeds: int = 1, directory=None, progress: bool = False) -> lis
         board = None
     jobs = []
     for i, s in enumerate(data["scores"][:seeds]):
+        if s["seed"] is None:
+            raise ResultError(f"scores.{i}.seed", "a seed of null cannot be re-trained")
         module, args = parse_command(record["command"], int(s["seed"]))  # every seed checked before any runs
-        found = resolve_policy_file(s["policy_file"], path, board)
-        if found is None:
-            raise BadInput(f"scores.{i}: policy file {s['policy_file']!r} not found")
-        jobs.append((s["seed"], module, args, found))
+        jobs.append((s["seed"], module, args, _submitted_policy(data, i, path, board)))
+    _check_cost(data, jobs, max_seconds)
     reports = []
     for seed, module, args, submitted in jobs:
         with tempfile.TemporaryDirectory(prefix="ials-zoo-retrain-") as tmp:

@@ -104,6 +104,7 @@ class RunFolder:
         import fcntl
 
         self._created = not self.path.exists()
+        self._had_lock = (self.path / LOCK).exists()
         self.path.mkdir(parents=True, exist_ok=True)
         fd = os.open(self.path / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
         try:
@@ -150,6 +151,7 @@ class RunFolder:
                     shutil.rmtree(p) if p.is_dir() and not p.is_symlink() else p.unlink()
         self.path.mkdir(parents=True, exist_ok=True)
         remove_stale_temporaries(self.path, max_age_seconds=0)
+        self._before = {p.name for p in self.path.iterdir()} - {LOCK}  # what a discarded new run leaves alone
         if not self.resuming:
             self.run_id = uuid.uuid4().hex
         self._started = time.time()
@@ -200,13 +202,15 @@ class RunFolder:
             self.release()
 
     def _discard(self) -> None:
-        """Remove what this new run wrote (the folder too, if the claim made it)."""
+        """Remove what this new run wrote, and nothing that was there before it (the folder
+        too, if the claim made it)."""
         for p in self.path.iterdir():
-            if p.name != LOCK:
+            if p.name != LOCK and p.name not in self._before:
                 shutil.rmtree(p) if p.is_dir() and not p.is_symlink() else p.unlink()
+        if not self._had_lock:
+            with contextlib.suppress(FileNotFoundError):
+                (self.path / LOCK).unlink()  # before the lock is given up: no one else holds this file
         self.release()
-        with contextlib.suppress(FileNotFoundError):
-            (self.path / LOCK).unlink()
         if self._created:
             with contextlib.suppress(OSError):
                 self.path.rmdir()

@@ -99,7 +99,7 @@ def _retrain(args) -> int:
 
     if args.policy:
         raise BadInput("--policy goes with a re-score, not --retrain (the entry's own policy files are compared)")
-    reports = retrain(args.file, args.seeds, args.dir, progress=True)
+    reports = retrain(args.file, args.seeds, args.dir, progress=True, max_seconds=args.max_remeasure_hours * 3600)
     for r in reports:
         status = "OK (the policy file re-made bit for bit)" if r["ok"] else f"FAILED: first difference: {r['difference']}"
         print(f"seed {r['seed']}: re-trained: {status}")

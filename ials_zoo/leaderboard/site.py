@@ -17,6 +17,7 @@ is HTML-escaped.
 from __future__ import annotations
 
 import html
+import re
 from pathlib import Path
 
 import ials_zoo
@@ -27,6 +28,8 @@ from ials_zoo.leaderboard.store import ARCHIVE_SUBDIR, board_path, load_entries
 from ials_zoo.utils import atomic_write_text
 
 PAGE = "index.html"
+BOARD_POLICY = re.compile(r"policies/[0-9a-f]{64}\.safetensors")
+"""The only policy paths linked: the board's own copies."""
 COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22",
           "#17becf")
 
@@ -79,8 +82,11 @@ def _links(d: dict, folder: str, link_base: str) -> str:
     name = d["_file"]
     parts = [f'<a href="{_e(link_base + folder + "/" + name)}">json</a>']
     for i, s in enumerate(d["scores"]):
-        if s.get("policy_file"):
-            parts.append(f'<a href="{_e(link_base + s["policy_file"])}">policy{"" if len(d["scores"]) == 1 else f" {i}"}</a>')
+        name_i = f"policy{'' if len(d['scores']) == 1 else f' {i}'}"
+        if s.get("policy_file") and BOARD_POLICY.fullmatch(s["policy_file"]):
+            parts.append(f'<a href="{_e(link_base + s["policy_file"])}">{name_i}</a>')
+        elif s.get("policy_file"):  # not a board file: shown, never linked (no javascript: or other hosts)
+            parts.append(f"{name_i}: <code>{_e(s['policy_file'])}</code>")
     checks = [f"ials-zoo leaderboard verify {folder}/{name}"]
     if (d.get("training") or {}).get("reproduce"):
         checks.append(f"ials-zoo leaderboard verify --retrain {folder}/{name}")
@@ -186,6 +192,8 @@ def _curves(rows: list[dict], group: int) -> str:
         legend.append(f'<label><input type="checkbox" checked data-series="{series}"> '
                       f'<span style="color:{color}">&#9632;</span> {_e(name)}</label>')
         curves += [(series, dict(c, _entry=d["_file"])) for c in d["learning_curves"] if c["points"]]
+    if not curves:  # entries whose curves hold no point
+        return ""
     ylabel = "GS mean return" + (" (mean over agents)" if rows[0]["track"] == MULTI else "")
     panels = [_svg(curves, "env_steps", "env steps per agent", ylabel),
               _svg(curves, "wall_clock_seconds", "wall-clock seconds (training + AIP)", ylabel)]
@@ -247,8 +255,6 @@ def render_site(directory=None, out: str | Path | None = None, link_base: str = 
 
 def entry_points(page: str) -> list[dict]:
     """The curve points of a written page, as its circles' data attributes hold them."""
-    import re
-
     found = re.findall(r'data-x="([^"]+)" data-mean="([^"]+)" data-entry="([^"]+)" data-seed="([^"]*)"', page)
     return [{"x": float(x), "mean": float(m), "entry": html.unescape(e), "seed": html.unescape(sd)}
             for x, m, e, sd in found]

@@ -203,6 +203,7 @@ def submit(path, directory=None, remeasure: bool = True, max_remeasure_seconds: 
                           "and reference policies only")
     if remeasure:
         check_remeasure_cost(data, max_remeasure_seconds)
+    data.pop("retrained", None)  # the board's own record of a re-train, never a submitter's claim
     copies, converted = [], []
     try:
         if kind == "model":

@@ -122,6 +122,12 @@ def validate_result(data) -> dict:
                               f"algorithm {kind!r}, no trained agents")
     if "provenance" in data and kind != "model":
         raise ResultError("provenance", "only trained policies have a provenance")
+    if "retrained" in data:
+        reproduce = (data["training"] or {}).get("reproduce")
+        if kind != "model" or reproduce is None:
+            raise ResultError("retrained", "only an entry that records its training command can have been re-trained")
+        if not set(data["retrained"]["seeds"]) <= set(data["training"]["seeds"]):
+            raise ResultError("retrained.seeds", f"{data['retrained']['seeds']} are not among the training seeds")
     _check_seed_scores(data, kind)
     _check_overall_score(data)
     _check_metrics(data, domain)

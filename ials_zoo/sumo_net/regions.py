@@ -130,21 +130,30 @@ def network_size(net_file: str) -> tuple[int, float]:
     return len(edges), sum(lane.getLength() for e in edges for lane in e.getLanes())
 
 
-def cut_network(net_file: str, region: NetRegion, out_file: str | os.PathLike, timeout: float = 120.0) -> Path:
-    """Write ``region``'s edges as a network of their own (``netconvert --keep-edges.explicit``);
-    the light and its program come along. Returns ``out_file``."""
-    out_file = Path(out_file)
-    netconvert = Path(sumo_binary()).with_name("netconvert")
-    cmd = [str(netconvert), "--sumo-net-file", str(net_file), "--keep-edges.explicit", ",".join(region.edges),
-           "--output-file", str(out_file), "--no-warnings"]
+def netconvert(args: list[str], what: str, timeout: float = 120.0) -> None:
+    """Run SUMO's ``netconvert`` (from the eclipse-sumo wheel) with ``args``; a RuntimeError
+    naming ``what`` if it fails or outlasts ``timeout`` seconds."""
+    binary = Path(sumo_binary()).with_name("netconvert")
     try:
-        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+        proc = subprocess.run([str(binary), *args, "--no-warnings"], capture_output=True, text=True, timeout=timeout)
     except subprocess.TimeoutExpired:
-        raise RuntimeError(f"netconvert did not finish within {timeout:.0f} s cutting the region of "
-                           f"{region.light}") from None
-    if proc.returncode != 0 or not out_file.is_file():
-        raise RuntimeError(f"netconvert could not cut the region of {region.light}: {proc.stderr.strip()[-500:]}")
+        raise RuntimeError(f"netconvert did not finish within {timeout:.0f} s {what}") from None
+    if proc.returncode != 0:
+        raise RuntimeError(f"netconvert failed {what}: {proc.stderr.strip()[-500:]}")
+
+
+def cut_network(net_file: str, region: NetRegion, out_file: str | os.PathLike, timeout: float = 120.0,
+                prefix: str = "") -> Path:
+    """Write ``region``'s edges as a network of their own (``netconvert --keep-edges.explicit``);
+    the light and its program come along. ``prefix`` goes before every id (several regions in
+    one simulation). Returns ``out_file``."""
+    out_file = Path(out_file)
+    args = ["--sumo-net-file", str(net_file), "--keep-edges.explicit", ",".join(region.edges),
+            "--output-file", str(out_file)] + (["--prefix", prefix] if prefix else [])
+    netconvert(args, f"cutting the region of {region.light}", timeout)
+    if not out_file.is_file():
+        raise RuntimeError(f"netconvert wrote no network for the region of {region.light}")
     return out_file
 
 
-__all__ = ["CHAIN_CAP_METRES", "NetRegion", "cut_network", "network_size", "regions_of"]
+__all__ = ["CHAIN_CAP_METRES", "NetRegion", "cut_network", "netconvert", "network_size", "regions_of"]

@@ -43,6 +43,11 @@ DIALS = DIALSSettings(aip_arch="mlp", aip_hidden=128, aip_lr=1e-3, aip_epochs=10
 TOOLS = {"calibrate": ("ials_zoo.traffic.calibrate", "demand calibration under actuated lights"),
          "sumo-bench": ("ials_zoo.traffic.benchmark", "raw SUMO vs GS vs LS steps/s, LS step breakdown")}
 
+def episode_steps(max_cycles=300, warmup_steps=0, **_options) -> int:
+    """SUMO steps of an episode: its warm-up, then its ``max_cycles`` (a re-measure's cost)."""
+    return int(max_cycles) + int(warmup_steps)
+
+
 DOMAIN = Domain(
     env_id=ENV_ID,
     description="25 signalised intersections of a SUMO grid (libsumo)",
@@ -55,6 +60,7 @@ DOMAIN = Domain(
     default_agents=("tls_12", "tls_18"),
     default_predictor="mlp",
     episode_length=300,
+    episode_steps=episode_steps,
     frame_stack=1,
     agent_options=("grid",),
     gs_options=("grid", "max_cycles", "inflow_probability", "warmup_steps", "internal_links"),

@@ -1,0 +1,144 @@
+"""Every light's region of a RESCO map, replayed: what a local simulator of every region would
+cost against the GS, and how closely it reproduces each light's lanes when fed the GS's own
+influence sources.
+
+1. The GS: the map's hour in libsumo, every light on its own program; each step, the vehicles
+   that appear on a region's edges (from outside it, or inserted there) are recorded with their
+   lane, position, speed, type and the rest of their route inside the region, and each light's
+   controlled lanes are read (vehicles, halting vehicles).
+2. The local simulators: every region cut from the network (``ials_zoo.sumo_net.regions``, ids
+   prefixed by the light) side by side in one SUMO simulation, the lights on the same programs
+   from the same second; each step the recorded vehicles are inserted where and as the GS had
+   them, and the same lanes are read.
+3. Cost: seconds per step of each simulation alone (the GS run again without the recording; the
+   local simulators with their insertions), their ratio is the cost per agent-step of the local
+   simulators against the GS (both simulate every light). Fidelity: per controlled lane and
+   step, the mean absolute difference of vehicles and of halting vehicles, against the GS's mean.
+
+Usage: python docs/sumo_net_regions.py [--net ingolstadt21] [--seconds 3600]
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+
+from ials_zoo.sumo.command import sumo_command
+from ials_zoo.sumo_net.network import read_network
+from ials_zoo.sumo_net.regions import cut_network, netconvert, regions_of
+from ials_zoo.sumo_net.scenario import make_scenario
+
+
+def _vtypes(route_files, out: Path) -> Path:
+    """The route files' vehicle types as an additional file (the cut networks carry none)."""
+    root = ET.Element("additional")
+    for f in route_files:
+        for vt in ET.parse(f).getroot().iter("vType"):
+            root.append(vt)
+    ET.ElementTree(root).write(out)
+    return out
+
+
+def _start(ls, cmd, begin, end):
+    ls.start(cmd + ["--begin", str(begin), "--end", str(end), "--time-to-teleport", "-1"])
+
+
+def _lanes_state(ls, lanes):
+    return np.array([(ls.lane.getLastStepVehicleNumber(x), ls.lane.getLastStepHaltingNumber(x)) for x in lanes], float)
+
+
+def run_gs(ls, sc, regions, lanes, seconds, record: bool):
+    """The GS's hour: ``(seconds per step, entries per step, lane states per step)``."""
+    _start(ls, sumo_command(0, net=sc.net_file, routes=sc.route_files), sc.begin, sc.begin + seconds)
+    region_edges = {light: set(r.edges) for light, r in regions.items()}
+    present = {light: set() for light in regions}
+    entries, states, spent = [], [], 0.0
+    for _ in range(seconds):
+        t0 = time.perf_counter()
+        ls.simulationStep()
+        spent += time.perf_counter() - t0
+        if not record:
+            continue
+        step = []
+        for light, edges in region_edges.items():
+            now = {v for e in edges for v in ls.edge.getLastStepVehicleIDs(e)}
+            for v in sorted(now - present[light]):
+                route, index = ls.vehicle.getRoute(v), ls.vehicle.getRouteIndex(v)
+                inside = []
+                for e in route[max(index, 0):]:
+                    if e not in edges:
+                        break
+                    inside.append(e)
+                if inside:
+                    step.append((light, v, tuple(inside), ls.vehicle.getLaneIndex(v), ls.vehicle.getLanePosition(v),
+                                 ls.vehicle.getSpeed(v), ls.vehicle.getTypeID(v)))
+            present[light] = now
+        entries.append(step)
+        states.append(_lanes_state(ls, lanes))
+    ls.close()
+    return spent / seconds, entries, states
+
+
+def run_local(ls, sc, merged, vtypes, lanes, entries, seconds):
+    """The local simulators fed the GS's entries: ``(seconds per step, lane states per step)``."""
+    _start(ls, sumo_command(0, net=merged, additionals=[vtypes]), sc.begin, sc.begin + seconds)
+    states, spent, n = [], 0.0, 0
+    for step in entries:
+        t0 = time.perf_counter()
+        for light, v, edges, lane, pos, speed, vtype in step:
+            rid = f"r{n}"
+            n += 1
+            ls.route.add(rid, [f"{light}__{e}" for e in edges])
+            ls.vehicle.add(f"{light}__{v}__{n}", rid, typeID=vtype, depart="now", departLane=str(lane),
+                           departPos=str(max(pos, 0.0)), departSpeed=str(speed))
+        ls.simulationStep()
+        spent += time.perf_counter() - t0
+        states.append(_lanes_state(ls, lanes))
+    ls.close()
+    return spent / seconds, states
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--net", default="ingolstadt21")
+    parser.add_argument("--seconds", type=int, default=3600)
+    args = parser.parse_args(argv)
+    import libsumo as ls
+
+    sc = make_scenario(net=args.net)
+    network = read_network(sc.net_file)
+    regions = regions_of(sc.net_file)
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        cuts = [str(cut_network(sc.net_file, r, tmp / f"{i}.net.xml", prefix=f"{light}__"))
+                for i, (light, r) in enumerate(regions.items())]
+        merged = tmp / "regions.net.xml"
+        netconvert(["--sumo-net-file", ",".join(cuts), "--output-file", str(merged)], "merging the regions", 600)
+        vtypes = _vtypes(sc.route_files, tmp / "vtypes.add.xml")
+        gs_lanes = [x for light in network.lights for x in dict.fromkeys(light.lanes)]
+        ls_lanes = [f"{light.id}__{x}" for light in network.lights for x in dict.fromkeys(light.lanes)]
+        gs_step, _, _ = run_gs(ls, sc, regions, gs_lanes, args.seconds, record=False)
+        _, entries, gs_states = run_gs(ls, sc, regions, gs_lanes, args.seconds, record=True)
+        ls_step, ls_states = run_local(ls, sc, str(merged), vtypes, ls_lanes, entries, args.seconds)
+    gs_s, ls_s = np.array(gs_states), np.array(ls_states)
+    error = np.abs(gs_s - ls_s).mean(axis=(0, 1))
+    scale = np.maximum(gs_s.mean(axis=(0, 1)), 1e-9)
+    inserted = sum(len(s) for s in entries)
+    print(f"{args.net}, {args.seconds} s, {len(regions)} lights, {len(gs_lanes)} controlled lanes, "
+          f"{inserted:,} vehicles inserted into the regions")
+    print("| | GS | local simulators (every region) |")
+    print("|---|---|---|")
+    print(f"| µs per step | {gs_step * 1e6:,.0f} | {ls_step * 1e6:,.0f} (**{ls_step / gs_step:.2f}** of the GS) |")
+    print(f"| vehicles per controlled lane (mean) | {scale[0]:.3f} | mean abs. difference {error[0]:.3f} "
+          f"({error[0] / scale[0]:.1%} of the GS's mean) |")
+    print(f"| halting vehicles per controlled lane (mean) | {scale[1]:.3f} | mean abs. difference {error[1]:.3f} "
+          f"({error[1] / scale[1]:.1%}) |")
+
+
+if __name__ == "__main__":
+    main()
