@@ -45,8 +45,8 @@ def _write_board(app, exception) -> None:
 
     from ials_zoo.leaderboard.site import render_site
 
-    if exception is None and app.builder.format == "html":
-        board = Path(app.srcdir).parent / "leaderboard"
+    board = Path(app.srcdir).parent / "leaderboard"
+    if exception is None and app.builder.format == "html" and (board / "results").is_dir():
         render_site(board, out=Path(app.outdir) / "board.html", link_base=REPOSITORY_FILES + "leaderboard/")
 
 
