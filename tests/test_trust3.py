@@ -586,6 +586,9 @@ def test_the_board_page_links_only_the_boards_own_policy_files(tmp_path, trained
     (board / "results" / "e.json").write_text(json.dumps(entry))
     page = render_site(board).read_text()
     assert 'href="javascript' not in page and "javascript:alert(1)" in page
+    entry["learning_curves"] = [{"seed": 0, "points": []}]  # valid, and nothing to draw
+    (board / "results" / "e.json").write_text(json.dumps(entry))
+    assert "<svg" not in render_site(board).read_text()
 
 
 def test_costs_and_numbers_that_do_not_fit_are_refused():
