@@ -49,4 +49,7 @@ def test_the_bench_says_what_to_take_from_its_figures():
     assert "costs 0.60x the GS per agent-step, cheaper than it" in text and "costs 2.40x" in text
     row["every_agent"]["ials_dials_cost_vs_gs"] = s(1.3)
     assert "costs 1.30x the GS per agent-step, dearer than it" in "\n".join(conclusion(row))
+    assert "the compatible API, not the fast one" in text
+    row["every_agent"]["ials_parallel_env_cost_vs_gs"] = s(1.35)
+    assert "about the same here" in "\n".join(conclusion(row))
     assert "within each repeat" in text and "3.10x per sample" in text
