@@ -15,12 +15,17 @@ influence sources.
    simulators against the GS (both simulate every light). Fidelity: per controlled lane and
    step, the mean absolute difference of vehicles and of halting vehicles, against the GS's mean.
 
-Usage: python docs/sumo_net_regions.py [--net ingolstadt21] [--seconds 3600]
+``--cap`` sets the incoming chains' length cap; ``--downstream M`` extends every outgoing edge
+by the road beyond it (through nodes that only join a road's pieces) up to M metres, to see how
+much of the replay's error is the missing downstream.
+
+Usage: python docs/sumo_net_regions.py [--net ingolstadt21] [--seconds 3600] [--cap 400] [--downstream 0]
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import tempfile
 import time
 import xml.etree.ElementTree as ET
@@ -30,7 +35,7 @@ import numpy as np
 
 from ials_zoo.sumo.command import sumo_command
 from ials_zoo.sumo_net.network import read_network
-from ials_zoo.sumo_net.regions import cut_network, netconvert, regions_of
+from ials_zoo.sumo_net.regions import CHAIN_CAP_METRES, cut_network, netconvert, regions_of
 from ials_zoo.sumo_net.scenario import make_scenario
 
 
@@ -65,9 +70,14 @@ def run_gs(ls, sc, regions, lanes, seconds, record: bool):
         if not record:
             continue
         step = []
+        alive = set(ls.vehicle.getIDList())
         for light, edges in region_edges.items():
             now = {v for e in edges for v in ls.edge.getLastStepVehicleIDs(e)}
-            for v in sorted(now - present[light]):
+            # a vehicle inside the region stays known while it crosses a junction's internal lanes
+            # (it is then on no region edge): it entered once, and is inserted once
+            known = {v for v in present[light] if v in alive
+                     and (v in now or ls.vehicle.getRoadID(v).startswith(":"))}
+            for v in sorted(now - known):
                 route, index = ls.vehicle.getRoute(v), ls.vehicle.getRouteIndex(v)
                 inside = []
                 for e in route[max(index, 0):]:
@@ -77,7 +87,7 @@ def run_gs(ls, sc, regions, lanes, seconds, record: bool):
                 if inside:
                     step.append((light, v, tuple(inside), ls.vehicle.getLaneIndex(v), ls.vehicle.getLanePosition(v),
                                  ls.vehicle.getSpeed(v), ls.vehicle.getTypeID(v)))
-            present[light] = now
+            present[light] = known | now
         entries.append(step)
         states.append(_lanes_state(ls, lanes))
     ls.close()
@@ -103,16 +113,43 @@ def run_local(ls, sc, merged, vtypes, lanes, entries, seconds):
     return spent / seconds, states
 
 
+def _downstream(net_file: str, regions: dict, metres: float) -> dict:
+    """Every region with its outgoing roads followed downstream up to ``metres``."""
+    import sumolib
+
+    net = sumolib.net.readNet(net_file, withInternal=False)
+    lights = {t.getID() for t in net.getTrafficLights()}
+    out = {}
+    for light, r in regions.items():
+        extra = []
+        for e in r.outgoing:
+            edge, covered = net.getEdge(e), 0.0
+            while covered < metres:
+                node = edge.getToNode()
+                ahead = [x for x in node.getOutgoing() if x.getToNode() is not edge.getFromNode()]
+                if node.getID() in lights or len(ahead) != 1 or ahead[0].getID() in r.edges or ahead[0].getID() in extra:
+                    break
+                edge = ahead[0]
+                extra.append(edge.getID())
+                covered += edge.getLength()
+        out[light] = dataclasses.replace(r, outgoing=r.outgoing + tuple(extra))
+    return out
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--net", default="ingolstadt21")
     parser.add_argument("--seconds", type=int, default=3600)
+    parser.add_argument("--cap", type=float, default=CHAIN_CAP_METRES)
+    parser.add_argument("--downstream", type=float, default=0.0)
     args = parser.parse_args(argv)
     import libsumo as ls
 
     sc = make_scenario(net=args.net)
     network = read_network(sc.net_file)
-    regions = regions_of(sc.net_file)
+    regions = regions_of(sc.net_file, cap=args.cap)
+    if args.downstream > 0:
+        regions = _downstream(sc.net_file, regions, args.downstream)
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         cuts = [str(cut_network(sc.net_file, r, tmp / f"{i}.net.xml", prefix=f"{light}__"))
@@ -129,7 +166,8 @@ def main(argv=None) -> None:
     error = np.abs(gs_s - ls_s).mean(axis=(0, 1))
     scale = np.maximum(gs_s.mean(axis=(0, 1)), 1e-9)
     inserted = sum(len(s) for s in entries)
-    print(f"{args.net}, {args.seconds} s, {len(regions)} lights, {len(gs_lanes)} controlled lanes, "
+    print(f"{args.net}, {args.seconds} s, cap {args.cap:g} m, downstream {args.downstream:g} m, {len(regions)} lights, "
+          f"{sum(len(r.edges) for r in regions.values())} region edges, {len(gs_lanes)} controlled lanes, "
           f"{inserted:,} vehicles inserted into the regions")
     print("| | GS | local simulators (every region) |")
     print("|---|---|---|")
