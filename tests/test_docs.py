@@ -206,3 +206,17 @@ def test_the_fast_api_example_of_the_guide_runs():
     exec(compile(code, "fast_api.md", "exec"), namespace)
     assert namespace["done"] is True and namespace["rewards"].shape == (4, namespace["copies"])
     assert namespace["gs_obs"].shape[:2] == (4, 2) and namespace["gs_rewards"].shape == (4, 2)
+
+
+def test_the_readme_example_runs():
+    """The landing page's ten lines, as written."""
+    import re
+
+    code = re.findall(r"```python\n(.*?)```", (DOCS.parent / "README.md").read_text(), re.S)[0]
+    namespace: dict = {}
+    exec(compile(code, "README.md", "exec"), namespace)
+    try:
+        assert set(namespace["rewards"]) == {"robot_20"} and namespace["every"].possible_agents[0] == "tls_0"
+    finally:
+        for name in ("env", "ials", "every", "city"):
+            namespace[name].close()
