@@ -599,3 +599,41 @@ def test_costs_and_numbers_that_do_not_fit_are_refused():
     assert estimate_evaluation_seconds("traffic_grid_v0", 20, warmup_steps=10**12) > 10 * 4 * 3600
     with pytest.raises(BadInput, match="does not fit a float"):
         loads_untrusted_json('{"clock": 1e999}')
+
+
+def test_a_dials_entry_re_trains_whatever_the_worker_count_and_headers_compare_types():
+    """A DIALS run's header records its worker count and its AIP rounds' clocks: neither makes a
+    re-train differ. And 1 is not 1.0 in a header."""
+    import tempfile
+    from pathlib import Path
+
+    from ials_zoo.baselines import dials
+    from ials_zoo.baselines.retrain import _first_difference, retrain
+
+    out = Path(tempfile.mkdtemp(prefix="ials-zoo-dials-")) / "run"
+    dials.main(dials.Args(**dict(RUNS["dials"], total_timesteps=256, eval_every=256, refresh="128",
+                                 final_eval_episodes=20, workers=1), out_dir=str(out)))
+    result = json.loads((out / "result.json").read_text())
+    assert result["training"]["aip"]["refreshes"] == 2
+    (report,) = retrain(out / "result.json")
+    assert report["ok"], report
+    assert _first_difference({"a": 1}, {"a": 1.0}) == "a (1 re-trained, 1.0 submitted)"
+    from ials_zoo.baselines.retrain import _strip
+
+    header = {"created": "x", "training": {"workers": 2, "backend": "process", "env_steps": 256,
+                                           "aip": {"collection_seconds": 1.0, "last": {"created": "y", "refreshes": 2}}}}
+    assert _strip(header) == {"training": {"env_steps": 256, "aip": {"last": {"refreshes": 2}}}}
+
+
+def test_the_quiet_ctrl_c_is_the_commands_alone(tmp_path):
+    """``python -m`` of another package that imports ials_zoo keeps Python's own Ctrl-C."""
+    import subprocess
+    import sys
+
+    pkg = tmp_path / "otherpkg"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("import ials_zoo\n")
+    (pkg / "tool.py").write_text("import signal\nprint(signal.getsignal(signal.SIGINT) is signal.default_int_handler)\n")
+    proc = subprocess.run([sys.executable, "-m", "otherpkg.tool"], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=120)
+    assert proc.stdout.strip() == "True", proc.stderr[-2000:]
