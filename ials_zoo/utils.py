@@ -141,14 +141,8 @@ def read_json_object(path: str | os.PathLike, max_bytes: int = 1 << 20, what: st
     integer and NaN limits), and an object at the top. Anything else is a :class:`BadInput`
     naming ``what`` and the file (never a ``RecursionError``, ``AttributeError`` or
     ``TypeError`` later)."""
-    raw = read_regular_file(path, max_bytes, follow_links=follow_links)
-    try:
-        value = loads_untrusted_json(raw)
-    except (ValueError, UnicodeDecodeError) as exc:
-        raise BadInput(f"{what} {str(path)!r} is not valid JSON: {exc}") from None
-    if not isinstance(value, dict):
-        raise BadInput(f"{what} {str(path)!r} must hold a JSON object, not a {type(value).__name__}")
-    return value
+    return parse_untrusted_json_object(read_regular_file(path, max_bytes, follow_links=follow_links),
+                                       f"{what} {str(path)!r}")
 
 
 def parse_untrusted_json_object(text: str | bytes, what: str) -> dict:

@@ -297,9 +297,9 @@ def _train(plan: RunPlan, learner: Learner, scoring: Scoring, policy_net, log: T
 def _say_measured_speed(plan: RunPlan, start: int, end: int, seconds: float, bar) -> None:
     """Once, after the first stretch of training: this machine's speed and what it makes of the
     rest (the opening line's estimate is the study's speed; machines differ 2-4x)."""
-    if plan.__dict__.get("_speed_said") or end >= plan.total or seconds <= 0:
+    if bar.speed_said or end >= plan.total or seconds <= 0:
         return
-    plan.__dict__["_speed_said"] = True
+    bar.speed_said = True
     rate = (end - start) / seconds
     unit = UNITS.get(plan.unit, plan.unit + "s")
     joint = f" ({rate * len(plan.agents):,.0f} agent-steps/s)" if plan.steps_per_second is None else ""
@@ -351,6 +351,7 @@ class _Bar:
     """The run's progress bar (steps per agent), or nothing with ``progress=False``."""
 
     def __init__(self, plan: RunPlan, steps: int):
+        self.speed_said = False  # this machine's speed is said once, after the first stretch
         self.bar = None
         if plan.progress:
             self.bar = tqdm(total=plan.total, initial=steps, unit=plan.unit, dynamic_ncols=True,

@@ -318,13 +318,7 @@ def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: i
         policy = spec if spec in ("random", "constant", "scripted") else load_model(spec)
         if progress:
             print(f"fidelity {env_id}: {name}: GS ...", flush=True)
-        gs_env = domain.parallel_env(learners=agents, scripted_learners=(spec == "scripted"), **options)
-        try:
-            gs = run(gs_env, agents, watched, "constant" if spec == "scripted" else policy, episodes, seed,
-                     domain.n_actions)
-        finally:
-            gs_env.close()
-        gs_m = summarise(gs, domain.null_influence)
+        gs_m = _gs_summary(domain, agents, watched, spec, policy, episodes, seed, options)
         if spec == "scripted":
             report["policies"][name] = {"gs_only": gs_m}
             continue
@@ -347,15 +341,33 @@ def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: i
                 ials_env.close()
             ials_m = summarise(ials, domain.null_influence)
             trainings.append({a: {m: compare(gs_m[a][m], ials_m[a][m], tolerance) for m in METRICS} for a in watched})
-        rows = trainings[0]  # shown as the report's means and interval; the others add their votes
-        for a in watched:
-            for m in METRICS:
-                votes = [t[a][m]["holds"] for t in trainings]
-                counted = [h for h in votes if h is not None]
-                rows[a][m].update(per_training=votes, ials_per_training=[t[a][m]["ials"] for t in trainings],
-                                  holds_in=sum(counted) if counted else None, trainings_compared=len(counted))
-        report["policies"][name] = rows
+        report["policies"][name] = _merge_trainings(trainings, watched)
     return report
+
+
+def _gs_summary(domain, agents, watched, spec, policy, episodes: int, seed: int, options: dict) -> dict:
+    """The GS's episodes under one joint policy, summarised (the scripted controllers drive
+    themselves: the learners' actions are ignored)."""
+    gs_env = domain.parallel_env(learners=agents, scripted_learners=(spec == "scripted"), **options)
+    try:
+        gs = run(gs_env, agents, watched, "constant" if spec == "scripted" else policy, episodes, seed,
+                 domain.n_actions)
+    finally:
+        gs_env.close()
+    return summarise(gs, domain.null_influence)
+
+
+def _merge_trainings(trainings: list[dict], watched) -> dict:
+    """The first AIP training's rows (the report's means and interval), each with the votes of
+    every training: under how many the row holds."""
+    rows = trainings[0]
+    for a in watched:
+        for m in METRICS:
+            votes = [t[a][m]["holds"] for t in trainings]
+            counted = [h for h in votes if h is not None]
+            rows[a][m].update(per_training=votes, ials_per_training=[t[a][m]["ials"] for t in trainings],
+                              holds_in=sum(counted) if counted else None, trainings_compared=len(counted))
+    return rows
 
 
 def markdown(report: dict) -> str:
