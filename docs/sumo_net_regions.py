@@ -20,6 +20,7 @@ by the road beyond it (through nodes that only join a road's pieces) up to M met
 much of the replay's error is the missing downstream.
 
 Usage: python docs/sumo_net_regions.py [--net ingolstadt21] [--seconds 3600] [--cap 400] [--downstream 0]
+       [--same-speed-factor]
 """
 
 from __future__ import annotations
@@ -86,7 +87,7 @@ def run_gs(ls, sc, regions, lanes, seconds, record: bool):
                     inside.append(e)
                 if inside:
                     step.append((light, v, tuple(inside), ls.vehicle.getLaneIndex(v), ls.vehicle.getLanePosition(v),
-                                 ls.vehicle.getSpeed(v), ls.vehicle.getTypeID(v)))
+                                 ls.vehicle.getSpeed(v), ls.vehicle.getTypeID(v), ls.vehicle.getSpeedFactor(v)))
             present[light] = known | now
         entries.append(step)
         states.append(_lanes_state(ls, lanes))
@@ -94,23 +95,29 @@ def run_gs(ls, sc, regions, lanes, seconds, record: bool):
     return spent / seconds, entries, states
 
 
-def run_local(ls, sc, merged, vtypes, lanes, entries, seconds):
-    """The local simulators fed the GS's entries: ``(seconds per step, lane states per step)``."""
+def run_local(ls, sc, merged, vtypes, lanes, entries, seconds, same_speed_factor=False):
+    """The local simulators fed the GS's entries: ``(seconds per step, lane states per step, mean
+    vehicles waiting to be inserted)``; ``same_speed_factor``: each keeps the GS's speed factor
+    (otherwise it draws its own from its type, as a new vehicle does)."""
     _start(ls, sumo_command(0, net=merged, additionals=[vtypes]), sc.begin, sc.begin + seconds)
-    states, spent, n = [], 0.0, 0
+    states, spent, n, pending = [], 0.0, 0, 0
     for step in entries:
         t0 = time.perf_counter()
-        for light, v, edges, lane, pos, speed, vtype in step:
+        for light, v, edges, lane, pos, speed, vtype, factor in step:
             rid = f"r{n}"
             n += 1
             ls.route.add(rid, [f"{light}__{e}" for e in edges])
-            ls.vehicle.add(f"{light}__{v}__{n}", rid, typeID=vtype, depart="now", departLane=str(lane),
+            vid = f"{light}__{v}__{n}"
+            ls.vehicle.add(vid, rid, typeID=vtype, depart="now", departLane=str(lane),
                            departPos=str(max(pos, 0.0)), departSpeed=str(speed))
+            if same_speed_factor:
+                ls.vehicle.setSpeedFactor(vid, factor)
         ls.simulationStep()
         spent += time.perf_counter() - t0
+        pending += len(ls.simulation.getPendingVehicles())
         states.append(_lanes_state(ls, lanes))
     ls.close()
-    return spent / seconds, states
+    return spent / seconds, states, pending / max(len(entries), 1)
 
 
 def _downstream(net_file: str, regions: dict, metres: float) -> dict:
@@ -142,6 +149,8 @@ def main(argv=None) -> None:
     parser.add_argument("--seconds", type=int, default=3600)
     parser.add_argument("--cap", type=float, default=CHAIN_CAP_METRES)
     parser.add_argument("--downstream", type=float, default=0.0)
+    parser.add_argument("--same-speed-factor", action="store_true",
+                        help="inserted vehicles keep the GS's speed factor")
     args = parser.parse_args(argv)
     import libsumo as ls
 
@@ -161,14 +170,16 @@ def main(argv=None) -> None:
         ls_lanes = [f"{light.id}__{x}" for light in network.lights for x in dict.fromkeys(light.lanes)]
         gs_step, _, _ = run_gs(ls, sc, regions, gs_lanes, args.seconds, record=False)
         _, entries, gs_states = run_gs(ls, sc, regions, gs_lanes, args.seconds, record=True)
-        ls_step, ls_states = run_local(ls, sc, str(merged), vtypes, ls_lanes, entries, args.seconds)
+        ls_step, ls_states, pending = run_local(ls, sc, str(merged), vtypes, ls_lanes, entries, args.seconds,
+                                                args.same_speed_factor)
     gs_s, ls_s = np.array(gs_states), np.array(ls_states)
     error = np.abs(gs_s - ls_s).mean(axis=(0, 1))
     scale = np.maximum(gs_s.mean(axis=(0, 1)), 1e-9)
     inserted = sum(len(s) for s in entries)
     print(f"{args.net}, {args.seconds} s, cap {args.cap:g} m, downstream {args.downstream:g} m, {len(regions)} lights, "
           f"{sum(len(r.edges) for r in regions.values())} region edges, {len(gs_lanes)} controlled lanes, "
-          f"{inserted:,} vehicles inserted into the regions")
+          f"{inserted:,} vehicles inserted into the regions, {pending:.1f} waiting to be inserted (mean over steps)"
+          + (", the GS's speed factors" if args.same_speed_factor else ""))
     print("| | GS | local simulators (every region) |")
     print("|---|---|---|")
     print(f"| µs per step | {gs_step * 1e6:,.0f} | {ls_step * 1e6:,.0f} (**{ls_step / gs_step:.2f}** of the GS) |")

@@ -162,9 +162,42 @@ def test_sumo_workers_die_with_their_parent(tmp_path):
             "time.sleep(60)")
     proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
     worker = int(proc.stdout.readline())
+    family = _children(proc.pid)  # the zygote the worker was forked from, and the worker
+    assert worker in family and len(family) >= 2
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait()
-    assert _gone_within({worker}, 5)
+    assert _gone_within(family, 5)
+
+
+def test_forked_workers_are_the_zygotes_leave_no_zombies_and_die_with_it():
+    import random
+
+    from ials_zoo.processes import Worker, zygote_for
+
+    preload = ("random", "no_such_module_here")  # a preload that fails costs nothing but its speed
+    workers = [Worker(random.Random, (seed,), name="forked worker", preload=preload) for seed in (1, 2, 3)]
+    zygote = zygote_for(preload)
+    try:
+        for w in workers:
+            w.started()
+        assert [w.call("random") for w in workers] == [random.Random(s).random() for s in (1, 2, 3)]
+        assert {w.pid for w in workers} == _children(zygote.process.pid)  # forked, not fresh interpreters
+        workers[0].close()
+        os.kill(workers[1].pid, signal.SIGKILL)
+        with pytest.raises(Exception, match="died"):
+            workers[1].call("random")
+        assert workers[1].process.returncode in (-signal.SIGKILL, None)
+        assert _children(zygote.process.pid) == {workers[2].pid}  # the others reaped: no zombies
+        os.kill(zygote.process.pid, signal.SIGKILL)  # the zygote's death takes its workers with it
+        assert _gone_within({workers[2].pid}, 5)
+        again = Worker(random.Random, (4,), preload=preload)  # and the next worker gets a new zygote
+        again.started()
+        assert again.call("random") == random.Random(4).random()
+        assert zygote_for(preload) is not zygote
+        again.close()
+    finally:
+        for w in workers:
+            w.close(kill=True)
 
 
 def test_seeds_are_checked_and_never_alias():
@@ -233,13 +266,14 @@ def test_a_worker_answers_calls_and_names_its_errors():
         Worker(random.Random, ("a", "b", "c")).started()  # the constructor's error
 
 
+@pytest.mark.parametrize("preload", [None, ("random",)], ids=["fresh", "forked"])
 @pytest.mark.parametrize("how", ["kill", "stop"])
-def test_a_dead_or_stopped_worker_is_named_within_seconds(how):
+def test_a_dead_or_stopped_worker_is_named_within_seconds(how, preload):
     import random
 
     from ials_zoo.processes import Worker, WorkerError
 
-    worker = Worker(random.Random, (0,), name="test worker", unresponsive_after=3.0)
+    worker = Worker(random.Random, (0,), name="test worker", unresponsive_after=3.0, preload=preload)
     worker.started()
     os.kill(worker.pid, signal.SIGKILL if how == "kill" else signal.SIGSTOP)
     t0 = time.monotonic()

@@ -1,11 +1,12 @@
 """The speed of ``sumo_net_v0``'s GS against raw SUMO on the same traffic, per map.
 
 Every light learns and acts at random (as at the start of training). Raw SUMO's cost is
-measured inside the same episode: the wall-clock of SUMO's own start (loading the network) and
-``simulationStep`` calls, the simulation the GS asked for and nothing else. The GS's share of
+measured inside the same episode: the wall-clock of SUMO's own start (loading the network),
+``simulationStep`` calls and end (``close``: the last tripinfo written), the simulation the GS
+asked for and nothing else. The GS's share of
 raw speed is that time over the GS's whole wall-clock from ``reset`` to the last step
-(observing, rewards, the Python env, SUMO's tripinfo output, and in the default mode a fresh
-worker process per episode and one pipe round trip per decision). One ratio per episode, taken
+(observing, rewards, the Python env, reading SUMO's tripinfo, and in the default mode a fresh
+worker process per episode, forked from a zygote, and one pipe round trip per decision). One ratio per episode, taken
 in one run, so machine load largely cancels out; median [min, max] over ``repeats`` episodes
 (seeds 0, 1, ...), for two modes: the env's default (``fresh_process=True``: every episode in
 a new worker, which makes episodes reproducible) and in this process (``fresh_process=False``).
@@ -36,19 +37,18 @@ def bench_map(net: str, repeats: int = 3, max_cycles: int | None = None, mode: s
     shares, decisions_per_s, raw_steps_per_s = [], [], []
     try:
         for seed in range(repeats):
+            # a fresh worker's core starts its clock at zero; this process's keeps counting
             before = env._sim.call("timing") if not env.fresh_process and seed else 0.0
+            # the random policy's draws are made before the clock starts: they are not the GS's cost
+            draws = {a: rng.integers(env.action_space(a).n, size=env.scenario.decisions).tolist()
+                     for a in env.possible_agents}
             t0, n = time.perf_counter(), 0
             env.reset(seed=seed)
             while env.agents:
-                if n == env.scenario.decisions - 1 and env.fresh_process:
-                    sim = env._sim.call("timing")  # the worker's core, before the last decision ends it
-                env.step({a: int(rng.integers(env.action_space(a).n)) for a in env.agents})
+                env.step({a: draws[a][n] for a in env.agents})
                 n += 1
             wall = time.perf_counter() - t0
-            if not env.fresh_process:
-                sim = env._sim.call("timing") - before
-            else:
-                sim *= n / (n - 1)  # the last decision's SUMO time, at the episode's mean rate
+            sim = env._sim.call("timing") - before  # the episode's worker lives until the next reset
             shares.append(sim / wall)
             decisions_per_s.append(n / wall)
             raw_steps_per_s.append(n * env.scenario.decision_seconds / sim)

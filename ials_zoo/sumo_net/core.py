@@ -21,14 +21,12 @@ Lights that are not controlled run their own program from the network file.
 
 from __future__ import annotations
 
-import os
 import time
 
 import numpy as np
 
 from ials_zoo.sumo.command import close_any_simulation, sumo_command
 from ials_zoo.sumo.lease import import_libsumo
-from ials_zoo.sumo_net.metrics import episode_metrics
 
 # per incoming lane: vehicles approaching, RESCO's total wait (s), queue, sum of speeds (m/s), max wait
 MEASURES = ("approach", "total_wait", "queue", "speed_sum", "max_wait")
@@ -61,16 +59,14 @@ class _Signal:
     """One light's RESCO bookkeeping: its detected vehicles and their waits."""
 
     def __init__(self, lanes, lengths):
-        self.lanes = list(lanes)
+        self.lanes = list(lanes)  # unique (a vehicle is seen once per observation)
         self.lengths = list(lengths)
-        self.waits: dict[str, float] = {}
-        self.seen: set | None = None
+        self.waits: dict[str, float] = {}  # the vehicles detected last time with a wait
 
     def observe(self, raw, interval: int, max_distance: float) -> np.ndarray:
         """``raw`` is libsumo's ``_libsumo`` module (its plain functions: no wrapper per call)."""
         rows = []
-        now = set()
-        waits = self.waits
+        last, waits = self.waits, {}  # a vehicle that left the zone is not carried over
         ids, position, waiting, speed = (raw.lane_getLastStepVehicleIDs, raw.vehicle_getLanePosition,
                                          raw.vehicle_getWaitingTime, raw.vehicle_getSpeed)
         for lane, length in zip(self.lanes, self.lengths):
@@ -81,26 +77,19 @@ class _Signal:
                 # is the distance to the lane's end, which the lane position gives at a tenth of the cost
                 if far and length - position(veh) > max_distance:
                     continue
-                now.add(veh)
-                if veh in waits:
-                    waits[veh] += interval
-                else:
-                    w = waiting(veh)
-                    if w > 0:
-                        waits[veh] = w
-                wait = waits.get(veh, 0.0)
+                wait = last.get(veh)
+                wait = wait + interval if wait is not None else waiting(veh)
                 if wait > 0:
+                    waits[veh] = wait
                     total += wait
                     queue += 1
-                    longest = max(longest, wait)
+                    if wait > longest:
+                        longest = wait
                 else:
                     approach += 1
                 speeds += speed(veh)
             rows.append((approach, total, queue, speeds, longest))
-        if self.seen is not None:
-            for veh in self.seen - now:
-                waits.pop(veh, None)
-        self.seen = now
+        self.waits = waits
         return np.array(rows, np.float64).reshape(len(self.lanes), len(MEASURES))
 
 
@@ -131,7 +120,7 @@ class NetCore:
         self._yellow_index: dict[str, dict] = {}
         self._queues: list[float] = []
         self._lengths = None
-        self.sim_seconds = 0.0  # wall-clock of SUMO's own start and steps (the benchmark's "raw SUMO")
+        self.sim_seconds = 0.0  # wall-clock of SUMO's own start, steps and end (the benchmark's "raw SUMO")
 
     def _command(self, seed: int, tripinfo: str | None) -> list[str]:
         net, routes = self.files
@@ -163,27 +152,29 @@ class NetCore:
         return self._observe()
 
     def _observe(self):
-        ls = self.ls
-        measures = [s.observe(ls._libsumo, self.decision, self.max_distance) for s in self.signals]
-        phases = np.array([ls.trafficlight.getPhase(t) for t in self.lights], np.int64)
-        self._queues.append(float(np.mean([m[:, 2].sum() for m in measures])))
-        return np.concatenate(measures), phases, float(ls.simulation.getTime())
+        raw = self.ls._libsumo
+        measures = [s.observe(raw, self.decision, self.max_distance) for s in self.signals]
+        phase = raw.trafficlight_getPhase
+        phases = np.array([phase(t) for t in self.lights], np.int64)
+        measures = np.concatenate(measures)
+        self._queues.append(float(measures[:, 2].sum()) / len(self.signals))  # the mean of the lights' queues
+        return measures, phases, float(raw.simulation_getTime())
 
     def step(self, actions):
         """One decision of the controlled lights (green indices, in ``controlled`` order)."""
-        tl = self.ls.trafficlight
-        step = self.ls._libsumo.simulation_step  # the raw call: no TraCI step listeners
+        raw = self.ls._libsumo  # its plain functions: no wrapper per call, no TraCI step listeners
+        step, get_phase, set_phase = raw.simulation_step, raw.trafficlight_getPhase, raw.trafficlight_setPhase
         actions = [int(a) for a in actions]
         for tls, a in zip(self.controlled, actions):
-            current = tl.getPhase(tls)
+            current = get_phase(tls)
             if current != a and (current, a) in self._yellow_index[tls]:
-                tl.setPhase(tls, self._yellow_index[tls][(current, a)])
+                set_phase(tls, self._yellow_index[tls][(current, a)])
         start = time.perf_counter()
         for _ in range(self.yellow):
             step(0.0)
         middle = time.perf_counter()
         for tls, a in zip(self.controlled, actions):
-            tl.setPhase(tls, a)
+            set_phase(tls, a)
         restart = time.perf_counter()
         for _ in range(self.decision - self.yellow):
             step(0.0)
@@ -191,7 +182,7 @@ class NetCore:
         return self._observe()
 
     def timing(self) -> float:
-        """Seconds spent inside SUMO's own start and steps since the core was made."""
+        """Seconds spent inside SUMO's own start, steps and end since the core was made."""
         return self.sim_seconds
 
     def make_actuated(self) -> None:
@@ -202,15 +193,12 @@ class NetCore:
             tl.setProgramLogic(tls, tl.Logic("actuated", 3, tl.getPhase(tls), logic.phases))
 
     def finish(self) -> dict:
-        """End the episode (SUMO writes the unfinished trips) and return its metrics."""
+        """End the episode (SUMO writes its tripinfo, unfinished trips included, for the caller
+        to read: :mod:`ials_zoo.sumo_net.metrics`) and return its mean queue."""
+        start = time.perf_counter()
         close_any_simulation(self)
-        out = {"queue": float(np.mean(self._queues[1:])) if len(self._queues) > 1 else 0.0}
-        if self.tripinfo:
-            try:
-                out.update(episode_metrics(self.tripinfo, self.files[1], self.end))
-            finally:  # read once: a long run keeps no episode's file
-                os.remove(self.tripinfo)
-        return out
+        self.sim_seconds += time.perf_counter() - start  # SUMO's own end: a raw run ends too
+        return {"queue": float(np.mean(self._queues[1:])) if len(self._queues) > 1 else 0.0}
 
     def render_data(self) -> dict:
         """Vehicle positions and every light's signal state, for the viewer."""

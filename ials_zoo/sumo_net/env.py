@@ -15,6 +15,7 @@ from ials_zoo.errors import BadInput, BadInputType
 from ials_zoo.sumo.lease import SimHandle
 from ials_zoo.sumo_net.core import MEASURES
 from ials_zoo.sumo_net.mdp import N_FEATURES, observation_fn, reward_fn
+from ials_zoo.sumo_net.metrics import episode_metrics, scheduled_departures
 from ials_zoo.sumo_net.names import DEFAULT_NET, ENV_ID, OPTIONS, SCENARIO_OPTIONS
 from ials_zoo.sumo_net.network import read_network
 from ials_zoo.sumo_net.scenario import make_scenario
@@ -117,8 +118,9 @@ class SumoNetEnv(ParallelEnv):
     ``backend="worker"``) every episode runs in a new worker process: with SUMO 1.28 a second
     libsumo simulation in one process can differ from the first on maps of ``<trip>`` routes
     (cologne1, seed 3: 43.30 or 44.31 s of delay, at random), so only a fresh process makes
-    episodes reproducible. ``fresh_process=False`` with ``backend="auto"``/``"inprocess"`` saves
-    the process start (about a second per episode) at that price.
+    episodes reproducible. The process is forked from a zygote that imported libsumo but never
+    ran a simulation, so it starts in milliseconds. ``fresh_process=False`` with
+    ``backend="auto"``/``"inprocess"`` also saves the pipe round trip per decision, at that price.
 
     **Rendering**: ``"rgb_array"`` (a top view: roads, vehicles, each incoming lane's signal,
     learners ringed; :mod:`ials_zoo.sumo_net.render`), ``"ansi"`` (one line per light: its phase
@@ -150,7 +152,7 @@ class SumoNetEnv(ParallelEnv):
         self.possible_agents = _learner_ids(learners, self.network.ids)
         self.agents = []
         lights = self.network.lights
-        self._rows = np.cumsum([0] + [len(x.lanes) for x in lights])
+        self._rows = np.cumsum([0] + [len(x.lanes) for x in lights]).tolist()
         self._index = {x.id: k for k, x in enumerate(lights)}
         self.observation_spaces = {
             x.id: spaces.Box(0.0, np.inf, (N_FEATURES * len(x.lanes),), np.float32) for x in lights}
@@ -167,7 +169,7 @@ class SumoNetEnv(ParallelEnv):
         self.backend = self._sim.mode
         self._seed_rng = np.random.default_rng()
         self._measures, self._phases, self._time = None, None, 0.0
-        self._metrics, self._episodes = None, 0
+        self._metrics, self._episodes, self._tripinfo, self._schedule = None, 0, None, None
         self._view = self._last_frame = None
 
     def _core_config(self) -> dict:
@@ -220,10 +222,10 @@ class SumoNetEnv(ParallelEnv):
             seed = int(self._seed_rng.integers(SUMO_SEED_MAX + 1))
         self._episodes += 1
         self._metrics = None
-        tripinfo = os.path.join(self._tmp, f"tripinfo_{self._episodes}.xml")
+        self._tripinfo = os.path.join(self._tmp, f"tripinfo_{self._episodes}.xml")
         if self.fresh_process:  # a new process, started during the last episode
             self._sim.restart(spare=True)
-        self._store(self._sim.call("reset", seed, tripinfo))
+        self._store(self._sim.call("reset", seed, self._tripinfo))
         self.agents = list(self.possible_agents)
         return {a: self.observe(a) for a in self.agents}, {a: {} for a in self.agents}
 
@@ -254,9 +256,12 @@ class SumoNetEnv(ParallelEnv):
         self._store(self._sim.call("step", self._actions(actions)))
         done = self._time >= self.scenario.end
         if done:
-            self._metrics = self._sim.call("finish")
-        obs = {a: self.observe(a) for a in self.agents}
-        rewards = {a: self._reward(self._light_measures(a), int(self._phases[self._index[a]])) for a in self.agents}
+            self._metrics = self._finish()
+        obs, rewards = {}, {}
+        for a in self.agents:
+            k = self._index[a]
+            measures, phase = self._measures[self._rows[k]:self._rows[k + 1]], int(self._phases[k])
+            obs[a], rewards[a] = self._observe(measures, phase), self._reward(measures, phase)
         terms = {a: False for a in self.agents}
         truncs = {a: done for a in self.agents}
         infos = {a: {} for a in self.agents}
@@ -276,8 +281,20 @@ class SumoNetEnv(ParallelEnv):
             self._sim.call("make_actuated")
         while self._time < self.scenario.end:
             self._store(self._sim.call("step", []))
-        self._metrics = self._sim.call("finish")
+        self._metrics = self._finish()
         return self.episode_metrics()
+
+    def _finish(self) -> dict[str, float]:
+        """End the episode in SUMO and read its metrics from the tripinfo SUMO wrote."""
+        metrics = self._sim.call("finish")
+        s = self.scenario
+        try:
+            if self._schedule is None:  # the route files' schedule, read once for every episode
+                self._schedule = scheduled_departures(s.route_files)
+            metrics.update(episode_metrics(self._tripinfo, s.route_files, s.end, self._schedule))
+        finally:  # read once: a long run keeps no episode's file
+            os.remove(self._tripinfo)
+        return metrics
 
     # -- extras
     def state(self) -> np.ndarray:

@@ -15,28 +15,35 @@ from ials_zoo.errors import BadInput
 N_FEATURES = 5
 
 
-def drq(measures: np.ndarray, phase: int) -> np.ndarray:
-    """RESCO's ``drq``: per lane ``[lane index == phase index, approach, total wait, queue,
-    speed sum]`` (the first entry is RESCO's: a lane marker, not a one-hot of the phase)."""
+def _lanes_table(measures: np.ndarray, phase: int, divisors: np.ndarray | None) -> np.ndarray:
     n = len(measures)
-    out = np.zeros((n, N_FEATURES), np.float32)
+    out = np.empty((n, N_FEATURES), np.float32)
+    out[:, 0] = 0.0
     if 0 <= phase < n:
         out[phase, 0] = 1.0
     out[:, 1:] = measures[:, :4]
+    if divisors is not None:
+        out[:, 1:] /= divisors  # in float32, as the observation always was (bit for bit)
     return out.reshape(-1)
+
+
+def drq(measures: np.ndarray, phase: int) -> np.ndarray:
+    """RESCO's ``drq``: per lane ``[lane index == phase index, approach, total wait, queue,
+    speed sum]`` (the first entry is RESCO's: a lane marker, not a one-hot of the phase)."""
+    return _lanes_table(measures, phase, None)
+
+
+_DRQ_DIVISORS = np.array([28.0, 28.0, 28.0, 20.0 * 28.0], np.float32)
 
 
 def drq_norm(measures: np.ndarray, phase: int) -> np.ndarray:
     """RESCO's ``drq_norm`` (IDQN, IPPO): ``drq`` with counts and waits over 28, speeds over 20 * 28."""
-    out = drq(measures, phase).reshape(-1, N_FEATURES)
-    out[:, 1:4] /= 28.0
-    out[:, 4] /= 20.0 * 28.0
-    return out.reshape(-1)
+    return _lanes_table(measures, phase, _DRQ_DIVISORS)
 
 
 def wait_norm(measures: np.ndarray, phase: int) -> float:
     """RESCO's ``wait_norm`` (IDQN, IPPO): ``clip(-total wait / 224, -4, 4)``."""
-    return float(np.clip(-measures[:, 1].sum() / 224.0, -4.0, 4.0))
+    return min(4.0, max(-4.0, -float(measures[:, 1].sum()) / 224.0))  # np.clip costs 10x on a scalar
 
 
 def wait(measures: np.ndarray, phase: int) -> float:

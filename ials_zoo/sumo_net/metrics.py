@@ -65,16 +65,17 @@ def scheduled_departures(route_files) -> tuple[dict[str, float], list[tuple[str,
     return depart, entries
 
 
-def resco_delay(trips: dict, route_files, end: float, tags=("vehicle",)) -> float:
+def resco_delay(trips: dict, route_files, end: float, tags=("vehicle",), schedule=None) -> float:
     """RESCO's average delay (see the module docstring); ``tags`` are the route entries whose
-    never-departed vehicles are charged ``end - depart`` (RESCO: ``<vehicle>`` only)."""
+    never-departed vehicles are charged ``end - depart`` (RESCO: ``<vehicle>`` only);
+    ``schedule``: ``scheduled_departures(route_files)`` if already read."""
     total = float(np.sum(trips["timeLoss"] + trips["departDelay"]))
     count = len(trips["id"])
     if count == 0:
         return float("nan")
     departed = trips["depart"] >= 0
     last_id = trips["id"][int(np.argmax(np.where(departed, trips["depart"], -np.inf)))]
-    scheduled, entries = scheduled_departures(route_files)
+    scheduled, entries = schedule if schedule is not None else scheduled_departures(route_files)
     last_scheduled = scheduled.get(last_id)
     if last_scheduled is not None:
         # scheduled before the end: an episode shorter than its route file (max_cycles) does not
@@ -85,12 +86,14 @@ def resco_delay(trips: dict, route_files, end: float, tags=("vehicle",)) -> floa
     return total / count
 
 
-def episode_metrics(tripinfo: str, route_files, end: float) -> dict[str, float]:
-    """delay (RESCO's), delay_all, trip_time, waiting_time, throughput, vehicles."""
+def episode_metrics(tripinfo: str, route_files, end: float, schedule=None) -> dict[str, float]:
+    """delay (RESCO's), delay_all, trip_time, waiting_time, throughput, vehicles; ``schedule``:
+    ``scheduled_departures(route_files)``, if the caller keeps it across episodes."""
     trips = read_tripinfo(tripinfo)
+    schedule = schedule if schedule is not None else scheduled_departures(route_files)
     return {
-        "delay": resco_delay(trips, route_files, end),
-        "delay_all": resco_delay(trips, route_files, end, tags=("vehicle", "trip")),
+        "delay": resco_delay(trips, route_files, end, schedule=schedule),
+        "delay_all": resco_delay(trips, route_files, end, tags=("vehicle", "trip"), schedule=schedule),
         "trip_time": float(np.mean(trips["duration"])) if len(trips["id"]) else float("nan"),
         "waiting_time": float(np.mean(trips["waitingTime"])) if len(trips["id"]) else float("nan"),
         "throughput": float(np.sum(trips["arrival"] >= 0)),
