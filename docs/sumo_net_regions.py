@@ -20,7 +20,7 @@ by the road beyond it (through nodes that only join a road's pieces) up to M met
 much of the replay's error is the missing downstream.
 
 Usage: python docs/sumo_net_regions.py [--net ingolstadt21] [--seconds 3600] [--cap 400] [--downstream 0]
-       [--same-speed-factor]
+       [--same-speed-factor] [--depart-speed gs|max] [--exit-lane] [--noise-floor]
 """
 
 from __future__ import annotations
@@ -63,6 +63,7 @@ def run_gs(ls, sc, regions, lanes, seconds, record: bool):
     _start(ls, sumo_command(0, net=sc.net_file, routes=sc.route_files), sc.begin, sc.begin + seconds)
     region_edges = {light: set(r.edges) for light, r in regions.items()}
     present = {light: set() for light in regions}
+    leaving = {light: {} for light in regions}  # vehicle -> its entry (its exit lane is filled in as it goes)
     entries, states, spent = [], [], 0.0
     for _ in range(seconds):
         t0 = time.perf_counter()
@@ -86,8 +87,14 @@ def run_gs(ls, sc, regions, lanes, seconds, record: bool):
                         break
                     inside.append(e)
                 if inside:
-                    step.append((light, v, tuple(inside), ls.vehicle.getLaneIndex(v), ls.vehicle.getLanePosition(v),
-                                 ls.vehicle.getSpeed(v), ls.vehicle.getTypeID(v), ls.vehicle.getSpeedFactor(v)))
+                    step.append([light, v, tuple(inside), ls.vehicle.getLaneIndex(v), ls.vehicle.getLanePosition(v),
+                                 ls.vehicle.getSpeed(v), ls.vehicle.getTypeID(v), ls.vehicle.getSpeedFactor(v), None])
+                    leaving[light][v] = step[-1]
+            for v in now:  # the lane a vehicle leaves the region by: the last one it holds on its last edge
+                entry = leaving[light].get(v)
+                if entry is not None and ls.vehicle.getRoadID(v) == entry[2][-1]:
+                    entry[-1] = ls.vehicle.getLaneIndex(v)
+            leaving[light] = {v: e for v, e in leaving[light].items() if v in known or v in now}
             present[light] = known | now
         entries.append(step)
         states.append(_lanes_state(ls, lanes))
@@ -95,21 +102,26 @@ def run_gs(ls, sc, regions, lanes, seconds, record: bool):
     return spent / seconds, entries, states
 
 
-def run_local(ls, sc, merged, vtypes, lanes, entries, seconds, same_speed_factor=False):
+def run_local(ls, sc, merged, vtypes, lanes, entries, seconds, same_speed_factor=False, depart_speed="gs", seed=0,
+              exit_lane=False):
     """The local simulators fed the GS's entries: ``(seconds per step, lane states per step, mean
     vehicles waiting to be inserted)``; ``same_speed_factor``: each keeps the GS's speed factor
-    (otherwise it draws its own from its type, as a new vehicle does)."""
-    _start(ls, sumo_command(0, net=merged, additionals=[vtypes]), sc.begin, sc.begin + seconds)
+    (otherwise it draws its own from its type, as a new vehicle does); ``depart_speed``: ``"gs"``
+    inserts at the GS's speed (SUMO delays an insertion until that speed is safe), ``"max"`` at
+    the highest safe speed; ``exit_lane``: each aims for the lane by which it left the region in
+    the GS (its route there goes on beyond the region, which its lane choices inside follow)."""
+    _start(ls, sumo_command(seed, net=merged, additionals=[vtypes]), sc.begin, sc.begin + seconds)
     states, spent, n, pending = [], 0.0, 0, 0
     for step in entries:
         t0 = time.perf_counter()
-        for light, v, edges, lane, pos, speed, vtype, factor in step:
+        for light, v, edges, lane, pos, speed, vtype, factor, out_lane in step:
             rid = f"r{n}"
             n += 1
             ls.route.add(rid, [f"{light}__{e}" for e in edges])
             vid = f"{light}__{v}__{n}"
             ls.vehicle.add(vid, rid, typeID=vtype, depart="now", departLane=str(lane),
-                           departPos=str(max(pos, 0.0)), departSpeed=str(speed))
+                           departPos=str(max(pos, 0.0)), departSpeed=str(speed) if depart_speed == "gs" else "max",
+                           arrivalLane=str(out_lane) if exit_lane and out_lane is not None else "current")
             if same_speed_factor:
                 ls.vehicle.setSpeedFactor(vid, factor)
         ls.simulationStep()
@@ -143,6 +155,20 @@ def _downstream(net_file: str, regions: dict, metres: float) -> dict:
     return out
 
 
+def _past_short_exits(net_file: str, regions: dict, metres: float) -> dict:
+    """Every region with the roads after each outgoing edge shorter than ``metres`` (one hop):
+    where two junctions are that close, the second one's queue reaches back into the first."""
+    import sumolib
+
+    net = sumolib.net.readNet(net_file, withInternal=False)
+    out = {}
+    for light, r in regions.items():
+        extra = [x.getID() for e in r.outgoing if net.getEdge(e).getLength() < metres
+                 for x in net.getEdge(e).getOutgoing() if x.getID() not in r.edges]
+        out[light] = dataclasses.replace(r, outgoing=r.outgoing + tuple(dict.fromkeys(extra)))
+    return out
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--net", default="ingolstadt21")
@@ -151,6 +177,15 @@ def main(argv=None) -> None:
     parser.add_argument("--downstream", type=float, default=0.0)
     parser.add_argument("--same-speed-factor", action="store_true",
                         help="inserted vehicles keep the GS's speed factor")
+    parser.add_argument("--exit-lane", action="store_true",
+                        help="inserted vehicles aim for the lane by which they left the region in the GS")
+    parser.add_argument("--past-short", type=float, default=0.0, metavar="M",
+                        help="also keep the roads after outgoing edges shorter than M metres")
+    parser.add_argument("--worst", type=int, default=0, help="list the N lanes replayed worst")
+    parser.add_argument("--noise-floor", action="store_true",
+                        help="also replay with SUMO seed 1: how far two replays of the same entries differ")
+    parser.add_argument("--depart-speed", choices=("gs", "max"), default="gs",
+                        help="insert at the GS's speed (default) or at the highest safe speed")
     args = parser.parse_args(argv)
     import libsumo as ls
 
@@ -159,6 +194,8 @@ def main(argv=None) -> None:
     regions = regions_of(sc.net_file, cap=args.cap)
     if args.downstream > 0:
         regions = _downstream(sc.net_file, regions, args.downstream)
+    if args.past_short > 0:
+        regions = _past_short_exits(sc.net_file, regions, args.past_short)
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         cuts = [str(cut_network(sc.net_file, r, tmp / f"{i}.net.xml", prefix=f"{light}__"))
@@ -171,7 +208,10 @@ def main(argv=None) -> None:
         gs_step, _, _ = run_gs(ls, sc, regions, gs_lanes, args.seconds, record=False)
         _, entries, gs_states = run_gs(ls, sc, regions, gs_lanes, args.seconds, record=True)
         ls_step, ls_states, pending = run_local(ls, sc, str(merged), vtypes, ls_lanes, entries, args.seconds,
-                                                args.same_speed_factor)
+                                                args.same_speed_factor, args.depart_speed, exit_lane=args.exit_lane)
+        if args.noise_floor:
+            _, again, _ = run_local(ls, sc, str(merged), vtypes, ls_lanes, entries, args.seconds,
+                                    args.same_speed_factor, args.depart_speed, seed=1, exit_lane=args.exit_lane)
     gs_s, ls_s = np.array(gs_states), np.array(ls_states)
     error = np.abs(gs_s - ls_s).mean(axis=(0, 1))
     scale = np.maximum(gs_s.mean(axis=(0, 1)), 1e-9)
@@ -179,7 +219,8 @@ def main(argv=None) -> None:
     print(f"{args.net}, {args.seconds} s, cap {args.cap:g} m, downstream {args.downstream:g} m, {len(regions)} lights, "
           f"{sum(len(r.edges) for r in regions.values())} region edges, {len(gs_lanes)} controlled lanes, "
           f"{inserted:,} vehicles inserted into the regions, {pending:.1f} waiting to be inserted (mean over steps)"
-          + (", the GS's speed factors" if args.same_speed_factor else ""))
+          + (", the GS's speed factors" if args.same_speed_factor else "") + f", depart speed {args.depart_speed}"
+          + (", exit lanes the GS's" if args.exit_lane else ""))
     print("| | GS | local simulators (every region) |")
     print("|---|---|---|")
     print(f"| µs per step | {gs_step * 1e6:,.0f} | {ls_step * 1e6:,.0f} (**{ls_step / gs_step:.2f}** of the GS) |")
@@ -187,6 +228,17 @@ def main(argv=None) -> None:
           f"({error[0] / scale[0]:.1%} of the GS's mean) |")
     print(f"| halting vehicles per controlled lane (mean) | {scale[1]:.3f} | mean abs. difference {error[1]:.3f} "
           f"({error[1] / scale[1]:.1%}) |")
+    bias = (ls_s - gs_s).mean(axis=(0, 1))
+    print(f"| mean signed difference (local - GS) | | vehicles {bias[0]:+.3f}, halting {bias[1]:+.3f} |")
+    if args.worst:
+        per_lane = np.abs(gs_s - ls_s).mean(axis=0)[:, 0]
+        for k in np.argsort(per_lane)[::-1][:args.worst]:
+            print(f"  {gs_lanes[k]}: vehicles GS {gs_s[:, k, 0].mean():.2f}, local {ls_s[:, k, 0].mean():.2f}, "
+                  f"mean abs. difference {per_lane[k]:.2f}")
+    if args.noise_floor:  # SUMO's own randomness (driver imperfection) with the same entries
+        floor = np.abs(ls_s - np.array(again)).mean(axis=(0, 1))
+        print(f"| two replays, SUMO seeds 0 and 1 | | vehicles {floor[0]:.3f} ({floor[0] / scale[0]:.1%}), "
+              f"halting {floor[1]:.3f} ({floor[1] / scale[1]:.1%}) |")
 
 
 if __name__ == "__main__":
