@@ -8,7 +8,11 @@ A light's region (:class:`NetRegion`) is what its local simulator will simulate:
   network's fringe) or until the chain covers :data:`CHAIN_CAP_METRES` (twice RESCO's 200 m
   detection, so a vehicle is simulated before the light can see it);
 * **outgoing edges**: every edge a controlled link leads to, so that every link of the light's
-  program survives a cut (its phases keep their meaning) and spill-back from them is simulated.
+  program survives a cut (its phases keep their meaning) and spill-back from them is simulated;
+  where one is shorter than :data:`SHORT_EXIT_METRES`, the edges after it too (**beyond**):
+  a junction that close (ingolstadt21 has one 12 m past a light) backs its queue into the
+  light's lanes, and without it the region's replay of ingolstadt21 missed a whole queue
+  (``docs/sumo_net.md``).
 
 The **influence sources** are the chains' first edges: a vehicle entering one from outside the
 region (from the upstream junction, or inserted there) is what the rest of the network does to
@@ -31,6 +35,7 @@ from ials_zoo.errors import BadInput
 from ials_zoo.sumo.command import sumo_binary
 
 CHAIN_CAP_METRES = 400.0
+SHORT_EXIT_METRES = 50.0
 
 
 @dataclass(frozen=True)
@@ -44,6 +49,7 @@ class NetRegion:
         outgoing: the edges its controlled links lead to.
         sources: the chains' first edges (where influence enters), in ``incoming`` order.
         length: metres of lanes in the region (every lane of every edge).
+        beyond: the edges after its short outgoing edges.
     """
 
     light: str
@@ -52,11 +58,12 @@ class NetRegion:
     outgoing: tuple[str, ...]
     sources: tuple[str, ...]
     length: float
+    beyond: tuple[str, ...] = ()
 
     @property
     def edges(self) -> tuple[str, ...]:
         """Every edge of the region, chains first."""
-        return tuple(dict.fromkeys([e for c in self.chains for e in c] + list(self.outgoing)))
+        return tuple(dict.fromkeys([e for c in self.chains for e in c] + list(self.outgoing) + list(self.beyond)))
 
 
 @functools.lru_cache(maxsize=8)
@@ -95,12 +102,16 @@ def _chain(edge, lights: set, cap: float) -> tuple:
     return tuple(e.getID() for e in chain)
 
 
-def regions_of(net_file: str, cap: float = CHAIN_CAP_METRES) -> dict[str, NetRegion]:
-    """Every light's region of the network ``net_file`` (module docstring), by light id."""
+def regions_of(net_file: str, cap: float = CHAIN_CAP_METRES,
+               short_exit: float = SHORT_EXIT_METRES) -> dict[str, NetRegion]:
+    """Every light's region of the network ``net_file`` (module docstring), by light id;
+    ``short_exit``: outgoing edges shorter than that (m) bring the edges after them (0: none)."""
     if not os.path.isfile(net_file):
         raise BadInput(f"network file {net_file!r} does not exist")
     if not cap > 0:
         raise BadInput(f"the chains' length cap must be > 0 m, got {cap!r}")
+    if not short_exit >= 0:
+        raise BadInput(f"the short exits' length must be >= 0 m, got {short_exit!r}")
     net = _read(str(net_file), os.path.getmtime(net_file))
     lights = {t.getID() for t in net.getTrafficLights()}
     # a light's nodes (a joint light controls several): their edges end chains too
@@ -113,9 +124,13 @@ def regions_of(net_file: str, cap: float = CHAIN_CAP_METRES) -> dict[str, NetReg
         incoming = tuple(dict.fromkeys(c[0].getEdge().getID() for c in connections))
         outgoing = tuple(dict.fromkeys(c[1].getEdge().getID() for c in connections))
         chains = tuple(_chain(net.getEdge(e), lights | light_nodes, cap) for e in incoming)
-        edges = dict.fromkeys([e for c in chains for e in c] + list(outgoing))
+        inside = set(outgoing).union(*chains)
+        beyond = tuple(dict.fromkeys(x.getID() for e in outgoing if net.getEdge(e).getLength() < short_exit
+                                     for x in net.getEdge(e).getOutgoing() if x.getID() not in inside))
+        edges = dict.fromkeys([e for c in chains for e in c] + list(outgoing) + list(beyond))
         length = sum(lane.getLength() for e in edges for lane in net.getEdge(e).getLanes())
-        out[tls.getID()] = NetRegion(tls.getID(), incoming, chains, outgoing, tuple(c[0] for c in chains), length)
+        out[tls.getID()] = NetRegion(tls.getID(), incoming, chains, outgoing, tuple(c[0] for c in chains), length,
+                                     beyond)
     return out
 
 
@@ -156,4 +171,4 @@ def cut_network(net_file: str, region: NetRegion, out_file: str | os.PathLike, t
     return out_file
 
 
-__all__ = ["CHAIN_CAP_METRES", "NetRegion", "cut_network", "netconvert", "network_size", "regions_of"]
+__all__ = ["CHAIN_CAP_METRES", "SHORT_EXIT_METRES", "NetRegion", "cut_network", "netconvert", "network_size", "regions_of"]
