@@ -163,23 +163,26 @@ class NetCore:
     def step(self, actions):
         """One decision of the controlled lights (green indices, in ``controlled`` order)."""
         raw = self.ls._libsumo  # its plain functions: no wrapper per call, no TraCI step listeners
-        step, get_phase, set_phase = raw.simulation_step, raw.trafficlight_getPhase, raw.trafficlight_setPhase
+        get_phase, set_phase = raw.trafficlight_getPhase, raw.trafficlight_setPhase
         actions = [int(a) for a in actions]
         for tls, a in zip(self.controlled, actions):
             current = get_phase(tls)
             if current != a and (current, a) in self._yellow_index[tls]:
                 set_phase(tls, self._yellow_index[tls][(current, a)])
-        start = time.perf_counter()
-        for _ in range(self.yellow):
-            step(0.0)
-        middle = time.perf_counter()
+        self._advance(self.yellow)
         for tls, a in zip(self.controlled, actions):
             set_phase(tls, a)
-        restart = time.perf_counter()
-        for _ in range(self.decision - self.yellow):
-            step(0.0)
-        self.sim_seconds += time.perf_counter() - restart + middle - start
+        self._advance(self.decision - self.yellow)
         return self._observe()
+
+    def _advance(self, seconds: int) -> None:
+        """``seconds`` SUMO steps (timed as raw SUMO's work); a local simulator inserts its
+        influence here."""
+        step = self.ls._libsumo.simulation_step  # the raw call: no TraCI step listeners
+        start = time.perf_counter()
+        for _ in range(seconds):
+            step(0.0)
+        self.sim_seconds += time.perf_counter() - start
 
     def timing(self) -> float:
         """Seconds spent inside SUMO's own start, steps and end since the core was made."""

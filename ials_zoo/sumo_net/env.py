@@ -131,6 +131,7 @@ class SumoNetEnv(ParallelEnv):
 
     metadata = {"name": ENV_ID, "render_modes": ["rgb_array", "ansi", "human"], "is_parallelizable": True,
                 "render_fps": 10}
+    CORE = "ials_zoo.sumo_net.core:NetCore"  # the simulation core (``"package.module:Class"``)
 
     def __init__(self, net=None, sumocfg=None, net_file=None, route_files=None, begin=None, end=None,
                  decision_seconds=None, yellow_seconds=None, max_cycles=None, learners=None, max_distance=200.0,
@@ -165,7 +166,7 @@ class SumoNetEnv(ParallelEnv):
                            f"not {backend!r} (or pass fresh_process=False)")
         self.fresh_process = bool(fresh_process)
         self._tmp = tempfile.mkdtemp(prefix="ials_zoo_sumo_net_")  # the episodes' tripinfo, read and removed
-        self._sim = SimHandle("ials_zoo.sumo_net.core:NetCore", self._core_config(), backend)
+        self._sim = SimHandle(self.CORE, self._core_config(), backend)
         self.backend = self._sim.mode
         self._seed_rng = np.random.default_rng()
         self._measures, self._phases, self._time = None, None, 0.0

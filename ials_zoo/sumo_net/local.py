@@ -1,0 +1,152 @@
+"""Local simulators of every light's region of a ``sumo_net_v0`` network, with RESCO's MDP: a
+first multi-agent IALS of a real network, to measure what it costs against the GS.
+
+Every region (:mod:`ials_zoo.sumo_net.regions`) is cut from the network and all of them run side
+by side in one SUMO simulation (ids prefixed ``"<light>__"``); :class:`LocalNetEnv` is
+``sumo_net_v0``'s ParallelEnv on it: the same agents, spaces, signal loop, observations and
+rewards (:class:`ials_zoo.sumo_net.core.NetCore`), each light acting on its own region.
+
+**Influence** (first version, no AIP yet): drawn from the GS's own statistics. One GS run with
+every light on its own program is recorded (:meth:`ials_zoo.sumo_net.replay.ReplayCore.record`:
+every vehicle entering a region, where and as it entered, with the rest of its route inside);
+then every SUMO step, for every region, the arrivals of one recorded step drawn at random are
+inserted (:class:`GSInfluence`). This keeps each step's joint arrivals and the regions' mean
+inflow; it forgets the timing of arrivals across steps (platoons after a green upstream) and
+their dependence on the learners' actions, which is what an AIP is for. Lights of other regions
+that a cut keeps (a junction just past a short exit) run their own program.
+"""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ials_zoo.sumo.lease import SimHandle
+from ials_zoo.sumo_net.core import NetCore
+from ials_zoo.sumo_net.env import SumoNetEnv, scenario_of
+from ials_zoo.sumo_net.names import SCENARIO_OPTIONS
+from ials_zoo.sumo_net.regions import regions_of
+from ials_zoo.sumo_net.replay import cut_regions, vehicle_types
+
+
+def record_influence(scenario, regions: dict, seconds: int, seed: int = 0) -> list:
+    """Every region's entries at every step of ``seconds`` of the GS (own programs, SUMO seed
+    ``seed``), as :meth:`~ials_zoo.sumo_net.replay.ReplayCore.record` gives them."""
+    sim = SimHandle("ials_zoo.sumo_net.replay:ReplayCore", {}, "auto", timeout=3600.0)
+    try:
+        edges = {light: r.edges for light, r in regions.items()}
+        entries, _, _ = sim.call("record", scenario.net_file, scenario.route_files, scenario.begin, seconds,
+                                 edges, [], [], seconds + 1, seed)
+    finally:
+        sim.close()
+    return entries
+
+
+class GSInfluence:
+    """Per light, the recorded steps' arrivals ``(vehicle, edges inside, lane index, position,
+    speed, type, speed factor)``, one list per recorded step (module docstring)."""
+
+    def __init__(self, entries_per_step: list, lights):
+        self.steps = {light: [[] for _ in entries_per_step] for light in lights}
+        for t, step in enumerate(entries_per_step):
+            for light, *entry in step:
+                if light in self.steps:
+                    self.steps[light][t].append(tuple(entry))
+
+    def rate(self) -> float:
+        """Mean vehicles entering all regions per step."""
+        return float(sum(len(x) for s in self.steps.values() for x in s) / max(len(next(iter(self.steps.values()),
+                                                                                        [1])), 1))
+
+
+class LocalNetCore(NetCore):
+    """:class:`~ials_zoo.sumo_net.core.NetCore` on the regions' network, inserting each step
+    ``influence`` (``light -> recorded steps' arrivals``) drawn with the episode's seed."""
+
+    def __init__(self, influence: dict, **config):
+        super().__init__(**config)
+        self.influence = {light: steps for light, steps in influence.items() if steps}
+        self.rng = np.random.default_rng(0)
+        self.inserted = 0
+
+    def reset(self, seed: int, tripinfo: str | None = None):
+        self.rng = np.random.default_rng(seed)
+        return super().reset(seed, None)  # no trips to score: a region's vehicles are borrowed
+
+    def _insert(self) -> None:
+        raw = self.ls._libsumo
+        for light, steps in self.influence.items():
+            for vehicle, edges, lane, pos, _speed, vtype, factor in steps[int(self.rng.integers(len(steps)))]:
+                self.inserted += 1
+                name = f"{light}__{vehicle}__{self.inserted}"
+                raw.route_add(name, [f"{light}__{e}" for e in edges])
+                raw.vehicle_add(name, name, vtype, "now", str(lane), str(max(pos, 0.0)), "max")
+                raw.vehicle_setSpeedFactor(name, factor)
+
+    def inserted_total(self) -> int:
+        """Vehicles inserted since the core was made."""
+        return self.inserted
+
+    def _advance(self, seconds: int) -> None:
+        step = self.ls._libsumo.simulation_step
+        for _ in range(seconds):
+            self._insert()
+            start = time.perf_counter()
+            step(0.0)
+            self.sim_seconds += time.perf_counter() - start
+
+
+class LocalNetEnv(SumoNetEnv):
+    """``sumo_net_v0`` on the local simulators of every light's region (module docstring).
+
+    Takes ``sumo_net_v0``'s options (``net=``, ``learners=``, ...); ``record_seconds`` (default:
+    the map's episode) is how much GS is recorded for the influence, ``record_seed`` its SUMO
+    seed. ``episode_metrics()`` has only ``queue``: trip delays need the whole network.
+    """
+
+    CORE = "ials_zoo.sumo_net.local:LocalNetCore"
+
+    def __init__(self, record_seconds: int | None = None, record_seed: int = 0, **options):
+        scenario = scenario_of(**{k: options[k] for k in SCENARIO_OPTIONS if k in options})
+        self._folder = Path(tempfile.mkdtemp(prefix="ials_zoo_local_net_"))
+        try:
+            self.regions = regions_of(scenario.net_file)
+            self._merged = cut_regions(scenario.net_file, self.regions, self._folder)
+            self._vtypes = vehicle_types(scenario.route_files, self._folder / "vtypes.add.xml")
+            seconds = int(record_seconds or scenario.end - scenario.begin)
+            self.influence = GSInfluence(record_influence(scenario, self.regions, seconds, record_seed),
+                                         list(self.regions))
+            super().__init__(**options)
+        except BaseException:
+            shutil.rmtree(self._folder, ignore_errors=True)
+            raise
+
+    def _core_config(self) -> dict:
+        config = super()._core_config()
+
+        def local(light: str, name: str) -> str:
+            return f"{light}__{name}"
+
+        ids = config["lights"]
+        config.update(net_file=str(self._merged), route_files=[], extra=["--additional-files", str(self._vtypes)],
+                      lights=[local(x, x) for x in ids], controlled=[local(x, x) for x in config["controlled"]],
+                      lanes=[[local(x, lane) for lane in lanes] for x, lanes in zip(ids, config["lanes"])],
+                      influence=self.influence.steps)
+        return config
+
+    def _finish(self) -> dict[str, float]:
+        return self._sim.call("finish")
+
+    def close(self):
+        super().close()
+        folder = getattr(self, "_folder", None)
+        if folder is not None:
+            shutil.rmtree(folder, ignore_errors=True)
+            self._folder = None
+
+
+__all__ = ["GSInfluence", "LocalNetCore", "LocalNetEnv", "record_influence"]
