@@ -267,6 +267,22 @@ def test_merge_seeds_into_one_result(tmp_path):
     assert rc == 0 and lb.load_result(out)["score"]["ci_over"] == "seeds"
 
 
+def test_merging_results_in_their_run_folders_keeps_their_policies(tmp_path):
+    paths = []
+    for seed in (0, 1):
+        run = tmp_path / f"run_s{seed}"
+        run.mkdir()
+        r = _model_result(run, seed, episodes=2)
+        r["scores"][0]["policy_file"] = "policy.safetensors"  # as a training run writes it, beside its result
+        paths.append(str(_write(run, r, "result.json")))
+    out = tmp_path / "merged" / "m.json"
+    out.parent.mkdir()
+    assert main(["leaderboard", "merge", *paths, "--out", str(out)]) == 0
+    merged = json.loads(out.read_text())
+    assert [s["policy_file"] for s in merged["scores"]] == [f"../run_s{k}/policy.safetensors" for k in (0, 1)]
+    assert lb.load_result(out)["scores"][1]["seed"] == 1  # every policy found beside the merged file
+
+
 def test_interrupted_submission_leaves_the_board_as_it_was(tmp_path, board, reference, monkeypatch):
     before = _snapshot(board)
 

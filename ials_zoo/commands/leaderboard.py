@@ -32,6 +32,18 @@ from ials_zoo.policy import save_policy
 from ials_zoo.utils import atomic_write_text, check_output_file
 
 
+def _policies_relative_to(result: dict, source, out) -> dict:
+    """``result`` (read from ``source``) with each seed's policy file, if named relative to the
+    result's folder (as a training run writes it), named relative to ``out``'s folder instead."""
+    import os
+
+    here, there = Path(source).resolve().parent, Path(out).resolve().parent
+    for s in result["scores"]:
+        name = s.get("policy_file")
+        if name and not os.path.isabs(name) and (here / name).is_file():
+            s["policy_file"] = os.path.relpath(here / name, there)
+    return result
+
 def configure(parser):
     sub = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
 
@@ -124,7 +136,8 @@ def run(args) -> int:
         elif args.action == "merge":
 
             check_output_file(args.out, "--out")
-            merged = lb.merge_results([lb.load_result(f) for f in args.files], notes=args.notes)
+            results = [_policies_relative_to(lb.load_result(f), f, args.out) for f in args.files]
+            merged = lb.merge_results(results, notes=args.notes)
             lb.write_result(args.out, merged)
             s = merged["score"]
             print(f"{len(merged['scores'])} seeds: GS score {s['mean']:.3f} "
