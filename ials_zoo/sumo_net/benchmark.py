@@ -10,6 +10,9 @@ worker process per episode, forked from a zygote, and one pipe round trip per de
 in one run, so machine load largely cancels out; median [min, max] over ``repeats`` episodes
 (seeds 0, 1, ...), for two modes: the env's default (``fresh_process=True``: every episode in
 a new worker, which makes episodes reproducible) and in this process (``fresh_process=False``).
+
+Then the local simulators of every light's region (:class:`ials_zoo.sumo_net.local.LocalNetEnv`)
+against the GS, per agent-decision, both ParallelEnvs in a worker (:func:`bench_local`).
 """
 
 from __future__ import annotations
@@ -36,6 +39,8 @@ def bench_map(net: str, repeats: int = 3, max_cycles: int | None = None, mode: s
     rng = np.random.default_rng(0)
     shares, decisions_per_s, raw_steps_per_s = [], [], []
     try:
+        if env.fresh_process:  # the zygote that forks the workers starts once per process: not timed
+            env.reset(seed=repeats)
         for seed in range(repeats):
             # a fresh worker's core starts its clock at zero; this process's keeps counting
             before = env._sim.call("timing") if not env.fresh_process and seed else 0.0
@@ -75,18 +80,73 @@ def print_rows(rows) -> None:
           "steps of the same episode (1.0 = no overhead); median [min, max] over the repeats. All lights random.")
 
 
-def run_bench(nets=DEFAULT_MAPS, repeats: int = 3, max_cycles: int | None = None) -> list[dict]:
-    """Measure and print every map of ``nets`` in both modes."""
+def _random_episode(env, seed: int) -> float:
+    """Seconds per decision of one episode with every light at random (drawn before the clock)."""
+    rng = np.random.default_rng(seed)
+    draws = {a: rng.integers(env.action_space(a).n, size=env.scenario.decisions).tolist() for a in env.possible_agents}
+    start, n = time.perf_counter(), 0
+    env.reset(seed=seed)
+    while env.agents:
+        env.step({a: draws[a][n] for a in env.agents})
+        n += 1
+    return (time.perf_counter() - start) / n
+
+
+def bench_local(net: str, repeats: int = 3, max_cycles: int | None = None) -> dict:
+    """The multi-agent local simulators' ParallelEnv (:class:`ials_zoo.sumo_net.local.LocalNetEnv`)
+    against the GS, per agent-decision: both in a worker process (one pipe round trip per
+    decision each), episodes of the same seed alternating, one ratio per pair."""
+    from ials_zoo.sumo_net.local import LocalNetEnv
+
+    options = {"net": net, "backend": "worker", "fresh_process": False, "max_cycles": max_cycles}
+    start = time.perf_counter()
+    local = LocalNetEnv(**options)
+    built = time.perf_counter() - start
+    gs = SumoNetEnv(**options)
+    pairs = []
+    try:
+        for seed in range(repeats):
+            pairs.append((_random_episode(gs, seed), _random_episode(local, seed)))
+    finally:
+        local.close()
+        gs.close()
+    agents = len(gs.possible_agents)
+    return {"net": net, "agents": agents, "repeats": repeats, "build_seconds": built,
+            "gs_us_per_agent_decision": _stat([g / agents * 1e6 for g, _ in pairs]),
+            "local_us_per_agent_decision": _stat([x / agents * 1e6 for _, x in pairs]),
+            "local_over_gs": _stat([x / g for g, x in pairs])}
+
+
+def print_local_rows(rows) -> None:
+    print(f"\n{'map':<14}{'lights':>7}{'GS µs/agent-decision':>22}{'local µs/agent-decision':>25}"
+          f"{'local / GS':>22}{'built in':>10}")
+    for r in rows:
+        m, lo, hi = r["local_over_gs"]
+        print(f"{r['net']:<14}{r['agents']:>7}{r['gs_us_per_agent_decision'][0]:>22,.0f}"
+              f"{r['local_us_per_agent_decision'][0]:>25,.0f}{f'{m:.2f} [{lo:.2f}, {hi:.2f}]':>22}"
+              f"{r['build_seconds']:>9.0f}s")
+    print("local: every light's region side by side in one SUMO simulation, influence drawn from a recorded GS "
+          "episode (no AIP yet); built in: cutting, merging and recording. Median [min, max] over episode pairs.")
+
+
+def run_bench(nets=DEFAULT_MAPS, repeats: int = 3, max_cycles: int | None = None, local: bool = True) -> list[dict]:
+    """Measure and print every map of ``nets`` in both modes, and (``local``) its local simulators."""
     unknown = [n for n in nets if n not in RESCO_MAPS]
     if unknown:
         raise BadInput(f"--net: unknown map(s) {unknown}; expected some of {', '.join(RESCO_MAPS)}")
-    rows = []
+    rows, local_rows = [], []
     for net in nets:
         for mode in MODES:
             rows.append(bench_map(net, repeats, max_cycles, mode))
             print(f"{net}, {mode}: GS at {rows[-1]['gs_share_of_raw'][0]:.2f} of raw SUMO", flush=True)
+        if local:
+            local_rows.append(bench_local(net, repeats, max_cycles))
+            print(f"{net}, local simulators: {local_rows[-1]['local_over_gs'][0]:.2f} of the GS per agent-decision",
+                  flush=True)
     print_rows(rows)
-    return rows
+    if local_rows:
+        print_local_rows(local_rows)
+    return rows + local_rows
 
 
-__all__ = ["DEFAULT_MAPS", "MODES", "bench_map", "print_rows", "run_bench"]
+__all__ = ["DEFAULT_MAPS", "MODES", "bench_local", "bench_map", "print_local_rows", "print_rows", "run_bench"]

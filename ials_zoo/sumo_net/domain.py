@@ -1,4 +1,5 @@
-"""Any SUMO network as a zoo domain (GS only: the local simulators of its junctions come later)."""
+"""Any SUMO network as a zoo domain (the GS; the local simulators of its junctions are measured
+in :mod:`ials_zoo.sumo_net.local`, not yet trained on)."""
 
 from __future__ import annotations
 
@@ -22,7 +23,8 @@ def possible_agents(**options) -> list[str]:
 
 
 def bench_gs(nets, repeats: int) -> list[dict]:
-    """``ials-zoo bench --domain sumo_net_v0 [--net M,...]``: the GS against raw SUMO per map."""
+    """``ials-zoo bench --domain sumo_net_v0 [--net M,...]``: the GS against raw SUMO per map,
+    and every region's local simulators against the GS."""
     from ials_zoo.sumo_net.benchmark import DEFAULT_MAPS, run_bench
 
     return run_bench(tuple(nets or DEFAULT_MAPS), repeats)
