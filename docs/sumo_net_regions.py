@@ -13,7 +13,7 @@ The variants measured on the way (inserting at the GS's speed, a new speed facto
 lanes, roads followed downstream) are in this script's history (commit 9170cfb).
 
 Usage: python docs/sumo_net_regions.py [--net ingolstadt21] [--seconds 3600] [--cap 400]
-       [--short-exit 50] [--worst N] [--noise-floor]
+       [--short-exit 50] [--worst N] [--noise-floor] [--each]
 """
 
 from __future__ import annotations
@@ -66,13 +66,20 @@ def main(argv=None) -> None:
     parser.add_argument("--short-exit", type=float, default=SHORT_EXIT_METRES)
     parser.add_argument("--worst", type=int, default=0, help="list the N lanes replayed worst")
     parser.add_argument("--noise-floor", action="store_true")
+    parser.add_argument("--each", action="store_true", help="also every region alone: a single learner's cost")
     args = parser.parse_args(argv)
     sc = make_scenario(net=args.net)
     regions = regions_of(sc.net_file, cap=args.cap, short_exit=args.short_exit)
     with tempfile.TemporaryDirectory() as tmp:
-        out = replay_regions(sc, regions, args.seconds, tmp, measure_cost=True, noise_floor=args.noise_floor)
+        out = replay_regions(sc, regions, args.seconds, tmp, measure_cost=True, noise_floor=args.noise_floor,
+                             each=args.each)
     print_table(args.net, args, regions, out)
     print_worst(out, args.worst)
+    if args.each:
+        speedup = {k: out["gs_seconds_per_step"] / v for k, v in out["each_seconds_per_step"].items()}
+        values = sorted(speedup.values())
+        print(f"every region alone: the GS's seconds per step over the region's, median {np.median(values):.0f}x, "
+              f"min {values[0]:.0f}x ({min(speedup, key=speedup.get)}), max {values[-1]:.0f}x")
 
 
 if __name__ == "__main__":

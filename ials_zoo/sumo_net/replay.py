@@ -206,14 +206,30 @@ class ReplayCore:
         close_any_simulation(self)
 
 
+def replay_each(sim, scenario, regions: dict, entries, folder, seed: int = 0) -> dict[str, float]:
+    """Every region alone in a simulation of its own, fed its entries: seconds per step, by light
+    (what a single learner's local simulator costs)."""
+    out = {}
+    for k, (light, region) in enumerate(regions.items()):
+        alone = Path(folder) / f"alone_{k}"
+        alone.mkdir(parents=True, exist_ok=True)
+        merged = cut_regions(scenario.net_file, {light: region}, alone)
+        mine = [[e for e in step if e[0] == light] for step in entries]
+        sim.call("replay", merged, [Path(folder) / "vtypes.add.xml"], scenario.begin, mine, [], [], len(mine) + 1,
+                 seed)
+        out[light] = sim.call("timing") / len(mine)
+    return out
+
+
 def replay_regions(scenario, regions: dict, seconds: int, folder, seed: int = 0, measure_cost: bool = False,
-                   noise_floor: bool = False) -> dict:
+                   noise_floor: bool = False, each: bool = False) -> dict:
     """Record the GS's ``seconds`` and replay ``regions`` (light -> :class:`NetRegion`) fed with
     it; ``folder`` takes the cut networks. Returns ``error`` (:func:`replay_error` over the
     regions' controlled lanes), ``inserted`` (vehicles), ``local_seconds_per_step``, the lanes
     and both runs' lane states; ``measure_cost``: also ``gs_seconds_per_step`` (the GS alone);
     ``noise_floor``: also the error between two replays of SUMO seeds ``seed`` and ``seed + 1``
-    (SUMO's own randomness, given the same entries)."""
+    (SUMO's own randomness, given the same entries); ``each``: also every region alone
+    (:func:`replay_each`, ``each_seconds_per_step``)."""
     from ials_zoo.sumo.lease import SimHandle
     from ials_zoo.sumo_net.network import read_network
 
@@ -243,10 +259,12 @@ def replay_regions(scenario, regions: dict, seconds: int, folder, seed: int = 0,
             again, again_measures = sim.call(*replay, seed + 1)
             out["noise_floor"] = replay_error(out["local"], again)
             out["noise_floor"].update(measures_error(local_measures, again_measures))
+        if each:
+            out["each_seconds_per_step"] = replay_each(sim, scenario, regions, entries, folder, seed)
     finally:
         sim.close()
     return out
 
 
-__all__ = ["MAX_DISTANCE", "ReplayCore", "cut_regions", "measures_error", "replay_error", "replay_regions",
+__all__ = ["MAX_DISTANCE", "ReplayCore", "cut_regions", "measures_error", "replay_each", "replay_error", "replay_regions",
            "vehicle_types"]
