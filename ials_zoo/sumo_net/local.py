@@ -51,6 +51,7 @@ class GSInfluence:
     speed, type, speed factor)``, one list per recorded step (module docstring)."""
 
     def __init__(self, entries_per_step: list, lights):
+        self.recorded = len(entries_per_step)
         self.steps = {light: [[] for _ in entries_per_step] for light in lights}
         for t, step in enumerate(entries_per_step):
             for light, *entry in step:
@@ -59,8 +60,7 @@ class GSInfluence:
 
     def rate(self) -> float:
         """Mean vehicles entering all regions per step."""
-        return float(sum(len(x) for s in self.steps.values() for x in s) / max(len(next(iter(self.steps.values()),
-                                                                                        [1])), 1))
+        return sum(len(x) for steps in self.steps.values() for x in steps) / max(self.recorded, 1)
 
 
 class LocalNetCore(NetCore):
