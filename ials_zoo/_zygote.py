@@ -5,7 +5,7 @@
 
 import sys
 
-from ials_zoo.processes import zygote_main
+from ials_zoo.zygote import zygote_main
 
 if __name__ == "__main__":
     zygote_main(int(sys.argv[1]), sys.argv[2])

@@ -22,11 +22,9 @@ and the env workers of SB3's vector envs (:mod:`ials_zoo.single_agent`). Pools o
 
 from __future__ import annotations
 
-import atexit
 import concurrent.futures
 import contextlib
 import ctypes
-import importlib
 import multiprocessing
 import os
 import pickle
@@ -38,6 +36,8 @@ import threading
 import time
 import traceback
 
+from ials_zoo import zygote as zygotes
+from ials_zoo.children import fresh_interpreter, process_state
 from ials_zoo.errors import BadInput
 
 _PR_SET_PDEATHSIG = 1
@@ -222,16 +222,20 @@ class WorkerBadInput(WorkerError, BadInput):
     """Bad input found inside a worker (its message names it): printed like any bad input."""
 
 
-def _fresh_interpreter(module: str, fds: tuple[int, ...], extra: tuple[str, ...] = ()):
-    """``python -m module *fds *extra`` in its own session (a Ctrl-C at the terminal is this
-    process's to handle: it closes its workers), sharing only ``fds`` and the environment."""
-    import subprocess
+def _start(fds: tuple[int, int, int], preload):
+    """The process that serves on ``fds``: forked from the zygote of ``preload`` (Linux), or a
+    fresh interpreter. A zygote that died since its last fork is replaced once."""
+    if not preload or not zygotes.available():
+        return fresh_interpreter(WORKER_MODULE, fds)
+    for attempt in (0, 1):
+        try:
+            return zygotes.zygote_for(tuple(preload), SERVE_ENTRY).fork(fds)
+        except zygotes.ZygoteError as exc:
+            if exc.kind != "died" or attempt:
+                raise WorkerError(f"could not start a worker: {exc}", kind=exc.kind) from None
 
-    env = dict(os.environ)
-    env.setdefault("OMP_NUM_THREADS", "1")
-    return subprocess.Popen([sys.executable, "-m", module, *map(str, fds), *extra], pass_fds=fds,
-                            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, env=env, close_fds=True,
-                            start_new_session=True)
+
+SERVE_ENTRY = "ials_zoo.processes:serve"
 
 
 class Worker:
@@ -240,8 +244,8 @@ class Worker:
     (:func:`add_worker_context`), no ``__main__`` guard needed, its console output dropped)
     that dies with this process, and called by method name over two dedicated pipes.
     ``preload`` (module names, or ``"module:function"`` to call): the interpreter is instead a
-    fork of a :class:`Zygote` that imported them once (Linux), which starts in milliseconds
-    instead of the second a fresh interpreter needs to import them.
+    fork of a :class:`ials_zoo.zygote.Zygote` that imported them once (Linux), which starts in
+    milliseconds instead of the second a fresh interpreter needs to import them.
 
     Nothing waits forever on it, sending included. A :class:`WorkerError` naming the worker
     comes when it dies (``kind="died"``), is stopped by ``SIGSTOP`` or a debugger
@@ -267,9 +271,7 @@ class Worker:
         r_parent, w_child = os.pipe()  # child -> parent
         beat_r, beat_w = os.pipe()  # child -> parent heartbeats
         try:
-            zygote = zygote_for(preload) if preload else None
-            self.process = (zygote.fork((r_child, w_child, beat_w)) if zygote is not None
-                            else _fresh_interpreter(WORKER_MODULE, (r_child, w_child, beat_w)))
+            self.process = _start((r_child, w_child, beat_w), preload)
         except BaseException:
             for fd in (w_parent, r_parent, beat_r):
                 os.close(fd)
@@ -396,7 +398,7 @@ class Worker:
             self.process.kill()
         with contextlib.suppress(Exception):
             self.process.wait(timeout=5)
-        if isinstance(self.process, ForkedProcess):
+        if isinstance(self.process, zygotes.ForkedProcess):
             self.process.release()
         with contextlib.suppress(OSError):
             self._conn_r.close()
@@ -407,196 +409,6 @@ class Worker:
     def __del__(self):
         with contextlib.suppress(Exception):
             self.close(kill=True)
-
-
-# ----------------------------------------------------------------------------- zygotes
-
-ZYGOTE_MODULE = "ials_zoo._zygote"
-_FORK, _REAP = b"F", b"R"
-_INT = struct.Struct("!q")
-
-
-def zygote_main(sock_fd: int, setup: str) -> None:
-    """A :class:`Zygote`'s process (``python -m ials_zoo._zygote FD SETUP``): take the parent's
-    ``sys.path`` and import the preload list (``SETUP``: JSON ``[path, preload]``), then fork
-    one worker (:func:`serve`) per request until the parent's socket closes. Single-threaded,
-    so a fork copies a process that holds no lock; it reaps a child only when asked (a pid
-    cannot be reused before), and when it dies its children die with it (:func:`die_with_parent`)."""
-    import json
-    import socket
-
-    die_with_parent(ignore_sigint=True)
-    path, preload = json.loads(setup)
-    sys.path[:] = path
-    for entry in preload:
-        module, _, function = entry.partition(":")
-        with contextlib.suppress(Exception):  # a failed preload fails again, with its message, in the worker
-            loaded = importlib.import_module(module)
-            if function:
-                getattr(loaded, function)()
-    sock = socket.socket(fileno=sock_fd)
-    while True:
-        try:
-            data, fds, _, _ = socket.recv_fds(sock, 64, 3)
-        except OSError:
-            return
-        if not data:
-            return  # the parent is gone
-        if data[:1] == _FORK and len(fds) == 3:
-            pid = os.fork()
-            if pid == 0:
-                sock.close()
-                try:
-                    serve(*fds)
-                finally:
-                    os._exit(0)
-            for fd in fds:
-                os.close(fd)
-            sock.sendall(_INT.pack(pid))
-        elif data[:1] == _REAP:
-            try:
-                done, status = os.waitpid(_INT.unpack(data[1:9])[0], os.WNOHANG)
-                code = os.waitstatus_to_exitcode(status) if done else -(1 << 40)
-            except ChildProcessError:
-                code = -(1 << 41)
-            sock.sendall(_INT.pack(code))
-
-
-class ForkedProcess:
-    """A worker forked by a :class:`Zygote`, with the part of ``subprocess.Popen``'s interface
-    that :class:`Worker` uses (``pid``, ``poll``, ``returncode``, ``wait``, ``kill``). It is the
-    zygote's child, so it is watched through a pidfd and reaped by the zygote."""
-
-    def __init__(self, zygote: Zygote, pid: int):
-        self.pid, self.returncode, self._zygote = pid, None, zygote
-        self._pidfd = os.pidfd_open(pid)
-
-    def poll(self) -> int | None:
-        if self.returncode is None and self._pidfd is not None and select.select([self._pidfd], [], [], 0)[0]:
-            self.returncode = self._zygote.reap(self.pid)
-        return self.returncode
-
-    def wait(self, timeout: float | None = None) -> int:
-        import subprocess
-
-        if self.poll() is None and self._pidfd is not None:
-            select.select([self._pidfd], [], [], timeout)
-        if self.poll() is None:
-            raise subprocess.TimeoutExpired(f"pid {self.pid}", timeout)
-        return self.returncode
-
-    def kill(self) -> None:
-        if self.poll() is None:
-            with contextlib.suppress(OSError):
-                signal.pidfd_send_signal(self._pidfd, signal.SIGKILL)
-
-    def release(self) -> None:
-        """Close the pidfd (after :meth:`wait`); the process is not watched any more."""
-        if self._pidfd is not None:
-            with contextlib.suppress(OSError):
-                os.close(self._pidfd)
-            self._pidfd = None
-
-
-class Zygote:
-    """A fresh interpreter that imports ``preload`` once and then forks workers on request:
-    each fork is a process in which those modules are imported but nothing else happened (no
-    simulation started, no state of this process), ready in milliseconds. It dies with this
-    process, and its workers with it; one per preload list (:func:`zygote_for`)."""
-
-    START_SECONDS = 300.0
-
-    def __init__(self, preload: tuple[str, ...]):
-        import json
-        import socket
-
-        self.preload = tuple(preload)
-        ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
-        try:
-            self.process = _fresh_interpreter(ZYGOTE_MODULE, (theirs.fileno(),),
-                                              (json.dumps([list(sys.path), list(self.preload)]),))
-        except BaseException:
-            ours.close()
-            raise
-        finally:
-            theirs.close()
-        self._sock, self._lock = ours, threading.Lock()
-
-    def _ask(self, data: bytes, fds=()) -> int:
-        """One request and its 8-byte answer; never waits on a dead zygote, nor forever."""
-        import socket
-
-        with self._lock:
-            try:
-                socket.send_fds(self._sock, [data], list(fds))
-            except OSError as exc:  # its socket closed: it died (or was replaced by a new one)
-                raise WorkerError(f"the zygote (pid {self.process.pid}) is gone ({exc})", kind="died") from None
-            answer, start = b"", time.monotonic()
-            self._sock.settimeout(0.2)
-            while len(answer) < _INT.size:
-                try:
-                    chunk = self._sock.recv(_INT.size - len(answer))
-                except TimeoutError:
-                    chunk = None
-                except OSError:
-                    chunk = b""
-                if chunk == b"" or self.process.poll() is not None:
-                    raise WorkerError(f"the zygote (pid {self.process.pid}) died", kind="died")
-                if time.monotonic() - start > self.START_SECONDS:
-                    raise WorkerError(f"the zygote (pid {self.process.pid}) did not answer in "
-                                      f"{self.START_SECONDS:.0f} s", kind="timeout")
-                answer += chunk or b""
-            return _INT.unpack(answer)[0]
-
-    def alive(self) -> bool:
-        return self.process.poll() is None
-
-    def fork(self, fds: tuple[int, int, int]) -> ForkedProcess:
-        """A worker serving on ``fds`` (``serve``'s read, write and heartbeat pipes)."""
-        return ForkedProcess(self, self._ask(_FORK, fds))
-
-    def reap(self, pid: int) -> int:
-        """The exit code of ``pid``, a child of this zygote that has exited (-1: unknown)."""
-        try:
-            code = self._ask(_REAP + _INT.pack(pid))
-        except WorkerError:
-            return -1  # the zygote is gone: its children were reparented and reaped elsewhere
-        return code if code > -(1 << 40) else -1
-
-    def close(self) -> None:
-        with contextlib.suppress(OSError):
-            self._sock.close()
-        if self.process.poll() is None:
-            with contextlib.suppress(Exception):
-                self.process.wait(timeout=5)
-        if self.process.poll() is None:
-            self.process.kill()
-
-
-_zygotes: dict[tuple, Zygote] = {}
-_zygotes_lock = threading.Lock()
-
-
-def zygote_for(preload: tuple[str, ...]) -> Zygote | None:
-    """The live :class:`Zygote` of ``preload`` (started at first use), or None where forking
-    workers is not available (no ``pidfd_open``: not Linux 5.3+)."""
-    if not (hasattr(os, "pidfd_open") and hasattr(signal, "pidfd_send_signal") and hasattr(os, "fork")):
-        return None
-    key = tuple(preload)
-    with _zygotes_lock:
-        zygote = _zygotes.get(key)
-        if zygote is None or not zygote.alive():
-            if zygote is not None:
-                zygote.close()
-            zygote = _zygotes[key] = Zygote(key)
-        return zygote
-
-
-@atexit.register
-def _close_zygotes() -> None:
-    for zygote in list(_zygotes.values()):
-        zygote.close()
-    _zygotes.clear()
 
 
 def call_all(workers: list[Worker], method: str, args: list | None = None, timeout: float | None = None) -> list:
@@ -622,16 +434,6 @@ def start_all(workers: list[Worker], timeout: float | None = 300.0) -> None:
         for w in workers:
             w.close(kill=True)
         raise
-
-
-def process_state(pid: int) -> str | None:
-    """The kernel's one-letter state of ``pid`` (``R``, ``S``, ``T`` stopped, ``Z`` zombie,
-    ...) from ``/proc``, or None where that cannot be read."""
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()[0]
-    except (OSError, IndexError):
-        return None
 
 
 def _proc_table() -> dict[int, tuple[int, str]]:
@@ -702,5 +504,5 @@ _REAPER = None
 _REAPER_PIPE: list[int] = []
 
 
-__all__ = ["ForkedProcess", "Worker", "Zygote", "WorkerBadInput", "WorkerError", "add_worker_context", "call_all", "die_with_parent", "keep_freed_memory", "process_state", "reap_descendants_when_gone",
-           "shutdown_pool", "sigint_ignored_at_birth", "spawn_pool", "start_all", "zygote_for", "zygote_main"]
+__all__ = ["Worker", "WorkerBadInput", "WorkerError", "add_worker_context", "call_all", "die_with_parent", "keep_freed_memory", "process_state", "reap_descendants_when_gone",
+           "shutdown_pool", "sigint_ignored_at_birth", "spawn_pool", "start_all"]

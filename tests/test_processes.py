@@ -172,11 +172,12 @@ def test_sumo_workers_die_with_their_parent(tmp_path):
 def test_forked_workers_are_the_zygotes_leave_no_zombies_and_die_with_it():
     import random
 
-    from ials_zoo.processes import Worker, zygote_for
+    from ials_zoo.processes import SERVE_ENTRY, Worker
+    from ials_zoo.zygote import zygote_for
 
     preload = ("random", "no_such_module_here")  # a preload that fails costs nothing but its speed
     workers = [Worker(random.Random, (seed,), name="forked worker", preload=preload) for seed in (1, 2, 3)]
-    zygote = zygote_for(preload)
+    zygote = zygote_for(preload, SERVE_ENTRY)
     try:
         for w in workers:
             w.started()
@@ -186,18 +187,67 @@ def test_forked_workers_are_the_zygotes_leave_no_zombies_and_die_with_it():
         os.kill(workers[1].pid, signal.SIGKILL)
         with pytest.raises(Exception, match="died"):
             workers[1].call("random")
-        assert workers[1].process.returncode in (-signal.SIGKILL, None)
+        assert workers[1].process.returncode == -signal.SIGKILL  # the zygote kept its exit code
         assert _children(zygote.process.pid) == {workers[2].pid}  # the others reaped: no zombies
         os.kill(zygote.process.pid, signal.SIGKILL)  # the zygote's death takes its workers with it
         assert _gone_within({workers[2].pid}, 5)
         again = Worker(random.Random, (4,), preload=preload)  # and the next worker gets a new zygote
         again.started()
         assert again.call("random") == random.Random(4).random()
-        assert zygote_for(preload) is not zygote
+        assert zygote_for(preload, SERVE_ENTRY) is not zygote
         again.close()
     finally:
         for w in workers:
             w.close(kill=True)
+
+
+def test_an_answer_cut_short_is_never_taken_for_the_next_one(monkeypatch):
+    import random
+
+    from ials_zoo import zygote as zygotes
+    from ials_zoo.processes import SERVE_ENTRY, Worker
+
+    preload = ("random", "json")
+    Worker(random.Random, (0,), preload=preload).close()  # the zygote has answered once
+    zygote = zygotes.zygote_for(preload, SERVE_ENTRY)
+    real = zygotes.Zygote._receive
+
+    def cut_short(self, number):
+        raise KeyboardInterrupt  # Ctrl-C after the fork request went out, before its answer came
+
+    monkeypatch.setattr(zygotes.Zygote, "_receive", cut_short)
+    with pytest.raises(KeyboardInterrupt):
+        Worker(random.Random, (1,), preload=preload)
+    monkeypatch.setattr(zygotes.Zygote, "_receive", real)
+    import importlib
+
+    w = Worker(importlib.import_module, ("os",), preload=preload)  # a worker that is the os module
+    w.started()
+    assert w.call("getpid") == w.pid  # its own pid, not the answer to the cut-short request
+    assert zygotes.zygote_for(preload, SERVE_ENTRY) is zygote
+    w.close()
+    deadline = time.time() + 5  # the cut-short fork found its pipes closed, exited and was reaped
+    while _children(zygote.process.pid) and time.time() < deadline:
+        time.sleep(0.2)
+    assert not _children(zygote.process.pid)
+
+
+def test_a_fork_of_the_parent_leaves_the_parents_workers_alone():
+    import random
+
+    from ials_zoo.processes import Worker
+
+    w = Worker(random.Random, (0,), preload=("random",))
+    w.started()
+    pid = os.fork()
+    if pid == 0:  # the fork closes its copy of the handle: it must not kill the parent's worker
+        try:
+            w.close(kill=True)
+        finally:
+            os._exit(0)
+    os.waitpid(pid, 0)
+    assert w.call("random") == random.Random(0).random()
+    w.close()
 
 
 def test_seeds_are_checked_and_never_alias():

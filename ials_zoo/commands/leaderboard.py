@@ -37,11 +37,14 @@ def _policies_relative_to(result: dict, source, out) -> dict:
     result's folder (as a training run writes it), named relative to ``out``'s folder instead."""
     import os
 
-    here, there = Path(source).resolve().parent, Path(out).resolve().parent
+    from ials_zoo.leaderboard.store import resolve_policy_file
+
+    there = Path(out).resolve().parent
     for s in result["scores"]:
         name = s.get("policy_file")
-        if name and not os.path.isabs(name) and (here / name).is_file():
-            s["policy_file"] = os.path.relpath(here / name, there)
+        found = resolve_policy_file(name, Path(source)) if name and not os.path.isabs(name) else None
+        if found is not None:  # the file validation read: named so that the merged result finds it too
+            s["policy_file"] = os.path.relpath(Path(found).resolve(), there)
     return result
 
 def configure(parser):

@@ -217,8 +217,11 @@ class SimHandle:
         # forked from a process that imported libsumo and the core but never started a
         # simulation: as fresh as a new interpreter for SUMO, without its second of imports
         preload = ("ials_zoo.sumo.lease:import_libsumo", self.core_name.partition(":")[0])
-        return Worker(_WorkerCore, (self.core_name, self.config), name="SUMO worker",
-                      unresponsive_after=self.unresponsive_after, preload=preload)
+        try:
+            return Worker(_WorkerCore, (self.core_name, self.config), name="SUMO worker",
+                          unresponsive_after=self.unresponsive_after, preload=preload)
+        except WorkerError as exc:  # its zygote died, stopped or did not answer
+            raise WorkerDiedError(f"could not start a SUMO worker: {exc}") from None
 
     def _spawn(self):
         # a spare started earlier (restart(spare=True)) has done its imports meanwhile

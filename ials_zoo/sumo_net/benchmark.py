@@ -102,14 +102,15 @@ def bench_local(net: str, repeats: int = 3, max_cycles: int | None = None) -> di
     start = time.perf_counter()
     local = LocalNetEnv(**options)
     built = time.perf_counter() - start
-    gs = SumoNetEnv(**options)
-    pairs = []
+    gs, pairs = None, []
     try:
+        gs = SumoNetEnv(**options)
         for seed in range(repeats):
             pairs.append((_random_episode(gs, seed), _random_episode(local, seed)))
     finally:
         local.close()
-        gs.close()
+        if gs is not None:
+            gs.close()
     agents = len(gs.possible_agents)
     return {"net": net, "agents": agents, "repeats": repeats, "build_seconds": built,
             "gs_us_per_agent_decision": _stat([g / agents * 1e6 for g, _ in pairs]),

@@ -217,7 +217,7 @@ def replay_each(sim, scenario, regions: dict, entries, folder, seed: int = 0) ->
         mine = [[e for e in step if e[0] == light] for step in entries]
         sim.call("replay", merged, [Path(folder) / "vtypes.add.xml"], scenario.begin, mine, [], [], len(mine) + 1,
                  seed)
-        out[light] = sim.call("timing") / len(mine)
+        out[light] = sim.call("timing") / max(len(mine), 1)
     return out
 
 
