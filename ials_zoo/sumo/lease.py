@@ -12,7 +12,7 @@ work, and a
   :class:`SimulationBusyError` (also when someone else started a libsumo simulation outside
   this module: ``libsumo.simulation.isLoaded()``);
 * in a **worker process** (``backend="worker"``): a :class:`ials_zoo.processes.Worker` that
-  holds the core, forked from a :class:`ials_zoo.processes.Zygote` that imported libsumo and
+  holds the core, forked from a :class:`ials_zoo.zygote.Zygote` that imported libsumo and
   the core's module but never started a simulation (nothing of the parent inherited; it starts
   in milliseconds, not the second a fresh interpreter takes to import them); one pipe round
   trip per call over two dedicated pipes (SUMO's own console output cannot corrupt the
