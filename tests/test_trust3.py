@@ -627,6 +627,7 @@ def test_a_dials_entry_re_trains_whatever_the_worker_count_and_headers_compare_t
 
 def test_the_quiet_ctrl_c_is_the_commands_alone(tmp_path):
     """``python -m`` of another package that imports ials_zoo keeps Python's own Ctrl-C."""
+    import signal
     import subprocess
     import sys
 
@@ -634,6 +635,8 @@ def test_the_quiet_ctrl_c_is_the_commands_alone(tmp_path):
     pkg.mkdir()
     (pkg / "__init__.py").write_text("import ials_zoo\n")
     (pkg / "tool.py").write_text("import signal\nprint(signal.getsignal(signal.SIGINT) is signal.default_int_handler)\n")
+    # started as a terminal starts a command: a suite run in the background (`cmd &` in a script)
+    # ignores SIGINT, and a child would inherit that, not Python's handler
     proc = subprocess.run([sys.executable, "-m", "otherpkg.tool"], cwd=tmp_path, capture_output=True, text=True,
-                          timeout=120)
+                          timeout=120, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     assert proc.stdout.strip() == "True", proc.stderr[-2000:]
