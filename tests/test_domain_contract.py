@@ -29,7 +29,9 @@ def domains():
     return ["traffic_grid_v0", "warehouse_v0", TOY]
 
 
-GS_ONLY = ["sumo_net_v0"]  # a GS and no local simulator yet: the GS half of the contract
+# agents with their own spaces: the GS half of the contract, and one junction's IALS
+# (tests/test_sumo_net_ials.py) but no multi-agent IALS tools yet
+OWN_SPACES = ["sumo_net_v0"]
 
 
 @pytest.fixture(params=domains())
@@ -38,30 +40,34 @@ def domain(request) -> Domain:
     return get_domain(request.param)
 
 
-@pytest.fixture(params=domains() + GS_ONLY)
+@pytest.fixture(params=domains() + OWN_SPACES)
 def any_domain(request) -> Domain:
     """Every domain: the GS half of the contract."""
     return get_domain(request.param)
 
 
-def test_gs_only_domains_say_so_and_the_ials_tools_refuse_them_by_name():
+def test_domains_with_their_own_spaces_say_so_and_the_multi_agent_tools_refuse_them_by_name():
     from ials_zoo.core.domains import ials_domain_ids
     from ials_zoo.errors import BadInput
 
-    assert set(GS_ONLY) <= set(domain_ids()) and not set(GS_ONLY) & set(ials_domain_ids())
+    assert set(OWN_SPACES) <= set(domain_ids()) and not set(OWN_SPACES) & set(ials_domain_ids())
     assert set(domains()) - {TOY} <= set(ials_domain_ids())
-    for env_id in GS_ONLY:
+    for env_id in OWN_SPACES:
         d = get_domain(env_id)
-        assert not d.has_ials and d.local_simulator is None
-        with pytest.raises(BadInput, match=f"train ippo needs a local simulator.*{env_id}"):
+        assert not d.has_ials and d.has_local_simulator and d.observation_space is None
+        assert d.require_local_simulator("make_ials") is d
+        with pytest.raises(BadInput, match=f"train ippo needs a local simulator and shared agent spaces.*{env_id}"):
             d.require_ials("train ippo")
         with pytest.raises(BadInput, match="own action space"):
             d.n_actions  # noqa: B018
-        with pytest.raises(BadInput, match="make_ials needs a local simulator"):
-            ials_zoo.make_ials(env_id, d.default_agents[0])
         with pytest.raises(BadInput, match="make_ials_parallel_env needs a local simulator"):
             ials_zoo.make_ials_parallel_env(env_id)
-    with pytest.raises(BadInput, match="needs region_spec, observation_space, action_space"):
+    gs_only = Domain(env_id="gs_only_v0", parallel_env=dict, possible_agents=list, default_agents=("a",),
+                     episode_length=1)
+    assert not gs_only.has_local_simulator
+    with pytest.raises(BadInput, match="make_ials needs a local simulator, which gs_only_v0"):
+        gs_only.require_local_simulator("make_ials")
+    with pytest.raises(BadInput, match="needs region_spec"):
         Domain(env_id="half_v0", parallel_env=dict, possible_agents=list, default_agents=("a",), episode_length=1,
                local_simulator=dict)
 

@@ -53,7 +53,9 @@ class Domain:
             :mod:`ials_zoo.core.region` in its infos and has ``region_spec(agent)``.
         local_simulator: ``local_simulator(agent, n_envs=1, **options) -> LocalSimulator``;
             accepts (and ignores) the GS-only options. None for a domain that has a GS only
-            (no IALS yet: :attr:`has_ials` is False, and the IALS tools refuse it by name).
+            (no IALS yet: :attr:`has_ials` is False, and the IALS tools refuse it by name). A
+            domain whose agents have their own spaces (no :attr:`observation_space`) has the
+            single-agent IALS only (``make_ials``, ``train-aip``: :attr:`has_local_simulator`).
         region_spec: ``region_spec(agent, **options) -> RegionSpec`` without building a GS
             (None without a local simulator).
         possible_agents: ``possible_agents(**options) -> list[str]``: every agent id of the
@@ -79,6 +81,8 @@ class Domain:
         replay_agreement: the share of observation entries on which the LS, fed the GS's own
             actions and influence sources from the same start, must agree with the GS
             (1.0 only where the LS is exact without the GS's other random draws).
+        collect_options: GS options the influence collector adds to the GS it runs (a GS that
+            reports its region data only when asked, because watching regions costs).
         metrics: the physical metrics of an episode, ``{name: "lower" | "higher"}`` (which
             way is better); the GS then has ``enable_metrics()`` (record from the next
             reset on) and ``episode_metrics() -> {name: float}`` for the episode just run.
@@ -116,6 +120,7 @@ class Domain:
     null_influence: int = 0
     untrained_probs: tuple | None = None
     replay_agreement: float = 0.9
+    collect_options: dict = field(default_factory=dict)
     metrics: dict = field(default_factory=dict)
     metric_ranges: dict = field(default_factory=dict)
     score_metric: str | None = None
@@ -126,7 +131,9 @@ class Domain:
 
     def __post_init__(self):
         if self.local_simulator is not None:
-            missing = [k for k in ("region_spec", "observation_space", "action_space") if getattr(self, k) is None]
+            missing = [k for k in ("region_spec",) if getattr(self, k) is None]
+            if (self.observation_space is None) != (self.action_space is None):
+                missing += ["observation_space" if self.observation_space is None else "action_space"]
             if missing:
                 raise BadInput(f"{self.env_id}: a domain with a local simulator needs {', '.join(missing)}")
             if self.default_predictor not in ("gru", "mlp"):
@@ -184,9 +191,24 @@ class Domain:
 
     @property
     def has_ials(self) -> bool:
-        """Whether the domain has a local simulator (and so IALS, AIPs, DIALS and the tools
-        built on them); a domain with a GS only has none yet."""
+        """Whether the domain has a local simulator and agents that share their spaces (and so
+        every IALS tool: multi-agent IALS, DIALS, fidelity, ...); a domain with a GS only has
+        none yet, and one whose agents have their own spaces has the single-agent IALS alone
+        (:attr:`has_local_simulator`)."""
+        return self.local_simulator is not None and self.observation_space is not None
+
+    @property
+    def has_local_simulator(self) -> bool:
+        """Whether one agent's IALS can be built (``make_ials``, ``train-aip``)."""
         return self.local_simulator is not None
+
+    def require_local_simulator(self, what: str) -> Domain:
+        """This domain, or a BadInput saying that ``what`` needs a local simulator it lacks."""
+        if not self.has_local_simulator:
+            raise BadInput(f"{what} needs a local simulator, which {self.env_id} does not have yet; its GS is "
+                           f"ials_zoo.{self.env_id}.parallel_env() (domains with one: "
+                           f"{', '.join(d for d in domain_ids() if get_domain(d).has_local_simulator)})")
+        return self
 
     def require_ials(self, what: str) -> Domain:
         """This domain, or a BadInput saying that ``what`` needs a local simulator it lacks."""

@@ -289,7 +289,7 @@ def _collect_in_process(domain, env_id: str, agents: list, steps: int, policy, s
     """:func:`collect_all` in this process, its arguments checked: one GS run of whole episodes
     until ``steps`` are recorded."""
     t0 = time.perf_counter()
-    env = domain.parallel_env(learners=agents, **gs_options)
+    env = domain.parallel_env(learners=agents, **{**domain.collect_options, **gs_options})
     try:
         actor = _JointActor(policy, agents, env.action_space, seed)
         keys = {kind: dset_key(kind) for kind in DSET_KINDS}

@@ -325,7 +325,7 @@ def trained_predictor(
     A shipped/cached AIP is used only if it was trained for exactly this region setting
     (``RegionSpec`` incl. its params), d-set kind and architecture (default: the domain's).
     """
-    domain = get_domain(env_id).require_ials("make_ials")
+    domain = get_domain(env_id).require_local_simulator("make_ials")
     options = dict(options or {})
     region = domain.region_spec(agent, **options)
     arch = arch or domain.default_predictor
@@ -429,7 +429,7 @@ def make_ials(
     """
     if render_mode is not None:
         raise BadInput(f"IALS envs do not render; got render_mode={render_mode!r}")
-    domain = get_domain(env_id).require_ials("make_ials")
+    domain = get_domain(env_id).require_local_simulator("make_ials")
     domain.check_agent(agent, **options)
     pred = resolve_predictor(predictor, env_id, agent, dset_kind, seed, options)
     ls = domain.local_simulator(agent, n_envs=1, **options)
@@ -464,7 +464,7 @@ def make_ials_vec_env(
     """
     if isinstance(n_envs, bool) or not isinstance(n_envs, (int, np.integer)) or n_envs < 1:
         raise BadInput(f"n_envs must be a positive int, got {n_envs!r}")
-    domain = get_domain(env_id)
+    domain = get_domain(env_id).require_local_simulator("make_ials_vec_env")
     domain.check_agent(agent, **options)
     pred = resolve_predictor(predictor, env_id, agent, dset_kind, seed, options)
     ls = domain.local_simulator(agent, n_envs=int(n_envs), **options)

@@ -1,5 +1,7 @@
-"""Any SUMO network as a zoo domain (the GS; the local simulators of its junctions are measured
-in :mod:`ials_zoo.sumo_net.local`, not yet trained on)."""
+"""Any SUMO network as a zoo domain: the GS, and one junction's IALS (its region's local
+simulator, :mod:`ials_zoo.sumo_net.island`, with an AIP of :mod:`ials_zoo.sumo_net.influence`'s
+sources). Junctions have their own spaces, so the multi-agent IALS tools (DIALS, fidelity) do
+not take this domain yet; :mod:`ials_zoo.sumo_net.local` measures every region side by side."""
 
 from __future__ import annotations
 
@@ -13,6 +15,20 @@ def parallel_env(**options):
     from ials_zoo.sumo_net.env import parallel_env as make
 
     return make(**options)
+
+
+def local_simulator(agents, n_envs: int = 1, **options):
+    """One junction's local simulator (:class:`ials_zoo.sumo_net.island.SumoNetLocalSimulator`)."""
+    from ials_zoo.sumo_net.island import local_simulator as make
+
+    return make(agents, n_envs, **options)
+
+
+def region_spec(agent, **options):
+    """A junction's region layout (:func:`ials_zoo.sumo_net.influence.region_spec`), without SUMO."""
+    from ials_zoo.sumo_net.influence import region_spec as spec
+
+    return spec(agent, **options)
 
 
 def possible_agents(**options) -> list[str]:
@@ -64,8 +80,13 @@ def episode_steps(**options) -> int:
 
 DOMAIN = Domain(
     env_id=ENV_ID,
-    description="any SUMO network, RESCO's eight city and grid maps by name (libsumo; GS only)",
+    description="any SUMO network, RESCO's eight city and grid maps by name (libsumo; single-junction IALS)",
     parallel_env=parallel_env,
+    local_simulator=local_simulator,
+    region_spec=region_spec,
+    default_predictor="mlp",
+    null_influence=0,
+    collect_options={"region_data": True},  # the GS watches its learners' regions only when asked
     possible_agents=possible_agents,
     default_agents=("cluster_1098574052_1098574061_247379905",),  # cologne8's 4-green junction
     episode_length=360,

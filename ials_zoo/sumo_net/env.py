@@ -136,7 +136,7 @@ class SumoNetEnv(ParallelEnv):
     def __init__(self, net=None, sumocfg=None, net_file=None, route_files=None, begin=None, end=None,
                  decision_seconds=None, yellow_seconds=None, max_cycles=None, learners=None, max_distance=200.0,
                  observation="drq_norm", reward="wait_norm", backend="worker", fresh_process=True, render_mode=None,
-                 scripted_learners=False, **unknown):
+                 scripted_learners=False, region_data=False, **unknown):
         if scripted_learners is not False:  # the zoo's single-agent scoring passes False
             raise BadInput(f"{ENV_ID} has no scripted controller for learners: pass learners=[] to run every light "
                            "on its own program, or see ials_zoo.sumo_net.controllers")
@@ -148,6 +148,9 @@ class SumoNetEnv(ParallelEnv):
         self._observe, self._reward = observation_fn(observation), reward_fn(reward)
         self.scenario = scenario_of(net, sumocfg, net_file, route_files, begin, end, decision_seconds, yellow_seconds,
                                     max_cycles)
+        given = dict(net=net, sumocfg=sumocfg, net_file=net_file, route_files=route_files, begin=begin, end=end,
+                     decision_seconds=decision_seconds, yellow_seconds=yellow_seconds, max_cycles=max_cycles)
+        self._scenario_options = {k: v for k, v in given.items() if v is not None}
         self.network = read_network(self.scenario.net_file)
         self.max_distance = _check_distance(max_distance)
         self.possible_agents = _learner_ids(learners, self.network.ids)
@@ -165,6 +168,12 @@ class SumoNetEnv(ParallelEnv):
             raise BadInput(f"fresh_process=True runs every episode in a new worker: backend must be 'worker', "
                            f"not {backend!r} (or pass fresh_process=False)")
         self.fresh_process = bool(fresh_process)
+        if not isinstance(region_data, (bool, np.bool_)):
+            raise BadInputType(f"region_data must be a bool, got {region_data!r}")
+        self.region_data = bool(region_data)
+        if self.region_data:  # the learners' regions watched every second (a cost): for AIP data
+            self.CORE = "ials_zoo.sumo_net.influence:RegionNetCore"
+        self._region = None
         self._tmp = tempfile.mkdtemp(prefix="ials_zoo_sumo_net_")  # the episodes' tripinfo, read and removed
         self._sim = SimHandle(self.CORE, self._core_config(), backend)
         self.backend = self._sim.mode
@@ -181,7 +190,21 @@ class SumoNetEnv(ParallelEnv):
             "lanes": [list(x.lanes) for x in lights],
             "greens": [[x.phases[i] for i in x.greens] for x in lights],
             "controlled": list(self.possible_agents), "max_distance": self.max_distance,
+            **({"regions": self._region_layouts()} if self.region_data else {}),
         }
+
+    def _region_layouts(self) -> list[dict]:
+        from dataclasses import asdict
+
+        from ials_zoo.sumo_net.influence import region_layout
+
+        return [asdict(region_layout(self.scenario.net_file, a)) for a in self.possible_agents]
+
+    def region_spec(self, agent):
+        """The region layout of a learner (:func:`ials_zoo.sumo_net.influence.region_spec`)."""
+        from ials_zoo.sumo_net.influence import region_spec
+
+        return region_spec(self._check_agent(agent), **self._scenario_options)
 
     # -- spaces
     def observation_space(self, agent):
@@ -211,7 +234,19 @@ class SumoNetEnv(ParallelEnv):
         return {name: m[:, i].copy() for i, name in enumerate(MEASURES)}
 
     def _store(self, result) -> None:
+        if self.region_data:
+            *result, self._region = result
         self._measures, self._phases, self._time = result
+
+    def _infos(self) -> dict:
+        """Every learner's region data (``region_data=True``; :mod:`ials_zoo.core.region`), else {}."""
+        if not self.region_data:
+            return {a: {} for a in self.agents}
+        from ials_zoo.sumo_net.influence import full_dset
+
+        influences, dsets = self._region
+        return {a: {"influence": influences[k].copy(), "dset": dsets[k].copy(),
+                    "dset_full": full_dset(dsets[k], self._light_measures(a))} for k, a in enumerate(self.agents)}
 
     def reset(self, seed=None, options=None):
         """Start an episode (``options``: none are known; PettingZoo's API)."""
@@ -228,7 +263,7 @@ class SumoNetEnv(ParallelEnv):
             self._sim.restart(spare=True)
         self._store(self._sim.call("reset", seed, self._tripinfo))
         self.agents = list(self.possible_agents)
-        return {a: self.observe(a) for a in self.agents}, {a: {} for a in self.agents}
+        return {a: self.observe(a) for a in self.agents}, self._infos()
 
     def _actions(self, actions) -> list[int]:
         if not isinstance(actions, dict):
@@ -265,7 +300,7 @@ class SumoNetEnv(ParallelEnv):
             obs[a], rewards[a] = self._observe(measures, phase), self._reward(measures, phase)
         terms = {a: False for a in self.agents}
         truncs = {a: done for a in self.agents}
-        infos = {a: {} for a in self.agents}
+        infos = self._infos()
         if done:
             self.agents = []
         return obs, rewards, terms, truncs, infos

@@ -6,7 +6,7 @@ SCENARIO_OPTIONS = ("net", "sumocfg", "net_file", "route_files", "begin", "end",
                     "max_cycles")
 DEFAULT_NET = "cologne8"
 OPTIONS = (*SCENARIO_OPTIONS, "learners", "max_distance", "observation", "reward", "backend", "fresh_process",
-           "render_mode")
+           "region_data", "render_mode")
 # what a board entry's evaluation may set: no file paths (a result file never makes us read a
 # path it names), so networks of your own are scored off the board
 BOARD_OPTIONS = ("net", "begin", "end", "decision_seconds", "yellow_seconds", "max_cycles", "max_distance",

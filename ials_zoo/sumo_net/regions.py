@@ -138,6 +138,12 @@ def _nodes_of(tls):
     return {c[0].getEdge().getToNode() for c in tls.getConnections()}
 
 
+def edge_lanes(net_file: str, edge: str) -> tuple[str, ...]:
+    """The lane ids of ``edge`` in ``net_file``, by index."""
+    net = _read(str(net_file), os.path.getmtime(net_file))
+    return tuple(lane.getID() for lane in net.getEdge(edge).getLanes())
+
+
 def network_size(net_file: str) -> tuple[int, float]:
     """``(edges, metres of lanes)`` of the whole network (internal lanes left out)."""
     net = _read(str(net_file), os.path.getmtime(net_file))
@@ -171,4 +177,4 @@ def cut_network(net_file: str, region: NetRegion, out_file: str | os.PathLike, t
     return out_file
 
 
-__all__ = ["CHAIN_CAP_METRES", "SHORT_EXIT_METRES", "NetRegion", "cut_network", "netconvert", "network_size", "regions_of"]
+__all__ = ["CHAIN_CAP_METRES", "SHORT_EXIT_METRES", "NetRegion", "cut_network", "edge_lanes", "netconvert", "network_size", "regions_of"]

@@ -1,0 +1,208 @@
+"""The region data of ``sumo_net_v0``'s junctions: influence sources and d-sets (paper §3).
+
+A light's region is :mod:`ials_zoo.sumo_net.regions`'s (its incoming chains, outgoing edges and
+the edges past short exits). What the rest of the network does to it is the vehicles that
+come in:
+
+* **influence sources**: per *entry point* and per second of a decision, the vehicles that
+  entered the region there during that second, as a class: 0, 1 or 2 (two or more; a third in
+  one second on one road is rare: ``docs/sumo_net.md``). The entry points are the chains'
+  first edges (:attr:`~ials_zoo.sumo_net.regions.NetRegion.sources`, in that order), then
+  ``"inside"``: vehicles that appear on any other edge of the region from outside it (inserted
+  there by the route files, or joining past a short exit). Sources are ordered second-major
+  (``"<entry>@<second>"``), so one decision of 10 s has ``10 * (sources + 1)`` of them.
+  *Where* an entering vehicle goes inside the region, on which lane and how fast it drives are
+  not sources: the local simulator draws them from the GS's own entries at that entry point
+  (:mod:`ials_zoo.sumo_net.island`), so the AIP predicts only *when* vehicles come.
+* **d-set** (``"dset"``): the region's local occupancy where vehicles come in, without the
+  light's state: per lane of every entry edge, :data:`CELLS` cells of :data:`CELL_METRES` m
+  from the lane's start, occupied or not.
+* **full** d-set: the d-set and, per incoming lane of the light (its observation's rows),
+  whether its detection holds a queue and whether it holds approaching vehicles.
+
+:class:`EntryWatcher` does the bookkeeping every SUMO second in the process that owns the
+simulation, the same way in the GS (:class:`RegionNetCore`) and in the local simulator, so
+that both measure the same thing.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ials_zoo.core.region import RegionSpec
+from ials_zoo.sumo_net.core import NetCore
+from ials_zoo.sumo_net.names import ENV_ID, SCENARIO_OPTIONS
+
+ENTRY_CLASSES = 3  # 0, 1, 2 or more vehicles in one second at one entry point
+INSIDE = "inside"
+CELLS, CELL_METRES = 4, 25.0
+
+
+@dataclass(frozen=True)
+class RegionLayout:
+    """What the bookkeeping needs of one light's region (plain data: it crosses to workers).
+
+    Attributes:
+        light: the light's id.
+        sources: the entry edges (the chains' first edges), in the region's order.
+        edges: every edge of the region.
+        source_lanes: every lane of the entry edges, in edge then lane order.
+        lanes: the light's incoming lanes (its observation's rows).
+    """
+
+    light: str
+    sources: tuple[str, ...]
+    edges: tuple[str, ...]
+    source_lanes: tuple[str, ...]
+    lanes: tuple[str, ...]
+
+    @property
+    def points(self) -> tuple[str, ...]:
+        """The entry points: the entry edges, then :data:`INSIDE`."""
+        return (*self.sources, INSIDE)
+
+    def prefixed(self, prefix: str) -> RegionLayout:
+        """The same region in a simulation whose ids carry ``prefix``."""
+        def p(ids):
+            return tuple(prefix + x for x in ids)
+
+        return RegionLayout(prefix + self.light, p(self.sources), p(self.edges), p(self.source_lanes), p(self.lanes))
+
+
+def region_layout(net_file: str, light: str) -> RegionLayout:
+    """The layout of ``light``'s region in the network ``net_file``."""
+    from ials_zoo.sumo_net.network import read_network
+    from ials_zoo.sumo_net.regions import edge_lanes, regions_of
+
+    region = regions_of(net_file)[light]
+    lanes = next(x.lanes for x in read_network(net_file).lights if x.id == light)
+    source_lanes = tuple(lane for e in region.sources for lane in edge_lanes(net_file, e))
+    return RegionLayout(light, region.sources, region.edges, source_lanes, tuple(lanes))
+
+
+def _scenario(options: dict):
+    from ials_zoo.sumo_net.env import scenario_of
+
+    return scenario_of(**{k: options[k] for k in SCENARIO_OPTIONS if k in options})
+
+
+def dset_names(layout: RegionLayout) -> dict[str, tuple[str, ...]]:
+    cells = tuple(f"occ_{lane}_{k}" for lane in layout.source_lanes for k in range(CELLS))
+    light = tuple(f"{what}_{lane}" for lane in layout.lanes for what in ("queue", "approach"))
+    return {"dset": cells, "full": cells + light}
+
+
+def region_spec(agent: str, **options) -> RegionSpec:
+    """The region layout of light ``agent`` under ``sumo_net_v0``'s options, without SUMO."""
+    scenario = _scenario(options)
+    layout = region_layout(scenario.net_file, agent)
+    names = tuple(f"{p}@{s}" for s in range(scenario.decision_seconds) for p in layout.points)
+    params = {"network": scenario.name, "begin": scenario.begin, "end": scenario.end,
+              "decision_seconds": scenario.decision_seconds, "yellow_seconds": scenario.yellow_seconds}
+    return RegionSpec(domain=ENV_ID, agent=agent, influence_names=names,
+                      influence_classes=(ENTRY_CLASSES,) * len(names), dset_names=dset_names(layout), params=params)
+
+
+def full_dset(dset: np.ndarray, measures: np.ndarray) -> np.ndarray:
+    """The full d-set from the d-set and the light's measures (``[lanes, 5]``)."""
+    light = np.stack([measures[:, 2] > 0, measures[:, 0] > 0], axis=1).reshape(-1)
+    return np.concatenate([dset, light.astype(np.uint8)])
+
+
+class EntryWatcher:
+    """Every second, the vehicles entering each watched region, by entry point (module
+    docstring); :meth:`dsets` reads the occupancy cells at a decision."""
+
+    def __init__(self, layouts: list[RegionLayout], decision: int):
+        self.layouts = list(layouts)
+        self.decision = int(decision)
+        self.point_of = [{e: j for j, e in enumerate(x.sources)} for x in self.layouts]
+        self.counts = [np.zeros((self.decision, len(x.points)), np.int64) for x in self.layouts]
+        self.present: list[set] = [set() for _ in self.layouts]
+        self.second = 0
+
+    def reset(self) -> None:
+        self.present = [set() for _ in self.layouts]
+        self.start_decision()
+
+    def start_decision(self) -> None:
+        for c in self.counts:
+            c[:] = 0
+        self.second = 0
+
+    def after_step(self, raw) -> None:
+        """Count the vehicles that appeared on each region's edges in the step just taken (a
+        vehicle crossing a junction inside the region is on none of its edges, and stays known)."""
+        s = min(self.second, self.decision - 1)
+        alive = None
+        on_edge = raw.edge_getLastStepVehicleIDs
+        for r, layout in enumerate(self.layouts):
+            now, counts, point_of = {}, self.counts[r], self.point_of[r]
+            for e in layout.edges:
+                for x in on_edge(e):
+                    now[x] = e
+            before = self.present[r]
+            gone = [x for x in before if x not in now]
+            if gone:
+                if alive is None:
+                    alive = set(raw.vehicle_getIDList())
+                kept = {x for x in gone if x in alive and raw.vehicle_getRoadID(x).startswith(":")}
+            else:
+                kept = set()
+            for x, e in now.items():
+                if x not in before:
+                    counts[s, point_of.get(e, len(point_of))] += 1
+            self.present[r] = kept | set(now)
+        self.second += 1
+
+    def influences(self) -> list[np.ndarray]:
+        """Per region, the last decision's entries as classes (int64, second-major)."""
+        return [np.minimum(c, ENTRY_CLASSES - 1).reshape(-1) for c in self.counts]
+
+    def dsets(self, raw) -> list[np.ndarray]:
+        """Per region, the occupancy cells of its entry lanes now (uint8)."""
+        ids, position = raw.lane_getLastStepVehicleIDs, raw.vehicle_getLanePosition
+        rows = []
+        for layout in self.layouts:
+            bits = np.zeros((len(layout.source_lanes), CELLS), np.uint8)
+            for i, lane in enumerate(layout.source_lanes):
+                for x in ids(lane):
+                    k = int(position(x) // CELL_METRES)
+                    if k < CELLS:
+                        bits[i, k] = 1
+            rows.append(bits.reshape(-1))
+        return rows
+
+
+class RegionNetCore(NetCore):
+    """The GS's core (:class:`~ials_zoo.sumo_net.core.NetCore`) that also watches the learners'
+    regions: every observation carries ``(influences, dsets)`` (:class:`EntryWatcher`)."""
+
+    def __init__(self, regions: list, **config):
+        super().__init__(**config)
+        self.watcher = EntryWatcher([RegionLayout(**r) for r in regions], self.decision)
+
+    def reset(self, seed: int, tripinfo: str | None = None):
+        self.watcher.reset()
+        return super().reset(seed, tripinfo)
+
+    def step(self, actions):
+        self.watcher.start_decision()
+        return super().step(actions)
+
+    def _advance(self, seconds: int) -> None:
+        raw = self.ls._libsumo
+        for _ in range(seconds):
+            super()._advance(1)
+            self.watcher.after_step(raw)
+
+    def _observe(self):
+        measures, phases, now = super()._observe()
+        raw = self.ls._libsumo
+        return measures, phases, now, (self.watcher.influences(), self.watcher.dsets(raw))
+
+
+__all__ = ["CELLS", "CELL_METRES", "ENTRY_CLASSES", "EntryWatcher", "INSIDE", "RegionLayout", "RegionNetCore",
+           "full_dset", "region_layout", "region_spec"]

@@ -1,0 +1,273 @@
+"""The local simulator of a ``sumo_net_v0`` junction: its region alone, fed influence sources.
+
+:class:`SumoNetLocalSimulator` cuts the light's region from the network
+(:mod:`ials_zoo.sumo_net.regions`) ``n_envs`` times into one SUMO simulation (ids prefixed
+``"c<copy>__"``) and runs RESCO's signal loop on it (:class:`~ials_zoo.sumo_net.core.NetCore`):
+the same spaces, observation and reward as the GS's light.
+
+Each decision it is given the influence sources of :mod:`ials_zoo.sumo_net.influence`: per
+entry point and second, how many vehicles come in (0, 1, 2). Each one is a vehicle the GS
+itself let in at that entry point, drawn at random from a recording of the GS (every light on
+its own program, the map's hour, SUMO seed 0; :func:`entry_tables`, cached under
+``$IALS_ZOO_CACHE/sumo_net``): its route inside the region, lane, position, type and speed
+factor, inserted at the highest safe speed. A vehicle that cannot be inserted within
+:data:`INSERT_PATIENCE` seconds is dropped, as the GS's could not have entered then. Vehicles leave at the end of the region's
+edges, so spill-back from beyond them is not simulated.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import tempfile
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+from gymnasium import spaces
+
+from ials_zoo.core.local import LocalSimulator, agent_list, check_n_envs
+from ials_zoo.core.streams import agent_key
+from ials_zoo.errors import BadInput, BadInputType
+from ials_zoo.sumo.lease import SimHandle
+from ials_zoo.sumo_net.core import NetCore
+from ials_zoo.sumo_net.influence import EntryWatcher, RegionLayout, full_dset, region_layout, region_spec
+from ials_zoo.sumo_net.mdp import N_FEATURES, observation_fn, reward_fn
+from ials_zoo.sumo_net.names import SCENARIO_OPTIONS
+from ials_zoo.utils import check_seed, parse_untrusted_json_object
+
+MAX_TABLE_BYTES = 64 << 20
+SUMO_SEEDS = 2**31 - 1
+INSERT_PATIENCE = 2  # seconds a vehicle that could not enter at once may wait (then it is dropped)
+
+
+def _table_path(scenario, light: str, seconds: int, seed: int) -> Path:
+    root = os.environ.get("IALS_ZOO_CACHE")
+    key = json.dumps([scenario.name, os.path.getsize(scenario.net_file), scenario.begin, light, seconds, seed])
+    h = hashlib.sha256(key.encode()).hexdigest()[:12]
+    return (Path(root) if root else Path.home() / ".cache" / "ials_zoo") / "sumo_net" / f"entries_{h}.json"
+
+
+def entry_tables(scenario, light: str, seconds: int | None = None, seed: int = 0) -> list[list]:
+    """Per entry point of ``light``'s region (:attr:`RegionLayout.points`), the GS's entries
+    there ``[edges inside, lane index, position, type, speed factor]`` over ``seconds`` of the
+    GS (default: the scenario's) with every light on its own program; cached as JSON."""
+    from ials_zoo.sumo_net.local import record_influence
+    from ials_zoo.sumo_net.regions import regions_of
+
+    seconds = int(seconds or scenario.end - scenario.begin)
+    path = _table_path(scenario, light, seconds, seed)
+    if path.is_file() and path.stat().st_size <= MAX_TABLE_BYTES:
+        data = parse_untrusted_json_object(path.read_bytes(), f"entry table {path}")
+        if isinstance(data.get("tables"), list):
+            return data["tables"]
+    region = regions_of(scenario.net_file)[light]
+    point = {e: j for j, e in enumerate(region.sources)}
+    tables = [[] for _ in range(len(region.sources) + 1)]
+    for step in record_influence(scenario, {light: region}, seconds, seed):
+        for _, _vehicle, edges, lane, pos, _speed, vtype, factor in step:
+            tables[point.get(edges[0], len(region.sources))].append([list(edges), lane, pos, vtype, factor])
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(f".{os.getpid()}.tmp")
+    tmp.write_text(json.dumps({"light": light, "seconds": seconds, "seed": seed, "tables": tables}))
+    os.replace(tmp, path)  # never half-written
+    return tables
+
+
+class IslandCore(NetCore):
+    """:class:`~ials_zoo.sumo_net.core.NetCore` on the cut copies, inserting each second the
+    vehicles the influence sources name, drawn from each copy's entry tables."""
+
+    def __init__(self, layouts: list, tables: list, row_keys: list, prefixes: list, **config):
+        super().__init__(**config)
+        self.layouts = [RegionLayout(**x) for x in layouts]
+        self.tables = tables  # per row, per entry point
+        self.row_keys = [(str(a), int(j)) for a, j in row_keys]  # (light, copy): each row's own random stream
+        self.prefixes = list(prefixes)
+        self.watcher = EntryWatcher(self.layouts, self.decision)
+        self.plan = np.zeros((len(self.layouts), self.decision, 1), np.int64)
+        self.rngs = []
+        self.inserted = 0
+        self.waiting: list[tuple[str, int]] = []  # our vehicles not inserted yet, with their wait (s)
+
+    def reset(self, seed: int, tripinfo: str | None = None):
+        self.rngs = [np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(agent_key(a), j)))
+                     for a, j in self.row_keys]
+        self.watcher.reset()
+        self.waiting = []
+        return self._with_region(super().reset(seed % SUMO_SEEDS, None))  # SUMO's seeds are 31-bit
+
+    def step(self, actions, influences=None):
+        points = [len(x.points) for x in self.layouts]
+        self.plan = [np.asarray(u, np.int64).reshape(self.decision, p) for u, p in zip(influences, points)]
+        self.watcher.start_decision()
+        return self._with_region(super().step(actions))
+
+    def _with_region(self, result):
+        return (*result, (self.watcher.influences(), self.watcher.dsets(self.ls._libsumo)))
+
+    def _insert(self, raw, second: int) -> list[str]:
+        names = []
+        for r, layout in enumerate(self.layouts):
+            prefix = self.prefixes[r]
+            for j, count in enumerate(self.plan[r][second]):
+                table = self.tables[r][j]
+                for _ in range(int(count) if table else 0):
+                    edges, lane, pos, vtype, factor = table[int(self.rngs[r].integers(len(table)))]
+                    self.inserted += 1
+                    name = f"{prefix}{self.inserted}"
+                    raw.route_add(name, [prefix + e for e in edges])
+                    raw.vehicle_add(name, name, vtype, "now", str(lane), str(max(pos, 0.0)), "max")
+                    raw.vehicle_setSpeedFactor(name, factor)
+                    names.append(name)
+        return names
+
+    def _advance(self, seconds: int) -> None:
+        raw = self.ls._libsumo
+        for _ in range(seconds):
+            self.waiting += [(name, 0) for name in self._insert(raw, min(self.watcher.second, self.decision - 1))]
+            super()._advance(1)
+            if self.waiting:
+                self._drop_late(raw)
+            self.watcher.after_step(raw)
+
+    def _drop_late(self, raw) -> None:
+        """A vehicle that could not be inserted gets :data:`INSERT_PATIENCE` more seconds (the
+        GS did let it in, a moment's difference in the region may block its spot), then it is
+        dropped: the GS would not have let it in so late."""
+        pending = set(raw.simulation_getPendingVehicles())
+        still = []
+        for name, age in self.waiting:
+            if name not in pending:
+                continue
+            if age >= INSERT_PATIENCE:
+                raw.vehicle_remove(name, 0)
+            else:
+                still.append((name, age + 1))
+        self.waiting = still
+
+
+def _scenario_options(options: dict) -> dict:
+    return {k: v for k, v in options.items() if k in SCENARIO_OPTIONS}
+
+
+class SumoNetLocalSimulator(LocalSimulator):
+    """``n_envs`` copies of each of ``agents``' regions (module docstring); agents must share
+    their spaces (the rows stack), so in practice one light.
+
+    Args:
+        agents: light id(s).
+        n_envs: copies per light.
+        backend: the lease's (``"auto"``: in this process if it holds no simulation).
+        record_seconds, record_seed: the GS recording the entry tables come from.
+        observation, reward, max_distance: as the GS's.
+        **options: ``sumo_net_v0``'s scenario options (``net=``, ...); GS-only options are ignored.
+
+    Attributes:
+        last_entries: per row, the vehicles that actually entered in the last decision, as
+            influence classes (measured like the GS's).
+    """
+
+    supports_step_single = False
+
+    def __init__(self, agents, n_envs: int = 1, backend: str = "auto", record_seconds: int | None = None,
+                 record_seed: int = 0, observation: str = "drq_norm", reward: str = "wait_norm",
+                 max_distance: float = 200.0, **options):
+        from ials_zoo.sumo_net.env import scenario_of
+        from ials_zoo.sumo_net.network import read_network
+
+        self.scenario = scenario_of(**_scenario_options(options))
+        self.n_envs = check_n_envs(n_envs)
+        lights = {x.id: x for x in read_network(self.scenario.net_file).lights}
+        self.agents = agent_list(agents)
+        unknown = [a for a in self.agents if a not in lights]
+        if unknown:
+            raise BadInput(f"unknown agent(s) {unknown}: not traffic lights of {self.scenario.name}")
+        sizes = {(len(lights[a].lanes), lights[a].n_actions) for a in self.agents}
+        if len(sizes) > 1:
+            raise BadInput(f"lights with their own spaces cannot share one local simulator: {list(self.agents)}")
+        first = lights[self.agents[0]]
+        self.observation_space = spaces.Box(0.0, np.inf, (N_FEATURES * len(first.lanes),), np.float32)
+        self.action_space = spaces.Discrete(first.n_actions)
+        self.max_cycles = self.scenario.decisions
+        self.regions = tuple(region_spec(a, **_scenario_options(options)) for a in self.agents)
+        self._observe, self._reward = observation_fn(observation), reward_fn(reward)
+        self._folder = Path(tempfile.mkdtemp(prefix="ials_zoo_island_"))
+        try:
+            config = self._config(lights, record_seconds, record_seed, float(max_distance))
+            self._sim = SimHandle("ials_zoo.sumo_net.island:IslandCore", config, backend)
+        except BaseException:
+            shutil.rmtree(self._folder, ignore_errors=True)
+            raise
+        self.last_entries = None
+        self._measures = None
+
+    def _config(self, lights: dict, record_seconds, record_seed: int, max_distance: float) -> dict:
+        from ials_zoo.sumo_net.regions import regions_of
+        from ials_zoo.sumo_net.replay import cut_regions, vehicle_types
+
+        s, rows = self.scenario, self.copy_agents()
+        regions = regions_of(s.net_file)
+        merged = cut_regions(s.net_file, {f"c{r}": regions[a] for r, a in enumerate(rows)}, self._folder)
+        vtypes = vehicle_types(s.route_files, self._folder / "vtypes.add.xml")
+        tables = {a: entry_tables(s, a, record_seconds, record_seed) for a in self.agents}
+        layouts = [region_layout(s.net_file, a).prefixed(f"c{r}__") for r, a in enumerate(rows)]
+        return {"net_file": str(merged), "route_files": [], "begin": s.begin, "end": s.end,
+                "decision": s.decision_seconds, "yellow": s.yellow_seconds, "max_distance": max_distance,
+                "extra": ["--additional-files", str(vtypes)], "lights": [x.light for x in layouts],
+                "lanes": [list(x.lanes) for x in layouts], "controlled": [x.light for x in layouts],
+                "greens": [[lights[a].phases[i] for i in lights[a].greens] for a in rows],
+                "layouts": [asdict(x) for x in layouts], "tables": [tables[a] for a in rows],
+                "row_keys": [(a, r % self.n_envs) for r, a in enumerate(rows)],
+                "prefixes": [f"c{r}__" for r in range(len(rows))]}
+
+    def _outputs(self, result):
+        measures, phases, _time, (influences, dsets) = result
+        n = self.observation_space.shape[0] // N_FEATURES  # lanes per light: the rows share their spaces
+        obs, rewards, full = [], [], []
+        for r in range(self.n_copies):
+            m = measures[r * n:(r + 1) * n]
+            obs.append(self._observe(m, int(phases[r])))
+            rewards.append(self._reward(m, int(phases[r])))
+            full.append(full_dset(dsets[r], m))
+        self.last_entries = np.stack(influences)
+        return (np.stack(obs), np.asarray(rewards, np.float64),
+                {"dset": np.stack(dsets).astype(np.uint8), "full": np.stack(full).astype(np.uint8)})
+
+    def reset(self, seed: int | None = None):
+        seed = check_seed(seed)
+        if seed is None:
+            seed = int(np.random.SeedSequence().generate_state(1)[0] >> 1)
+        obs, _, dsets = self._outputs(self._sim.call("reset", int(seed), None))
+        return obs, dsets
+
+    def step(self, actions, influences):
+        actions = np.asarray(actions).reshape(-1)
+        influences = np.asarray(influences)
+        if actions.shape != (self.n_copies,):
+            raise BadInputType(f"actions must have shape ({self.n_copies},), got {actions.shape}")
+        if influences.shape != (self.n_copies, self.regions[0].n_sources):
+            raise BadInputType(f"influences must have shape ({self.n_copies}, {self.regions[0].n_sources}), "
+                               f"got {influences.shape}")
+        return self._outputs(self._sim.call("step", [int(a) for a in actions], influences.tolist()))
+
+    def close(self) -> None:
+        sim = getattr(self, "_sim", None)
+        if sim is not None:
+            sim.close()
+            self._sim = None
+        folder = getattr(self, "_folder", None)
+        if folder is not None:
+            shutil.rmtree(folder, ignore_errors=True)
+            self._folder = None
+
+
+def local_simulator(agents, n_envs: int = 1, **options) -> SumoNetLocalSimulator:
+    """The domain's factory: GS-only options (``learners``, ``fresh_process``, ...) are ignored."""
+    keep = {"backend", "record_seconds", "record_seed", "observation", "reward", "max_distance", *SCENARIO_OPTIONS}
+    return SumoNetLocalSimulator(agents, n_envs, **{k: v for k, v in options.items() if k in keep})
+
+
+__all__ = ["IslandCore", "SumoNetLocalSimulator", "entry_tables", "local_simulator"]

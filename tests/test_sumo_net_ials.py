@@ -1,0 +1,143 @@
+"""One junction's IALS on a real network (cologne1's light): the GS's region data, the local
+simulator fed the GS's own influence sources, and an AIP trained on GS data that brings
+vehicles into the region at the GS's rate."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import ials_zoo
+from ials_zoo.core.domains import get_domain
+from ials_zoo.core.region import DSET_KINDS, INFLUENCE_KEY
+from ials_zoo.sumo_net.env import SumoNetEnv
+
+NET, LIGHT = "cologne1", "GS_cluster_357187_359543"
+OPTIONS = {"net": NET, "max_cycles": 120}  # 20 minutes of the map's hour
+LS_OPTIONS = {**OPTIONS, "record_seconds": 1200}
+
+
+@pytest.fixture(scope="module", autouse=True)
+def own_cache(tmp_path_factory):
+    """The entry tables and AIPs are cached in a folder of this module's own."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("IALS_ZOO_CACHE", str(tmp_path_factory.mktemp("cache")))
+        yield
+
+
+@pytest.fixture(scope="module")
+def data():
+    from ials_zoo.influence.dataset import collect
+
+    return collect("sumo_net_v0", LIGHT, steps=1440, seed=0, gs_options=OPTIONS, progress=False)
+
+
+def test_the_gs_reports_region_data_only_when_asked_with_the_layout_of_the_region_spec():
+    domain = get_domain("sumo_net_v0")
+    region = domain.region_spec(LIGHT, **OPTIONS)
+    assert region.n_sources == 10 * (len(region.influence_names) // 10) and region.influence_classes[0] == 3
+    env = SumoNetEnv(learners=[LIGHT], region_data=True, **OPTIONS)
+    plain = SumoNetEnv(learners=[LIGHT], max_cycles=2, net=NET)
+    try:
+        assert env.region_spec(LIGHT) == region
+        _, infos = env.reset(seed=0)
+        assert not infos[LIGHT][INFLUENCE_KEY].any()  # nothing has entered before the first step
+        entered = 0
+        for _ in range(10):
+            _, _, _, _, step_infos = env.step({LIGHT: 0})
+            entered += int(step_infos[LIGHT][INFLUENCE_KEY].sum())
+        for info in (infos[LIGHT], step_infos[LIGHT]):
+            assert info[INFLUENCE_KEY].shape == (region.n_sources,) and info[INFLUENCE_KEY].dtype == np.int64
+            assert info["dset"].shape == (region.dset_size("dset"),) and info["dset"].dtype == np.uint8
+            assert info["dset_full"].shape == (region.dset_size("full"),)
+        assert entered > 0
+        _, infos = plain.reset(seed=0)
+        assert infos == {LIGHT: {}}
+    finally:
+        env.close()
+        plain.close()
+
+
+def test_the_local_simulator_has_the_gs_spaces_and_region():
+    domain = get_domain("sumo_net_v0")
+    env = SumoNetEnv(learners=[LIGHT], **OPTIONS)
+    ls = domain.local_simulator(LIGHT, n_envs=2, **LS_OPTIONS)
+    try:
+        assert ls.region == domain.region_spec(LIGHT, **OPTIONS)
+        assert ls.observation_space == env.observation_space(LIGHT) and ls.action_space == env.action_space(LIGHT)
+        obs, dsets = ls.reset(seed=0)
+        assert obs.shape == (2, *ls.observation_space.shape)
+        for kind in DSET_KINDS:
+            assert dsets[kind].shape == (2, ls.region.dset_size(kind))
+    finally:
+        env.close()
+        ls.close()
+
+
+def test_fed_the_gs_influence_the_local_simulator_lets_the_same_vehicles_in_and_tracks_the_reward():
+    """The LS inserts what the sources say (measured like the GS's), and its light's reward
+    follows the GS's: the region replays its inflow, vehicles drawn from the GS's own entries."""
+    env = SumoNetEnv(learners=[LIGHT], region_data=True, **OPTIONS)
+    ls = get_domain("sumo_net_v0").local_simulator(LIGHT, **LS_OPTIONS)
+    rng = np.random.default_rng(0)
+    told = entered = 0
+    gs_rewards, ls_rewards = [], []
+    try:
+        env.reset(seed=3)
+        ls.reset(seed=3)
+        while env.agents:
+            a = int(rng.integers(env.action_space(LIGHT).n))
+            _, rewards, _, _, infos = env.step({LIGHT: a})
+            u = infos[LIGHT][INFLUENCE_KEY]
+            _, ls_reward, _ = ls.step(np.array([a]), u[None])
+            told, entered = told + int(u.sum()), entered + int(ls.last_entries.sum())
+            gs_rewards.append(rewards[LIGHT])
+            ls_rewards.append(float(ls_reward[0]))
+    finally:
+        env.close()
+        ls.close()
+    assert told > 300 and 0.95 * told <= entered <= told, (told, entered)  # measured 0.97
+    gs_mean, ls_mean = np.mean(gs_rewards), np.mean(ls_rewards)
+    assert abs(ls_mean - gs_mean) < 0.1 * abs(gs_mean), (gs_mean, ls_mean)  # measured 0.3%
+
+
+def test_make_ials_of_a_junction_passes_gymnasiums_checker():
+    env = ials_zoo.make_ials("sumo_net_v0", LIGHT, predictor="untrained", seed=0, **{**LS_OPTIONS, "max_cycles": 20})
+    try:
+        check_env(env, skip_render_check=True)
+        env.reset(seed=1)
+        steps, done = 0, False
+        while not done:
+            _, _, term, trunc, info = env.step(env.action_space.sample())
+            steps, done = steps + 1, term or trunc
+        assert steps == 20 and info[INFLUENCE_KEY].shape == (env.region.n_sources,)
+    finally:
+        env.close()
+
+
+def test_an_aip_trained_on_gs_data_brings_vehicles_at_the_gs_rate(data):
+    """Cross-entropy below the data's marginal, and the IALS's region gets the GS's inflow (a
+    uniform AIP floods it)."""
+    from ials_zoo.influence.train import train_predictor
+
+    pred, report = train_predictor(data, arch="mlp", epochs=30, lr=3e-3, progress=False)
+    ce = report["cross_entropy"]
+    assert ce["trained"]["test"] < 1.02 * ce["marginal"]["test"] < ce["untrained"]["test"]
+    gs_rate = np.asarray(data.influences).sum() / data.n_steps
+    rates = {}
+    for name, predictor in (("trained", pred), ("uniform", "uniform")):
+        env = ials_zoo.make_ials("sumo_net_v0", LIGHT, predictor=predictor, seed=0, **LS_OPTIONS)
+        entered = steps = 0
+        try:
+            for episode in range(2):
+                env.reset(seed=episode)
+                done = False
+                while not done:
+                    *_, term, trunc, _ = env.step(env.action_space.sample())
+                    entered, steps, done = entered + int(env.ls.last_entries.sum()), steps + 1, term or trunc
+        finally:
+            env.close()
+        rates[name] = entered / steps
+    assert abs(rates["trained"] - gs_rate) < 0.15 * gs_rate, (rates, gs_rate)
+    assert rates["uniform"] > 1.3 * gs_rate, (rates, gs_rate)  # measured 1.56: a flooded region fills up
