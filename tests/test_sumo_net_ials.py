@@ -79,7 +79,7 @@ def test_fed_the_gs_influence_the_local_simulator_lets_the_same_vehicles_in_and_
     """The LS inserts what the sources say (measured like the GS's), and its light's reward
     follows the GS's: the region replays its inflow, vehicles drawn from the GS's own entries."""
     env = SumoNetEnv(learners=[LIGHT], region_data=True, **OPTIONS)
-    ls = get_domain("sumo_net_v0").local_simulator(LIGHT, **LS_OPTIONS)
+    ls = get_domain("sumo_net_v0").local_simulator(LIGHT, measure_entries=True, **LS_OPTIONS)
     rng = np.random.default_rng(0)
     told = entered = 0
     gs_rewards, ls_rewards = [], []
@@ -127,7 +127,8 @@ def test_an_aip_trained_on_gs_data_brings_vehicles_at_the_gs_rate(data):
     gs_rate = np.asarray(data.influences).sum() / data.n_steps
     rates = {}
     for name, predictor in (("trained", pred), ("uniform", "uniform")):
-        env = ials_zoo.make_ials("sumo_net_v0", LIGHT, predictor=predictor, seed=0, **LS_OPTIONS)
+        env = ials_zoo.make_ials("sumo_net_v0", LIGHT, predictor=predictor, seed=0, measure_entries=True,
+                                 **LS_OPTIONS)
         entered = steps = 0
         try:
             for episode in range(2):

@@ -10,9 +10,12 @@ def sumo_binary() -> str:
     ``SUMO_HOME``); plain ``"sumo"`` where the wheel gives none (libsumo ignores argv[0])."""
     import sumo
 
-    home = os.environ.get("SUMO_HOME") or getattr(sumo, "SUMO_HOME", "")
-    path = os.path.join(home, "bin", "sumo")
-    return path if os.path.isfile(path) else "sumo"
+    # the wheel's own home first: another package may point SUMO_HOME at its data alone
+    for home in (getattr(sumo, "SUMO_HOME", ""), os.environ.get("SUMO_HOME", "")):
+        path = os.path.join(home, "bin", "sumo")
+        if home and os.path.isfile(path):
+            return path
+    return "sumo"
 
 
 def sumo_command(seed: int, *, net: str | None = None, routes=(), additionals=(), config: str | None = None,

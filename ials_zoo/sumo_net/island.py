@@ -50,29 +50,43 @@ def _table_path(scenario, light: str, seconds: int, seed: int) -> Path:
     return (Path(root) if root else Path.home() / ".cache" / "ials_zoo") / "sumo_net" / f"entries_{h}.json"
 
 
-def entry_tables(scenario, light: str, seconds: int | None = None, seed: int = 0) -> list[list]:
-    """Per entry point of ``light``'s region (:attr:`RegionLayout.points`), the GS's entries
+def entry_tables(scenario, lights, seconds: int | None = None, seed: int = 0) -> dict[str, list]:
+    """Per light, per entry point of its region (:attr:`RegionLayout.points`), the GS's entries
     there ``[edges inside, lane index, position, type, speed factor]`` over ``seconds`` of the
-    GS (default: the scenario's) with every light on its own program; cached as JSON."""
+    GS (default: the scenario's) with every light on its own program. Cached as JSON, one file
+    per light; the missing lights are recorded in one GS run."""
+    seconds = int(seconds or scenario.end - scenario.begin)
+    out = {light: _cached_tables(_table_path(scenario, light, seconds, seed)) for light in lights}
+    missing = [light for light, tables in out.items() if tables is None]
+    if missing:
+        for light, tables in _record_tables(scenario, missing, seconds, seed).items():
+            path = _table_path(scenario, light, seconds, seed)
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = path.with_suffix(f".{os.getpid()}.tmp")
+            tmp.write_text(json.dumps({"light": light, "seconds": seconds, "seed": seed, "tables": tables}))
+            os.replace(tmp, path)  # never half-written
+            out[light] = tables
+    return out
+
+
+def _cached_tables(path: Path) -> list | None:
+    if not path.is_file() or path.stat().st_size > MAX_TABLE_BYTES:
+        return None
+    data = parse_untrusted_json_object(path.read_bytes(), f"entry table {path}")
+    return data["tables"] if isinstance(data.get("tables"), list) else None
+
+
+def _record_tables(scenario, lights: list, seconds: int, seed: int) -> dict[str, list]:
     from ials_zoo.sumo_net.local import record_influence
     from ials_zoo.sumo_net.regions import regions_of
 
-    seconds = int(seconds or scenario.end - scenario.begin)
-    path = _table_path(scenario, light, seconds, seed)
-    if path.is_file() and path.stat().st_size <= MAX_TABLE_BYTES:
-        data = parse_untrusted_json_object(path.read_bytes(), f"entry table {path}")
-        if isinstance(data.get("tables"), list):
-            return data["tables"]
-    region = regions_of(scenario.net_file)[light]
-    point = {e: j for j, e in enumerate(region.sources)}
-    tables = [[] for _ in range(len(region.sources) + 1)]
-    for step in record_influence(scenario, {light: region}, seconds, seed):
-        for _, _vehicle, edges, lane, pos, _speed, vtype, factor in step:
-            tables[point.get(edges[0], len(region.sources))].append([list(edges), lane, pos, vtype, factor])
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(f".{os.getpid()}.tmp")
-    tmp.write_text(json.dumps({"light": light, "seconds": seconds, "seed": seed, "tables": tables}))
-    os.replace(tmp, path)  # never half-written
+    regions = {light: regions_of(scenario.net_file)[light] for light in lights}
+    point = {light: {e: j for j, e in enumerate(r.sources)} for light, r in regions.items()}
+    tables = {light: [[] for _ in range(len(r.sources) + 1)] for light, r in regions.items()}
+    for step in record_influence(scenario, regions, seconds, seed):
+        for light, _vehicle, edges, lane, pos, _speed, vtype, factor in step:
+            j = point[light].get(edges[0], len(point[light]))
+            tables[light][j].append([list(edges), lane, pos, vtype, factor])
     return tables
 
 
@@ -80,14 +94,16 @@ class IslandCore(NetCore):
     """:class:`~ials_zoo.sumo_net.core.NetCore` on the cut copies, inserting each second the
     vehicles the influence sources name, drawn from each copy's entry tables."""
 
-    def __init__(self, layouts: list, tables: list, row_keys: list, prefixes: list, **config):
+    def __init__(self, layouts: list, tables: list, row_keys: list, prefixes: list, watch: bool = False, **config):
         super().__init__(**config)
         self.layouts = [RegionLayout(**x) for x in layouts]
         self.tables = tables  # per row, per entry point
         self.row_keys = [(str(a), int(j)) for a, j in row_keys]  # (light, copy): each row's own random stream
         self.prefixes = list(prefixes)
         self.watcher = EntryWatcher(self.layouts, self.decision)
-        self.plan = np.zeros((len(self.layouts), self.decision, 1), np.int64)
+        self.watch = bool(watch)  # measure what entered every second (costs a call per edge and second)
+        self.plan = self._no_plan()
+        self.second = 0
         self.rngs = []
         self.inserted = 0
         self.waiting: list[tuple[str, int]] = []  # our vehicles not inserted yet, with their wait (s)
@@ -96,17 +112,24 @@ class IslandCore(NetCore):
         self.rngs = [np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(agent_key(a), j)))
                      for a, j in self.row_keys]
         self.watcher.reset()
-        self.waiting = []
+        self.waiting, self.plan, self.second = [], self._no_plan(), 0
         return self._with_region(super().reset(seed % SUMO_SEEDS, None))  # SUMO's seeds are 31-bit
 
     def step(self, actions, influences=None):
         points = [len(x.points) for x in self.layouts]
         self.plan = [np.asarray(u, np.int64).reshape(self.decision, p) for u, p in zip(influences, points)]
         self.watcher.start_decision()
+        self.second = 0
         return self._with_region(super().step(actions))
 
+    def _no_plan(self) -> list:
+        return [np.zeros((self.decision, len(x.points)), np.int64) for x in self.layouts]
+
     def _with_region(self, result):
-        return (*result, (self.watcher.influences(), self.watcher.dsets(self.ls._libsumo)))
+        """The core's result and the region data: what entered (measured if watched, else what
+        the sources said) and the d-sets."""
+        told = self.watcher.influences() if self.watch else [p.reshape(-1) for p in self.plan]
+        return (*result, (told, self.watcher.dsets(self.ls._libsumo)))
 
     def _insert(self, raw, second: int) -> list[str]:
         names = []
@@ -127,11 +150,13 @@ class IslandCore(NetCore):
     def _advance(self, seconds: int) -> None:
         raw = self.ls._libsumo
         for _ in range(seconds):
-            self.waiting += [(name, 0) for name in self._insert(raw, min(self.watcher.second, self.decision - 1))]
+            self.waiting += [(name, 0) for name in self._insert(raw, min(self.second, self.decision - 1))]
             super()._advance(1)
+            self.second += 1
             if self.waiting:
                 self._drop_late(raw)
-            self.watcher.after_step(raw)
+            if self.watch:
+                self.watcher.after_step(raw)
 
     def _drop_late(self, raw) -> None:
         """A vehicle that could not be inserted gets :data:`INSERT_PATIENCE` more seconds (the
@@ -167,14 +192,15 @@ class SumoNetLocalSimulator(LocalSimulator):
 
     Attributes:
         last_entries: per row, the vehicles that actually entered in the last decision, as
-            influence classes (measured like the GS's).
+            influence classes (``measure_entries=True``: measured like the GS's, a call per
+            edge and second; else None).
     """
 
     supports_step_single = False
 
     def __init__(self, agents, n_envs: int = 1, backend: str = "auto", record_seconds: int | None = None,
                  record_seed: int = 0, observation: str = "drq_norm", reward: str = "wait_norm",
-                 max_distance: float = 200.0, **options):
+                 max_distance: float = 200.0, measure_entries: bool = False, **options):
         from ials_zoo.sumo_net.env import scenario_of
         from ials_zoo.sumo_net.network import read_network
 
@@ -194,6 +220,9 @@ class SumoNetLocalSimulator(LocalSimulator):
         self.max_cycles = self.scenario.decisions
         self.regions = tuple(region_spec(a, **_scenario_options(options)) for a in self.agents)
         self._observe, self._reward = observation_fn(observation), reward_fn(reward)
+        if not isinstance(measure_entries, (bool, np.bool_)):
+            raise BadInputType(f"measure_entries must be a bool, got {measure_entries!r}")
+        self._measure = bool(measure_entries)
         self._folder = Path(tempfile.mkdtemp(prefix="ials_zoo_island_"))
         try:
             config = self._config(lights, record_seconds, record_seed, float(max_distance))
@@ -212,7 +241,7 @@ class SumoNetLocalSimulator(LocalSimulator):
         regions = regions_of(s.net_file)
         merged = cut_regions(s.net_file, {f"c{r}": regions[a] for r, a in enumerate(rows)}, self._folder)
         vtypes = vehicle_types(s.route_files, self._folder / "vtypes.add.xml")
-        tables = {a: entry_tables(s, a, record_seconds, record_seed) for a in self.agents}
+        tables = entry_tables(s, self.agents, record_seconds, record_seed)
         layouts = [region_layout(s.net_file, a).prefixed(f"c{r}__") for r, a in enumerate(rows)]
         return {"net_file": str(merged), "route_files": [], "begin": s.begin, "end": s.end,
                 "decision": s.decision_seconds, "yellow": s.yellow_seconds, "max_distance": max_distance,
@@ -221,7 +250,7 @@ class SumoNetLocalSimulator(LocalSimulator):
                 "greens": [[lights[a].phases[i] for i in lights[a].greens] for a in rows],
                 "layouts": [asdict(x) for x in layouts], "tables": [tables[a] for a in rows],
                 "row_keys": [(a, r % self.n_envs) for r, a in enumerate(rows)],
-                "prefixes": [f"c{r}__" for r in range(len(rows))]}
+                "prefixes": [f"c{r}__" for r in range(len(rows))], "watch": self._measure}
 
     def _outputs(self, result):
         measures, phases, _time, (influences, dsets) = result
@@ -232,7 +261,7 @@ class SumoNetLocalSimulator(LocalSimulator):
             obs.append(self._observe(m, int(phases[r])))
             rewards.append(self._reward(m, int(phases[r])))
             full.append(full_dset(dsets[r], m))
-        self.last_entries = np.stack(influences)
+        self.last_entries = np.stack(influences) if self._measure else None
         return (np.stack(obs), np.asarray(rewards, np.float64),
                 {"dset": np.stack(dsets).astype(np.uint8), "full": np.stack(full).astype(np.uint8)})
 
@@ -266,7 +295,8 @@ class SumoNetLocalSimulator(LocalSimulator):
 
 def local_simulator(agents, n_envs: int = 1, **options) -> SumoNetLocalSimulator:
     """The domain's factory: GS-only options (``learners``, ``fresh_process``, ...) are ignored."""
-    keep = {"backend", "record_seconds", "record_seed", "observation", "reward", "max_distance", *SCENARIO_OPTIONS}
+    keep = {"backend", "record_seconds", "record_seed", "observation", "reward", "max_distance", "measure_entries",
+            *SCENARIO_OPTIONS}
     return SumoNetLocalSimulator(agents, n_envs, **{k: v for k, v in options.items() if k in keep})
 
 
