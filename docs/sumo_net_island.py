@@ -4,7 +4,7 @@ against the GS's, and its light's reward against the GS's under random lights.
 1. One GS run of ``--episodes`` hours with every light acting at random records every
    junction's region data (:func:`ials_zoo.influence.dataset.collect_all`); each junction's AIP
    (an MLP, 150 epochs at lr 3e-3: 30 epochs left two hours of data above the data marginal's
-   cross-entropy) is trained on its own data and saved under ``--out``.
+   cross-entropy) is trained on its own data and saved as one AIP set, ``--out/aips.pt``.
 2. The GS's cost per decision with one learner among scripted neighbours (the rest on their
    own programs; in this process, ``--gs-decisions`` decisions, twice), and every light's mean
    reward in one GS hour with every light random (seed 100).
@@ -28,7 +28,7 @@ import numpy as np
 
 import ials_zoo
 from ials_zoo.influence.dataset import collect_all
-from ials_zoo.influence.files import load_predictor, save_predictor
+from ials_zoo.influence.files import load_predictor_set, save_predictor_set
 from ials_zoo.influence.train import train_predictor
 from ials_zoo.sumo_net.env import SumoNetEnv
 from ials_zoo.sumo_net.island import entry_tables
@@ -41,24 +41,23 @@ def _save(path: Path, results: dict) -> None:
 
 
 def train_aips(net: str, episodes: int, out: Path, results: dict) -> dict:
-    """Every junction's AIP from one GS run (already saved ones are loaded)."""
+    """Every junction's AIP from one GS run, saved as one AIP set ``out/aips.pt`` (loaded if there)."""
+    path = out / "aips.pt"
+    if path.is_file():
+        return load_predictor_set(path, "sumo_net_v0")
     lights = SumoNetEnv(net=net).possible_agents
-    paths = {a: out / f"aip_{k}.pt" for k, a in enumerate(lights)}
-    if all(p.is_file() for p in paths.values()):
-        return {a: load_predictor(p, agent=a) for a, p in paths.items()}
     start = time.perf_counter()
     data = collect_all("sumo_net_v0", lights, steps=episodes * 360, seed=0, gs_options={"net": net}, progress=True)
     results["collect_seconds"] = time.perf_counter() - start
-    out_aips = {}
+    aips = {}
     for a, d in data.items():
-        pred, report = train_predictor(d, arch="mlp", epochs=150, lr=3e-3, progress=False)
+        aips[a], report = train_predictor(d, arch="mlp", epochs=150, lr=3e-3, progress=False)
         ce = report["cross_entropy"]
         results.setdefault("aips", {})[a] = {
             "gs_entries_per_decision": float(np.asarray(d.influences).sum() / d.n_steps),
             "test_ce": ce["trained"]["test"], "marginal_ce": ce["marginal"]["test"], "sources": d.region.n_sources}
-        save_predictor(pred, paths[a])
-        out_aips[a] = pred
-    return out_aips
+    save_predictor_set(aips.values(), path, metadata={"net": net, "gs_hours": episodes, "policy": "uniform_random"})
+    return aips
 
 
 def gs_figures(net: str, decisions: int, results: dict) -> None:

@@ -142,3 +142,37 @@ def test_an_aip_trained_on_gs_data_brings_vehicles_at_the_gs_rate(data):
         rates[name] = entered / steps
     assert abs(rates["trained"] - gs_rate) < 0.15 * gs_rate, (rates, gs_rate)
     assert rates["uniform"] > 1.3 * gs_rate, (rates, gs_rate)  # measured 1.56: a flooded region fills up
+
+
+def test_train_aip_of_every_junction_feeds_the_multi_agent_ials(tmp_path):
+    """``train-aip --agent all`` on a network whose junctions have regions of their own sizes
+    trains each AIP alone into one set, which drives every region of the multi-agent IALS: a
+    PettingZoo ParallelEnv with the GS's agents and spaces."""
+    from pettingzoo.test import parallel_api_test
+
+    from ials_zoo.cli import main
+    from ials_zoo.influence.files import load_predictor_set
+    from ials_zoo.sumo_net.ials_env import IALSNetEnv
+
+    out = tmp_path / "aips.pt"
+    options = '{"net": "cologne3", "max_cycles": 30}'
+    assert main(["train-aip", "--env", "sumo_net_v0", "--options", options, "--agent", "all", "--steps", "60",
+                 "--epochs", "2", "--out", str(out), "--no-progress"]) == 0
+    aips = load_predictor_set(out, "sumo_net_v0")
+    gs = SumoNetEnv(net="cologne3", max_cycles=20)
+    assert sorted(aips) == sorted(gs.possible_agents)
+    assert len({p.region.n_sources for p in aips.values()}) > 1  # regions of their own sizes
+    env = IALSNetEnv(net="cologne3", predictors=str(out), max_cycles=20, record_seconds=600)
+    try:
+        assert env.possible_agents == gs.possible_agents
+        for a in gs.possible_agents:
+            assert env.observation_space(a) == gs.observation_space(a)
+            assert env.action_space(a) == gs.action_space(a)
+        parallel_api_test(env, num_cycles=20)
+        _, infos = env.reset(seed=0)
+        _, _, _, _, infos = env.step({a: 0 for a in env.agents})
+        for a in env.possible_agents:
+            assert infos[a][INFLUENCE_KEY].shape == (aips[a].region.n_sources,)
+    finally:
+        gs.close()
+        env.close()

@@ -15,7 +15,7 @@ records every listed region at once (all of them acting randomly) into
 from __future__ import annotations
 
 from ials_zoo.commands import CommandError
-from ials_zoo.core.domains import get_domain, ials_domain_ids
+from ials_zoo.core.domains import domain_ids, get_domain
 from ials_zoo.influence.dataset import collect_all
 from ials_zoo.utils import check_output_file, check_seed, parse_json_object, remove_stale_temporaries
 
@@ -28,7 +28,8 @@ def _json_dict(text: str) -> dict:
 def add_collect_arguments(parser, required: bool = True) -> None:
     """Arguments shared by ``collect`` and ``train-aip``."""
 
-    parser.add_argument("--env", required=required, choices=ials_domain_ids(), help="domain id")
+    parser.add_argument("--env", required=required, help="domain id",
+                        choices=[d for d in domain_ids() if get_domain(d).has_local_simulator])
     parser.add_argument("--agent", required=required, help="learning agent, e.g. robot_20")
     parser.add_argument("--steps", type=int, default=50_000,
                         help="steps to record, rounded up to whole episodes (default 50000)")

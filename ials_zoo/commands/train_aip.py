@@ -110,6 +110,17 @@ def run(args) -> int:
     return 0
 
 
+def _train_each(data: dict, arch: str, settings: dict) -> tuple[dict, dict]:
+    """Every agent's AIP trained alone (:func:`train_predictor`); the report of a stacked training."""
+    preds, ce, seconds = {}, {}, 0.0
+    for agent, dataset in data.items():
+        preds[agent], report = train_predictor(dataset, arch=arch, **settings)
+        ce[agent] = report["cross_entropy"]["trained"]["test"]
+        seconds += report["train_seconds"]
+    return preds, {"test_cross_entropy": ce, "mean_test_cross_entropy": sum(ce.values()) / len(ce),
+                   "train_seconds": seconds}
+
+
 def _train_set(args, progress: bool) -> int:
     """Every listed agent's AIP from one GS run, into one predictor-set file."""
 
@@ -119,20 +130,23 @@ def _train_set(args, progress: bool) -> int:
     if not args.env:
         raise CommandError("give --env")
     options = check_collect_arguments(args)
-    domain = get_domain(args.env).require_ials("train-aip")
+    domain = get_domain(args.env).require_local_simulator("train-aip")
     agents = domain.check_agents(None if args.agent == "all" else args.agent, **options)
     d = dials_of(domain)
     arch = args.arch or d.aip_arch
     data = collect_all(args.env, agents, steps=args.steps, seed=args.seed, gs_options=options, progress=progress,
                        workers=args.workers)
-    preds, report = train_predictors(
-        data, arch, hidden=args.hidden or (d.aip_hidden if arch == d.aip_arch else None),
-        lr=args.lr or (d.aip_lr if arch == d.aip_arch else None),
-        epochs=args.epochs or (d.aip_epochs if arch == d.aip_arch else None),
-        batch_size=args.batch_size or (d.aip_batch if arch == d.aip_arch else None),
-        seed=args.seed, dset_kind=args.dset_kind, progress=progress, autoregressive=args.autoregressive,
-        lr_schedule=args.lr_schedule or (d.aip_lr_schedule if arch == d.aip_arch else "linear"),
-        influence_lags=args.influence_lags)
+    mine = arch == d.aip_arch  # the domain's DIALS settings apply to its own architecture
+    settings = dict(hidden=args.hidden or (d.aip_hidden if mine else None),
+                    lr=args.lr or (d.aip_lr if mine else None), epochs=args.epochs or (d.aip_epochs if mine else None),
+                    batch_size=args.batch_size or (d.aip_batch if mine else None), seed=args.seed,
+                    dset_kind=args.dset_kind, progress=progress, autoregressive=args.autoregressive,
+                    lr_schedule=args.lr_schedule or (d.aip_lr_schedule if mine else "linear"),
+                    influence_lags=args.influence_lags)
+    if len({x.region.influence_classes + (x.region.dset_size(args.dset_kind),) for x in data.values()}) == 1:
+        preds, report = train_predictors(data, arch, **settings)
+    else:  # regions of their own sizes (a real network's junctions): one training each
+        preds, report = _train_each(data, arch, settings)
     collect_seconds = next(iter(data.values())).metadata["collect_seconds"]
     save_predictor_set(preds.values(), args.out, metadata={
         "steps": next(iter(data.values())).n_steps, "policy": "uniform_random (every listed agent)",

@@ -132,6 +132,7 @@ class SumoNetEnv(ParallelEnv):
     metadata = {"name": ENV_ID, "render_modes": ["rgb_array", "ansi", "human"], "is_parallelizable": True,
                 "render_fps": 10}
     CORE = "ials_zoo.sumo_net.core:NetCore"  # the simulation core (``"package.module:Class"``)
+    REGION_CORE = "ials_zoo.sumo_net.influence:RegionNetCore"  # the core that watches the learners' regions
 
     def __init__(self, net=None, sumocfg=None, net_file=None, route_files=None, begin=None, end=None,
                  decision_seconds=None, yellow_seconds=None, max_cycles=None, learners=None, max_distance=200.0,
@@ -172,8 +173,9 @@ class SumoNetEnv(ParallelEnv):
             raise BadInputType(f"region_data must be a bool, got {region_data!r}")
         self.region_data = bool(region_data)
         if self.region_data:  # the learners' regions watched every second (a cost): for AIP data
-            self.CORE = "ials_zoo.sumo_net.influence:RegionNetCore"
+            self.CORE = self.REGION_CORE
         self._region = None
+        self._region_rows = {a: k for k, a in enumerate(self.possible_agents)}  # the core's region data rows
         self._tmp = tempfile.mkdtemp(prefix="ials_zoo_sumo_net_")  # the episodes' tripinfo, read and removed
         self._sim = SimHandle(self.CORE, self._core_config(), backend)
         self.backend = self._sim.mode
@@ -233,6 +235,10 @@ class SumoNetEnv(ParallelEnv):
         m = self._light_measures(tls)
         return {name: m[:, i].copy() for i, name in enumerate(MEASURES)}
 
+    def _core_step(self, actions: list[int]) -> tuple:
+        """The core's ``step`` arguments for these actions (a local simulator adds its influence)."""
+        return (actions,)
+
     def _store(self, result) -> None:
         if self.region_data:
             *result, self._region = result
@@ -245,8 +251,9 @@ class SumoNetEnv(ParallelEnv):
         from ials_zoo.sumo_net.influence import full_dset
 
         influences, dsets = self._region
-        return {a: {"influence": influences[k].copy(), "dset": dsets[k].copy(),
-                    "dset_full": full_dset(dsets[k], self._light_measures(a))} for k, a in enumerate(self.agents)}
+        rows = self._region_rows
+        return {a: {"influence": influences[rows[a]].copy(), "dset": dsets[rows[a]].copy(),
+                    "dset_full": full_dset(dsets[rows[a]], self._light_measures(a))} for a in self.agents}
 
     def reset(self, seed=None, options=None):
         """Start an episode (``options``: none are known; PettingZoo's API)."""
@@ -257,6 +264,7 @@ class SumoNetEnv(ParallelEnv):
         else:
             seed = int(self._seed_rng.integers(SUMO_SEED_MAX + 1))
         self._episodes += 1
+        self._last_seed = seed
         self._metrics = None
         self._tripinfo = os.path.join(self._tmp, f"tripinfo_{self._episodes}.xml")
         if self.fresh_process:  # a new process, started during the last episode
@@ -289,7 +297,7 @@ class SumoNetEnv(ParallelEnv):
     def step(self, actions):
         if not self.agents:
             raise RuntimeError("step() called on a finished episode; call reset() first")
-        self._store(self._sim.call("step", self._actions(actions)))
+        self._store(self._sim.call("step", *self._core_step(self._actions(actions))))
         done = self._time >= self.scenario.end
         if done:
             self._metrics = self._finish()
