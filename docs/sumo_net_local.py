@@ -7,7 +7,11 @@ pair of episodes of the same seed. Also each side's mean reward and queue under 
 policy (the influence drawn from GS statistics, not an AIP: how far they agree is a first look
 at fidelity, not a result).
 
-Usage: python docs/sumo_net_local.py [--net ingolstadt21] [--repeats 3] [--max-cycles N]
+``--aips FILE`` (an AIP set: ``ials-zoo train-aip --agent all`` or ``docs/sumo_net_island.py``)
+measures the multi-agent IALS instead (:class:`ials_zoo.sumo_net.ials_env.IALSNetEnv`: the same
+regions, each fed by its trained AIP), AIP sampling included.
+
+Usage: python docs/sumo_net_local.py [--net ingolstadt21] [--repeats 3] [--max-cycles N] [--aips FILE]
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ import time
 import numpy as np
 
 from ials_zoo.sumo_net.env import SumoNetEnv
+from ials_zoo.sumo_net.ials_env import IALSNetEnv
 from ials_zoo.sumo_net.local import LocalNetEnv
 
 
@@ -38,10 +43,11 @@ def main(argv=None) -> None:
     parser.add_argument("--net", default="ingolstadt21")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--max-cycles", type=int, default=None)
+    parser.add_argument("--aips", default=None, help="an AIP set file: measure the multi-agent IALS")
     args = parser.parse_args(argv)
     options = {"net": args.net, "backend": "worker", "fresh_process": False, "max_cycles": args.max_cycles}
     start = time.perf_counter()
-    local = LocalNetEnv(**options)
+    local = IALSNetEnv(predictors=args.aips, **options) if args.aips else LocalNetEnv(**options)
     built = time.perf_counter() - start
     gs = SumoNetEnv(**options)
     rows = []
