@@ -64,9 +64,9 @@ def _legend():
 STUDY = StudySettings(multi_agent_budget=36_000, multi_agent_steps_per_second={"gs": 500.0, "ials": 500.0})
 
 # the AIPs of every junction (``train-aip --agent all``, each trained alone: the regions have their
-# own sizes): two GS hours of data; at DIALS's usual 10 epochs and lr 1e-3 they stayed above the
-# data marginal's cross-entropy (0.30 against 0.16 on cologne8), at 150 epochs and 3e-3 they
-# beat it (docs/sumo_net_island.py)
+# own sizes): two GS hours of data; at 30 epochs and lr 3e-3 they stayed at twice the data
+# marginal's cross-entropy (0.30 against 0.16 on cologne8) and flooded their regions, at 150 they
+# reach it (docs/sumo_net.md)
 DIALS = DIALSSettings(aip_arch="mlp", aip_hidden=64, aip_lr=3e-3, aip_epochs=150, aip_batch=256,
                       aip_lr_schedule="linear", collect_steps=720)
 

@@ -313,10 +313,11 @@ class SumoNetEnv(ParallelEnv):
             self.agents = []
         return obs, rewards, terms, truncs, infos
 
-    def run_uncontrolled(self, actuated: bool = False) -> dict[str, float]:
+    def run_uncontrolled(self, actuated: bool = False, on_decision=None) -> dict[str, float]:
         """Run the episode started by :meth:`reset` to its end with no learner acting (every
         light on its own program; ``actuated``: on SUMO's actuated control of the program's
-        phases); returns :meth:`episode_metrics`."""
+        phases); ``on_decision(env)`` is called after each decision (read :meth:`measures`
+        there); returns :meth:`episode_metrics`."""
         if self.possible_agents:
             raise BadInput("run_uncontrolled() needs learners=[] (every light on its own program)")
         if self._measures is None or self._metrics is not None:
@@ -325,6 +326,8 @@ class SumoNetEnv(ParallelEnv):
             self._sim.call("make_actuated")
         while self._time < self.scenario.end:
             self._store(self._sim.call("step", []))
+            if on_decision is not None:
+                on_decision(self)
         self._metrics = self._finish()
         return self.episode_metrics()
 
