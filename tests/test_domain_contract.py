@@ -60,8 +60,9 @@ def test_domains_with_their_own_spaces_say_so_and_the_multi_agent_tools_refuse_t
             d.require_ials("train ippo")
         with pytest.raises(BadInput, match="own action space"):
             d.n_actions  # noqa: B018
-        with pytest.raises(BadInput, match="make_ials_parallel_env needs a local simulator"):
-            ials_zoo.make_ials_parallel_env(env_id)
+        with pytest.raises(BadInput, match="make_multi_agent_ials needs a local simulator and shared agent spaces"):
+            ials_zoo.make_multi_agent_ials(env_id)
+        assert d.ials_parallel_env is not None  # its own multi-agent IALS (tests/test_sumo_net_ials.py)
     gs_only = Domain(env_id="gs_only_v0", parallel_env=dict, possible_agents=list, default_agents=("a",),
                      episode_length=1)
     assert not gs_only.has_local_simulator

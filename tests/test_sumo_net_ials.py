@@ -162,7 +162,9 @@ def test_train_aip_of_every_junction_feeds_the_multi_agent_ials(tmp_path):
     gs = SumoNetEnv(net="cologne3", max_cycles=20)
     assert sorted(aips) == sorted(gs.possible_agents)
     assert len({p.region.n_sources for p in aips.values()}) > 1  # regions of their own sizes
-    env = IALSNetEnv(net="cologne3", predictors=str(out), max_cycles=20, record_seconds=600)
+    env = ials_zoo.make_ials_parallel_env("sumo_net_v0", predictor=str(out), net="cologne3", max_cycles=20,
+                                          record_seconds=600)
+    assert isinstance(env, IALSNetEnv)
     try:
         assert env.possible_agents == gs.possible_agents
         for a in gs.possible_agents:

@@ -81,6 +81,9 @@ class Domain:
         replay_agreement: the share of observation entries on which the LS, fed the GS's own
             actions and influence sources from the same start, must agree with the GS
             (1.0 only where the LS is exact without the GS's other random draws).
+        ials_parallel_env: a domain whose agents have their own spaces may give its own
+            multi-agent IALS, ``ials_parallel_env(agents=None, predictor=..., seed=None,
+            **options) -> pettingzoo.ParallelEnv`` (``make_ials_parallel_env`` returns it).
         collect_options: GS options the influence collector adds to the GS it runs (a GS that
             reports its region data only when asked, because watching regions costs).
         metrics: the physical metrics of an episode, ``{name: "lower" | "higher"}`` (which
@@ -120,6 +123,7 @@ class Domain:
     null_influence: int = 0
     untrained_probs: tuple | None = None
     replay_agreement: float = 0.9
+    ials_parallel_env: Callable | None = None
     collect_options: dict = field(default_factory=dict)
     metrics: dict = field(default_factory=dict)
     metric_ranges: dict = field(default_factory=dict)

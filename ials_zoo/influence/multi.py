@@ -271,7 +271,7 @@ class IALSParallelEnv(ParallelEnv):
 def make_multi_agent_ials(env_id: str, agents=None, n_envs: int = 1, predictor="trained", dset_kind: str | None = None,
                           seed: int | None = None, **options) -> MultiAgentIALS:
     """:class:`MultiAgentIALS` of ``agents`` (default: every agent) with ``n_envs`` copies each."""
-    domain = get_domain(env_id)
+    domain = get_domain(env_id).require_ials("make_multi_agent_ials")
     if isinstance(agents, str):
         raise BadInputType(f"agents must be a list of agent ids (or None for all), got the string {agents!r}; "
                         f"did you mean [{agents!r}]?")
@@ -297,12 +297,18 @@ def make_ials_parallel_env(env_id: str, agents=None, predictor="trained", dset_k
         env_id: domain id, e.g. ``"traffic_grid_v0"``.
         agents: the agents (default: every agent of the GS under ``options``).
         predictor: ``"trained"`` (every agent's AIP, module docstring), another predictor spec
-            for every agent, a dict ``{agent: predictor}``, or a predictor-set file.
+            for every agent, a dict ``{agent: predictor}``, or a predictor-set file. (A domain
+            whose agents have their own spaces builds its own: :attr:`Domain.ials_parallel_env`.)
         dset_kind: the d-set the AIPs read (``"dset"`` default).
         seed: seeds the first ``reset`` (and ``"untrained"`` weights).
         **options: domain options, as for the GS.
     """
-    domain = get_domain(env_id).require_ials("make_ials_parallel_env")
+    domain = get_domain(env_id)
+    if not domain.has_ials and domain.ials_parallel_env is not None:  # agents with their own spaces
+        if dset_kind not in (None, "dset"):
+            raise BadInput(f"{env_id}'s multi-agent IALS reads the 'dset' d-set only, not {dset_kind!r}")
+        return domain.ials_parallel_env(agents=agents, predictor=predictor, seed=seed, **options)
+    domain.require_ials("make_ials_parallel_env")
     for gs_only in ("learners", "scripted_learners", "render_mode"):
         if gs_only in options:
             raise BadInput(f"{gs_only!r} is a GS option; the multi-agent IALS has no scripted agents and no renderer")

@@ -31,6 +31,20 @@ def region_spec(agent, **options):
     return spec(agent, **options)
 
 
+def ials_parallel_env(agents=None, predictor="trained", seed=None, **options):
+    """Every junction's IALS (:class:`ials_zoo.sumo_net.ials_env.IALSNetEnv`); ``agents`` learn
+    (default: all), ``predictor`` is an AIP set file or one spec for every light, ``seed`` seeds
+    the first reset."""
+    import numpy as np
+
+    from ials_zoo.sumo_net.ials_env import IALSNetEnv
+
+    env = IALSNetEnv(predictors=predictor, learners=agents, **options)
+    if seed is not None:
+        env._seed_rng = np.random.default_rng(seed)
+    return env
+
+
 def possible_agents(**options) -> list[str]:
     """Every signalised junction of the network the options name."""
     from ials_zoo.sumo_net.env import possible_agents as agents
@@ -91,6 +105,7 @@ DOMAIN = Domain(
     parallel_env=parallel_env,
     local_simulator=local_simulator,
     region_spec=region_spec,
+    ials_parallel_env=ials_parallel_env,
     default_predictor="mlp",
     null_influence=0,
     collect_options={"region_data": True},  # the GS watches its learners' regions only when asked
