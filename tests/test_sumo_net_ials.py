@@ -178,3 +178,9 @@ def test_train_aip_of_every_junction_feeds_the_multi_agent_ials(tmp_path):
     finally:
         gs.close()
         env.close()
+    one = ials_zoo.make_ials("sumo_net_v0", gs.possible_agents[1], predictor=str(out), net="cologne3", max_cycles=30,
+                             record_seconds=600)  # a set file gives make_ials the light's member
+    try:
+        assert one.predictor.region == aips[gs.possible_agents[1]].region
+    finally:
+        one.close()

@@ -173,9 +173,17 @@ def load_predictor(path, env_id: str | None = None, agent: str | None = None) ->
     ``env_id``/``agent``, when given, must match the ones it was trained for (a clear
     ``ValueError`` naming both otherwise). A file that is not a predictor file (corrupt,
     truncated, something else) raises ``ValueError("not an ials_zoo influence predictor: ...")``.
+    A predictor-set file (:func:`save_predictor_set`) gives ``agent``'s member.
     """
     path = Path(path)
-    pred = _from_payload(_torch_load(path), path)
+    payload = _torch_load(path)
+    if isinstance(payload, dict) and payload.get("format") == SET_FORMAT and agent is not None:
+        members = load_predictor_set(path, env_id)
+        if agent not in members:
+            raise BadInput(f"{path} is a set of influence predictors without one for agent {agent!r} "
+                           f"(it has {', '.join(sorted(members)[:5])}{', ...' if len(members) > 5 else ''})")
+        return members[agent]
+    pred = _from_payload(payload, path)
     region = pred.region
     if env_id is not None and region.domain != env_id:
         raise BadInput(
