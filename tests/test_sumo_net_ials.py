@@ -184,3 +184,8 @@ def test_train_aip_of_every_junction_feeds_the_multi_agent_ials(tmp_path):
         assert one.predictor.region == aips[gs.possible_agents[1]].region
     finally:
         one.close()
+
+
+def test_without_an_aip_make_ials_names_the_command_that_trains_one(own_cache):
+    with pytest.raises(FileNotFoundError, match=r"train-aip --env sumo_net_v0 --agent .* --options '\{\"net\": \"cologne1\"\}'"):
+        ials_zoo.make_ials("sumo_net_v0", LIGHT, net=NET)

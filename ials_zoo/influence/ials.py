@@ -337,7 +337,8 @@ def trained_predictor(
     if not train_if_missing:
         raise FileNotFoundError(
             f"no trained influence predictor for {env_id}/{agent} ({dset_kind!r} d-set, "
-            f"options {options}); train one with `ials-zoo train-aip --env {env_id} --agent {agent}` "
+            f"options {options}); train one with `ials-zoo train-aip --env {env_id} --agent {agent}"
+            f"{_options_flag(options)} --out FILE` "
             "and pass its file, or ask for predictor='train' to have it collected and trained now (minutes)"
         )
 
@@ -350,6 +351,11 @@ def trained_predictor(
     print(format_report(report))
     save_predictor(pred, _cache_path(region, arch, dset_kind))
     return pred
+
+
+def _options_flag(options: dict) -> str:
+    """`` --options '<json>'`` for a command line, or nothing without options."""
+    return f" --options '{json.dumps(options, sort_keys=True)}'" if options else ""
 
 
 def resolve_predictor(
