@@ -12,8 +12,9 @@ against the GS's, and its light's reward against the GS's under random lights.
    actions (seed 100): seconds per decision, its light's mean reward, and (a second pass) the
    vehicles entering its region per decision against the GS data's.
 
-Results go to ``--out/results.json`` as they come (a rerun skips what is done); the table is
-printed at the end. Usage: python docs/sumo_net_island.py --net ingolstadt21 [--episodes 2]
+Results go to ``--out/results.json`` as they come (a rerun skips what is done; the GS data are
+kept, so ``--aip ar3_clock`` trains the other variant on the same data); the table is printed at
+the end. Usage: python docs/sumo_net_island.py --net ingolstadt21 [--episodes 2]
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 import ials_zoo
-from ials_zoo.influence.dataset import collect_all
+from ials_zoo.influence.dataset import InfluenceDataset, collect_all
 from ials_zoo.influence.files import load_predictor_set, save_predictor_set
 from ials_zoo.influence.train import train_predictor
 from ials_zoo.sumo_net.env import SumoNetEnv
@@ -40,23 +41,41 @@ def _save(path: Path, results: dict) -> None:
     os.replace(tmp, path)
 
 
-def train_aips(net: str, episodes: int, out: Path, results: dict) -> dict:
-    """Every junction's AIP from one GS run, saved as one AIP set ``out/aips.pt`` (loaded if there)."""
-    path = out / "aips.pt"
-    if path.is_file():
-        return load_predictor_set(path, "sumo_net_v0")
+VARIANTS = {  # AIP variant -> train_predictor's settings
+    "mlp": {},
+    # the grid's best (docs/fidelity.md): its own last 3 draws and a clock over the hour
+    "ar3_clock": {"autoregressive": True, "influence_lags": 3, "clock_horizon": 360},
+}
+
+
+def gs_data(net: str, episodes: int, out: Path, results: dict) -> dict:
+    """Every junction's region data from one GS run with every light at random, saved under ``out``."""
     lights = SumoNetEnv(net=net).possible_agents
+    paths = {a: out / f"data_{k}.npz" for k, a in enumerate(lights)}
+    if all(p.is_file() for p in paths.values()):
+        return {a: InfluenceDataset.load(p, agent=a) for a, p in paths.items()}
     start = time.perf_counter()
     data = collect_all("sumo_net_v0", lights, steps=episodes * 360, seed=0, gs_options={"net": net}, progress=True)
     results["collect_seconds"] = time.perf_counter() - start
-    aips = {}
     for a, d in data.items():
-        aips[a], report = train_predictor(d, arch="mlp", epochs=150, lr=3e-3, progress=False)
+        d.save(paths[a])
+    return data
+
+
+def train_aips(net: str, episodes: int, variant: str, out: Path, results: dict) -> dict:
+    """Every junction's AIP of ``variant``, saved as one AIP set ``out/aips[_variant].pt`` (loaded if there)."""
+    path = out / ("aips.pt" if variant == "mlp" else f"aips_{variant}.pt")
+    if path.is_file():
+        return load_predictor_set(path, "sumo_net_v0")
+    aips = {}
+    for a, d in gs_data(net, episodes, out, results).items():
+        aips[a], report = train_predictor(d, arch="mlp", epochs=150, lr=3e-3, progress=False, **VARIANTS[variant])
         ce = report["cross_entropy"]
-        results.setdefault("aips", {})[a] = {
+        results.setdefault("aips" if variant == "mlp" else f"aips_{variant}", {})[a] = {
             "gs_entries_per_decision": float(np.asarray(d.influences).sum() / d.n_steps),
             "test_ce": ce["trained"]["test"], "marginal_ce": ce["marginal"]["test"], "sources": d.region.n_sources}
-    save_predictor_set(aips.values(), path, metadata={"net": net, "gs_hours": episodes, "policy": "uniform_random"})
+    save_predictor_set(aips.values(), path, metadata={"net": net, "gs_hours": episodes, "policy": "uniform_random",
+                                                      "variant": variant})
     return aips
 
 
@@ -116,12 +135,12 @@ def ials_figures(net: str, light: str, predictor) -> dict:
     return out
 
 
-def report(results: dict) -> None:
+def report(results: dict, key: str = "ials") -> None:
     gs = float(np.median(results["gs_seconds_per_decision"]))
     print(f"GS: {1 / gs:.1f} decisions/s (one learner, in this process)")
     print(f"{'light':<28}{'IALS dec/s':>11}{'x GS':>7}{'reward GS':>11}{'IALS':>8}{'entries GS':>12}{'IALS':>7}")
     speedups = []
-    for a, row in results.get("ials", {}).items():
+    for a, row in results.get(key, {}).items():
         aip = results["aips"][a]
         speedups.append(gs / row["seconds_per_decision"])
         print(f"{a[:27]:<28}{1 / row['seconds_per_decision']:>11.0f}{speedups[-1]:>7.1f}"
@@ -137,22 +156,24 @@ def main(argv=None) -> None:
     parser.add_argument("--episodes", type=int, default=2, help="GS hours of AIP data")
     parser.add_argument("--gs-decisions", type=int, default=120)
     parser.add_argument("--out", default=None, help="folder (default runs/sumo_net_island/<net>)")
+    parser.add_argument("--aip", default="mlp", choices=sorted(VARIANTS), help="the AIP variant")
     args = parser.parse_args(argv)
     out = Path(args.out or f"runs/sumo_net_island/{args.net}")
     out.mkdir(parents=True, exist_ok=True)
     path = out / "results.json"
     results = json.loads(path.read_text()) if path.is_file() else {"net": args.net}
-    aips = train_aips(args.net, args.episodes, out, results)
+    aips = train_aips(args.net, args.episodes, args.aip, out, results)
+    key = "ials" if args.aip == "mlp" else f"ials_{args.aip}"
     _save(path, results)
     entry_tables(SumoNetEnv(net=args.net).scenario, list(aips))  # one GS hour for every region's tables
     gs_figures(args.net, args.gs_decisions, results)
     _save(path, results)
     for light, pred in aips.items():
-        if light not in results.setdefault("ials", {}):
-            results["ials"][light] = ials_figures(args.net, light, pred)
+        if light not in results.setdefault(key, {}):
+            results[key][light] = ials_figures(args.net, light, pred)
             _save(path, results)
-            print(light, results["ials"][light], flush=True)
-    report(results)
+            print(light, results[key][light], flush=True)
+    report(results, key)
 
 
 if __name__ == "__main__":
