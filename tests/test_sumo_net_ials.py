@@ -189,3 +189,39 @@ def test_train_aip_of_every_junction_feeds_the_multi_agent_ials(tmp_path):
 def test_without_an_aip_make_ials_names_the_command_that_trains_one(own_cache):
     with pytest.raises(FileNotFoundError, match=r"train-aip --env sumo_net_v0 --agent .* --options '\{\"net\": \"cologne1\"\}'"):
         ials_zoo.make_ials("sumo_net_v0", LIGHT, net=NET)
+
+
+class _Seconds:
+    """SUMO's answers over a few seconds, as ``_libsumo`` gives them (which vehicles are on which
+    edge, alive, on which road): the watcher's bookkeeping alone, against a hand-made account."""
+
+    def __init__(self, seconds):
+        self.seconds, self.t = seconds, 0
+
+    def edge_getLastStepVehicleIDs(self, edge):
+        return [v for v, road in self.seconds[self.t].items() if road == edge]
+
+    def vehicle_getIDList(self):
+        return list(self.seconds[self.t])
+
+    def vehicle_getRoadID(self, vehicle):
+        return self.seconds[self.t][vehicle]
+
+
+def test_the_entry_watcher_counts_each_vehicle_once_where_it_came_in():
+    from ials_zoo.sumo_net.influence import EntryWatcher, RegionLayout
+
+    layout = RegionLayout("J", sources=("in_a", "in_b"), edges=("in_a", "in_b", "out"), source_lanes=(), lanes=())
+    seconds = [{"a": "in_a", "x": "far"},                    # a comes in on in_a
+               {"a": ":J_0", "b": "in_b", "c": "in_b"},      # a crosses the junction; b and c come in on in_b
+               {"a": "out", "b": "in_b", "c": "in_b", "d": "out"},  # a goes on; d appears past the light
+               {"b": "in_b", "e": "in_a"}]                   # a and c left (c vanished: it arrived); e comes in
+    raw = _Seconds(seconds)
+    watcher = EntryWatcher([layout], decision=4)
+    watcher.reset()
+    for t in range(4):
+        raw.t = t
+        watcher.after_step(raw)
+    np.testing.assert_array_equal(watcher.counts[0], [[1, 0, 0], [0, 2, 0], [0, 0, 1], [1, 0, 0]])
+    # points in ("in_a", "in_b", "inside") order per second, second-major; two or more is class 2
+    np.testing.assert_array_equal(watcher.influences()[0], [1, 0, 0, 0, 2, 0, 0, 0, 1, 1, 0, 0])
