@@ -117,16 +117,18 @@ def test_make_ials_of_a_junction_passes_gymnasiums_checker():
 
 
 def test_an_aip_trained_on_gs_data_brings_vehicles_at_the_gs_rate(data):
-    """Cross-entropy below the data's marginal, and the IALS's region gets the GS's inflow (a
-    uniform AIP floods it)."""
+    """Cross-entropy below the data's marginal, and the IALS's region gets the GS's inflow, as
+    with the GS's recorded entry frequencies (no training); a uniform AIP floods it."""
     from ials_zoo.influence.train import train_predictor
+    from ials_zoo.sumo_net.island import gs_marginal_predictors
 
     pred, report = train_predictor(data, arch="mlp", epochs=30, lr=3e-3, progress=False)
     ce = report["cross_entropy"]
     assert ce["trained"]["test"] < 1.02 * ce["marginal"]["test"] < ce["untrained"]["test"]
     gs_rate = np.asarray(data.influences).sum() / data.n_steps
     rates = {}
-    for name, predictor in (("trained", pred), ("uniform", "uniform")):
+    recorded = gs_marginal_predictors([LIGHT], **LS_OPTIONS)[LIGHT]
+    for name, predictor in (("trained", pred), ("recorded", recorded), ("uniform", "uniform")):
         env = ials_zoo.make_ials("sumo_net_v0", LIGHT, predictor=predictor, seed=0, measure_entries=True,
                                  **LS_OPTIONS)
         entered = steps = 0
@@ -141,6 +143,7 @@ def test_an_aip_trained_on_gs_data_brings_vehicles_at_the_gs_rate(data):
             env.close()
         rates[name] = entered / steps
     assert abs(rates["trained"] - gs_rate) < 0.15 * gs_rate, (rates, gs_rate)
+    assert abs(rates["recorded"] - gs_rate) < 0.15 * gs_rate, (rates, gs_rate)
     assert rates["uniform"] > 1.3 * gs_rate, (rates, gs_rate)  # measured 1.56: a flooded region fills up
 
 
@@ -225,3 +228,14 @@ def test_the_entry_watcher_counts_each_vehicle_once_where_it_came_in():
     np.testing.assert_array_equal(watcher.counts[0], [[1, 0, 0], [0, 2, 0], [0, 0, 1], [1, 0, 0]])
     # points in ("in_a", "in_b", "inside") order per second, second-major; two or more is class 2
     np.testing.assert_array_equal(watcher.influences()[0], [1, 0, 0, 0, 2, 0, 0, 0, 1, 1, 0, 0])
+
+
+def test_the_bench_reports_every_light_s_ials_and_the_multi_agent_ials_against_the_gs(capsys):
+    from ials_zoo.sumo_net.benchmark import run_bench
+
+    rows = run_bench(("cologne1",), repeats=1, max_cycles=30)
+    single = next(r for r in rows if "speedup" in r)
+    multi = next(r for r in rows if "local_over_gs" in r)
+    assert single["agents"] == multi["agents"] == 1 and single["gs_decisions_per_s"] > 0
+    assert np.isfinite(single["speedup"]).all() and np.isfinite(multi["local_over_gs"]).all()
+    assert "one light's IALS decisions/s" in capsys.readouterr().out

@@ -11,8 +11,8 @@ in one run, so machine load largely cancels out; median [min, max] over ``repeat
 (seeds 0, 1, ...), for two modes: the env's default (``fresh_process=True``: every episode in
 a new worker, which makes episodes reproducible) and in this process (``fresh_process=False``).
 
-Then the local simulators of every light's region (:class:`ials_zoo.sumo_net.local.LocalNetEnv`)
-against the GS, per agent-decision, both ParallelEnvs in a worker (:func:`bench_local`).
+Then the IALS against the GS: every light's at once, per agent-decision, both ParallelEnvs in a
+worker (:func:`bench_local`), and each light's own, decisions per second (:func:`bench_single`).
 """
 
 from __future__ import annotations
@@ -93,24 +93,27 @@ def _random_episode(env, seed: int) -> float:
 
 
 def bench_local(net: str, repeats: int = 3, max_cycles: int | None = None) -> dict:
-    """The multi-agent local simulators' ParallelEnv (:class:`ials_zoo.sumo_net.local.LocalNetEnv`)
+    """The multi-agent IALS (:class:`ials_zoo.sumo_net.ials_env.IALSNetEnv`, every light's AIP
+    the GS's recorded entry frequencies: :func:`~ials_zoo.sumo_net.island.gs_marginal_predictors`)
     against the GS, per agent-decision: both in a worker process (one pipe round trip per
     decision each), episodes of the same seed alternating, one ratio per pair."""
-    from ials_zoo.sumo_net.local import LocalNetEnv
+    from ials_zoo.sumo_net.ials_env import IALSNetEnv
+    from ials_zoo.sumo_net.island import gs_marginal_predictors
 
     options = {"net": net, "backend": "worker", "fresh_process": False, "max_cycles": max_cycles}
     start = time.perf_counter()
-    local = LocalNetEnv(**options)
-    built = time.perf_counter() - start
-    gs, pairs = None, []
+    gs = SumoNetEnv(**options)
+    local, pairs = None, []
     try:
-        gs = SumoNetEnv(**options)
+        local = IALSNetEnv(predictors=gs_marginal_predictors(gs.possible_agents, net=net, max_cycles=max_cycles),
+                           **options)
+        built = time.perf_counter() - start
         for seed in range(repeats):
             pairs.append((_random_episode(gs, seed), _random_episode(local, seed)))
     finally:
-        local.close()
-        if gs is not None:
-            gs.close()
+        gs.close()
+        if local is not None:
+            local.close()
     agents = len(gs.possible_agents)
     return {"net": net, "agents": agents, "repeats": repeats, "build_seconds": built,
             "gs_us_per_agent_decision": _stat([g / agents * 1e6 for g, _ in pairs]),
@@ -118,16 +121,58 @@ def bench_local(net: str, repeats: int = 3, max_cycles: int | None = None) -> di
             "local_over_gs": _stat([x / g for g, x in pairs])}
 
 
+def bench_single(net: str, repeats: int = 3, max_cycles: int | None = None) -> dict:
+    """Every light's own IALS (``make_ials``, the recorded-frequency AIP) against the GS with one
+    learner, decisions per second, both in this process; the GS's median over ``repeats`` episodes
+    of its first light learning, each IALS one episode."""
+    import ials_zoo
+    from ials_zoo.sumo_net.island import gs_marginal_predictors
+
+    gs = SumoNetEnv(net=net, max_cycles=max_cycles, backend="inprocess", fresh_process=False)
+    lights = list(gs.possible_agents)
+    gs.close()
+    gs = SumoNetEnv(net=net, max_cycles=max_cycles, backend="inprocess", fresh_process=False, learners=lights[:1])
+    try:
+        gs_rate = float(np.median([1.0 / _random_episode(gs, seed) for seed in range(repeats)]))
+    finally:
+        gs.close()
+    aips, rates = gs_marginal_predictors(lights, net=net, max_cycles=max_cycles), []
+    for k, light in enumerate(lights):
+        env = ials_zoo.make_ials("sumo_net_v0", light, predictor=aips[light], seed=k, net=net, max_cycles=max_cycles)
+        try:
+            rng = np.random.default_rng(k)
+            env.reset(seed=k)
+            start, n, done = time.perf_counter(), 0, False
+            while not done:
+                *_, term, trunc, _ = env.step(int(rng.integers(env.action_space.n)))
+                n, done = n + 1, term or trunc
+            rates.append(n / (time.perf_counter() - start))
+        finally:
+            env.close()
+    return {"net": net, "agents": len(lights), "gs_decisions_per_s": gs_rate,
+            "ials_decisions_per_s": _stat(rates), "speedup": _stat([r / gs_rate for r in rates])}
+
+
 def print_local_rows(rows) -> None:
-    print(f"\n{'map':<14}{'lights':>7}{'GS µs/agent-decision':>22}{'local µs/agent-decision':>25}"
-          f"{'local / GS':>22}{'built in':>10}")
-    for r in rows:
+    multi = [r for r in rows if "local_over_gs" in r]
+    print(f"\n{'map':<14}{'lights':>7}{'GS µs/agent-decision':>22}{'IALS µs/agent-decision':>24}"
+          f"{'IALS / GS':>22}{'built in':>10}")
+    for r in multi:
         m, lo, hi = r["local_over_gs"]
         print(f"{r['net']:<14}{r['agents']:>7}{r['gs_us_per_agent_decision'][0]:>22,.0f}"
-              f"{r['local_us_per_agent_decision'][0]:>25,.0f}{f'{m:.2f} [{lo:.2f}, {hi:.2f}]':>22}"
+              f"{r['local_us_per_agent_decision'][0]:>24,.0f}{f'{m:.2f} [{lo:.2f}, {hi:.2f}]':>22}"
               f"{r['build_seconds']:>9.0f}s")
-    print("local: every light's region side by side in one SUMO simulation, influence drawn from a recorded GS "
-          "episode (no AIP yet); built in: cutting, merging and recording. Median [min, max] over episode pairs.")
+    print("The multi-agent IALS: every light's region side by side in one SUMO simulation, each fed by an AIP of the "
+          "GS's recorded entry frequencies (a trained MLP costs one call more per light and decision); built in: "
+          "cutting, merging, recording. Median [min, max] over episode pairs.")
+    header = "one light's IALS decisions/s"
+    print(f"\n{'map':<14}{'lights':>7}{'GS decisions/s':>16}{header:>32}{'speed-up':>24}")
+    for r in (r for r in rows if "speedup" in r):
+        m, lo, hi = r["speedup"]
+        print(f"{r['net']:<14}{r['agents']:>7}{r['gs_decisions_per_s']:>16,.1f}"
+              f"{r['ials_decisions_per_s'][0]:>32,.0f}{f'{m:.1f}x [{lo:.1f}x, {hi:.1f}x]':>24}")
+    print("One light's IALS (make_ials) against the GS with that one learner, both in this process; median [min, "
+          "max] over the lights.")
 
 
 def run_bench(nets=DEFAULT_MAPS, repeats: int = 3, max_cycles: int | None = None, local: bool = True) -> list[dict]:
@@ -142,12 +187,15 @@ def run_bench(nets=DEFAULT_MAPS, repeats: int = 3, max_cycles: int | None = None
             print(f"{net}, {mode}: GS at {rows[-1]['gs_share_of_raw'][0]:.2f} of raw SUMO", flush=True)
         if local:
             local_rows.append(bench_local(net, repeats, max_cycles))
-            print(f"{net}, local simulators: {local_rows[-1]['local_over_gs'][0]:.2f} of the GS per agent-decision",
+            print(f"{net}, the multi-agent IALS: {local_rows[-1]['local_over_gs'][0]:.2f} of the GS per agent-decision",
                   flush=True)
+            local_rows.append(bench_single(net, repeats, max_cycles))
+            print(f"{net}, one light's IALS: {local_rows[-1]['speedup'][0]:.1f}x the GS's decisions/s", flush=True)
     print_rows(rows)
     if local_rows:
         print_local_rows(local_rows)
     return rows + local_rows
 
 
-__all__ = ["DEFAULT_MAPS", "MODES", "bench_local", "bench_map", "print_local_rows", "print_rows", "run_bench"]
+__all__ = ["DEFAULT_MAPS", "MODES", "bench_local", "bench_map", "bench_single", "print_local_rows", "print_rows",
+           "run_bench"]

@@ -35,7 +35,14 @@ from ials_zoo.core.streams import agent_key
 from ials_zoo.errors import BadInput, BadInputType
 from ials_zoo.sumo.lease import SimHandle
 from ials_zoo.sumo_net.core import NetCore
-from ials_zoo.sumo_net.influence import EntryWatcher, RegionLayout, full_dset, region_layout, region_spec
+from ials_zoo.sumo_net.influence import (
+    ENTRY_CLASSES,
+    EntryWatcher,
+    RegionLayout,
+    full_dset,
+    region_layout,
+    region_spec,
+)
 from ials_zoo.sumo_net.mdp import N_FEATURES, observation_fn, reward_fn
 from ials_zoo.sumo_net.names import SCENARIO_OPTIONS
 from ials_zoo.utils import check_seed, parse_untrusted_json_object
@@ -57,39 +64,75 @@ def entry_tables(scenario, lights, seconds: int | None = None, seed: int = 0) ->
     there ``[edges inside, lane index, position, type, speed factor]`` over ``seconds`` of the
     GS (default: the scenario's) with every light on its own program. Cached as JSON, one file
     per light; the missing lights are recorded in one GS run."""
+    return {light: x["tables"] for light, x in _recorded(scenario, lights, seconds, seed).items()}
+
+
+def entry_histograms(scenario, lights, seconds: int | None = None, seed: int = 0) -> dict[str, list]:
+    """Per light, per entry point: the seconds of the same recording in which 0, 1, or 2 or more
+    vehicles came in there."""
+    return {light: x["histogram"] for light, x in _recorded(scenario, lights, seconds, seed).items()}
+
+
+def _recorded(scenario, lights, seconds, seed: int) -> dict[str, dict]:
     seconds = int(seconds or scenario.end - scenario.begin)
-    out = {light: _cached_tables(_table_path(scenario, light, seconds, seed)) for light in lights}
-    missing = [light for light, tables in out.items() if tables is None]
+    out = {light: _cached(_table_path(scenario, light, seconds, seed)) for light in lights}
+    missing = [light for light, x in out.items() if x is None]
     if missing:
-        for light, tables in _record_tables(scenario, missing, seconds, seed).items():
+        for light, x in _record_tables(scenario, missing, seconds, seed).items():
             path = _table_path(scenario, light, seconds, seed)
             path.parent.mkdir(parents=True, exist_ok=True)
             tmp = path.with_suffix(f".{os.getpid()}.tmp")
-            tmp.write_text(json.dumps({"light": light, "seconds": seconds, "seed": seed, "tables": tables}))
+            tmp.write_text(json.dumps({"light": light, "seconds": seconds, "seed": seed, **x}))
             os.replace(tmp, path)  # never half-written
-            out[light] = tables
+            out[light] = x
     return out
 
 
-def _cached_tables(path: Path) -> list | None:
+def _cached(path: Path) -> dict | None:
     if not path.is_file() or path.stat().st_size > MAX_TABLE_BYTES:
         return None
     data = parse_untrusted_json_object(path.read_bytes(), f"entry table {path}")
-    return data["tables"] if isinstance(data.get("tables"), list) else None
+    if not (isinstance(data.get("tables"), list) and isinstance(data.get("histogram"), list)):
+        return None  # an older cache file: recorded again
+    return {"tables": data["tables"], "histogram": data["histogram"]}
 
 
-def _record_tables(scenario, lights: list, seconds: int, seed: int) -> dict[str, list]:
+def _record_tables(scenario, lights: list, seconds: int, seed: int) -> dict[str, dict]:
     from ials_zoo.sumo_net.local import record_influence
     from ials_zoo.sumo_net.regions import regions_of
 
     regions = {light: regions_of(scenario.net_file)[light] for light in lights}
     point = {light: {e: j for j, e in enumerate(r.sources)} for light, r in regions.items()}
     tables = {light: [[] for _ in range(len(r.sources) + 1)] for light, r in regions.items()}
+    histogram = {light: np.zeros((len(r.sources) + 1, ENTRY_CLASSES), np.int64) for light, r in regions.items()}
     for step in record_influence(scenario, regions, seconds, seed):
+        counts = {light: np.zeros(len(r.sources) + 1, np.int64) for light, r in regions.items()}
         for light, _vehicle, edges, lane, pos, _speed, vtype, factor in step:
             j = point[light].get(edges[0], len(point[light]))
             tables[light][j].append([list(edges), lane, pos, vtype, factor])
-    return tables
+            counts[light][j] += 1
+        for light, c in counts.items():
+            histogram[light][np.arange(len(c)), np.minimum(c, ENTRY_CLASSES - 1)] += 1
+    return {light: {"tables": tables[light], "histogram": histogram[light].tolist()} for light in lights}
+
+
+def gs_marginal_predictors(lights, record_seconds: int | None = None, record_seed: int = 0, **options) -> dict:
+    """Per light, an AIP that needs no training: every source drawn from the GS's own frequency of
+    0, 1 and 2+ entering vehicles per second at that entry point (:func:`entry_histograms`; a
+    :class:`~ials_zoo.influence.constant.MarginalPredictor`). Costs what a trained MLP costs to
+    within a call, so the benchmark uses it."""
+    from ials_zoo.influence.constant import MarginalPredictor
+    from ials_zoo.sumo_net.env import scenario_of
+
+    scenario_options = _scenario_options(options)
+    scenario = scenario_of(**scenario_options)
+    out = {}
+    for light, hist in entry_histograms(scenario, list(lights), record_seconds, record_seed).items():
+        region = region_spec(light, **scenario_options)
+        per_point = [(np.asarray(h, np.float64) + 0.5) / (np.sum(h) + 0.5 * ENTRY_CLASSES) for h in hist]
+        probs = [per_point[j] for _ in range(scenario.decision_seconds) for j in range(len(hist))]
+        out[light] = MarginalPredictor(region, probs, metadata={"from": "the GS's entries per second"})
+    return out
 
 
 class IslandCore(NetCore):
@@ -309,4 +352,5 @@ def local_simulator(agents, n_envs: int = 1, **options) -> SumoNetLocalSimulator
     return SumoNetLocalSimulator(agents, n_envs, **{k: v for k, v in options.items() if k in keep})
 
 
-__all__ = ["IslandCore", "SumoNetLocalSimulator", "entry_tables", "local_simulator"]
+__all__ = ["IslandCore", "SumoNetLocalSimulator", "entry_histograms", "entry_tables", "gs_marginal_predictors",
+           "local_simulator"]
