@@ -14,15 +14,13 @@ their own program, their regions fed by their AIPs too.
 
 from __future__ import annotations
 
-import shutil
-import tempfile
 from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
 from ials_zoo.errors import BadInput, BadInputType
-from ials_zoo.sumo_net.env import SumoNetEnv, scenario_of
+from ials_zoo.sumo_net.local import RegionsNetEnv
 from ials_zoo.sumo_net.names import ENV_ID, SCENARIO_OPTIONS
 
 
@@ -44,7 +42,7 @@ def resolve_predictors(predictors, lights: list[str], options: dict) -> dict:
     return {x: resolve_predictor(predictors[x], ENV_ID, x, options=options) for x in lights}
 
 
-class IALSNetEnv(SumoNetEnv):
+class IALSNetEnv(RegionsNetEnv):
     """``sumo_net_v0`` on every light's local simulator and AIP (module docstring).
 
     Takes ``sumo_net_v0``'s options (``net=``, ``learners=``, ...) and ``predictors`` (an AIP
@@ -59,40 +57,28 @@ class IALSNetEnv(SumoNetEnv):
 
     def __init__(self, predictors="untrained", record_seconds: int | None = None, record_seed: int = 0,
                  fresh_process: bool = False, **options):
-        from ials_zoo.sumo_net.island import entry_tables
-        from ials_zoo.sumo_net.regions import regions_of
-        from ials_zoo.sumo_net.replay import cut_regions, vehicle_types
-
         if options.get("region_data") is not None:
             raise BadInputType("region_data: the IALS always reports its region data")
-        scenario = scenario_of(**{k: options[k] for k in SCENARIO_OPTIONS if k in options})
-        self._folder = Path(tempfile.mkdtemp(prefix="ials_zoo_ials_net_"))
-        try:
-            self.regions = regions_of(scenario.net_file)
-            lights = list(self.regions)
-            given = {k: options[k] for k in SCENARIO_OPTIONS if k in options}
-            self.predictors = resolve_predictors(predictors, lights, given)
-            self._merged = cut_regions(scenario.net_file, self.regions, self._folder)
-            self._vtypes = vehicle_types(scenario.route_files, self._folder / "vtypes.add.xml")
-            self._tables = entry_tables(scenario, lights, record_seconds, record_seed)
-            super().__init__(fresh_process=fresh_process, region_data=True, **options)
-        except BaseException:
-            shutil.rmtree(self._folder, ignore_errors=True)
-            raise
+        self._aips = (predictors, {k: options[k] for k in SCENARIO_OPTIONS if k in options})
+        self._record = (record_seconds, record_seed)
+        super().__init__(fresh_process=fresh_process, region_data=True, **options)
         self._region_rows = {x: k for k, x in enumerate(self.network.ids)}
         self._aip_rng = np.random.default_rng()
+
+    def _prepare(self, scenario) -> None:
+        from ials_zoo.sumo_net.island import entry_tables
+
+        predictors, given = self._aips
+        self.predictors = resolve_predictors(predictors, list(self.regions), given)
+        self._tables = entry_tables(scenario, list(self.regions), *self._record)
 
     def _core_config(self) -> dict:
         from ials_zoo.sumo_net.influence import region_layout
 
         config = super()._core_config()
-        ids = config["lights"]
-        config.pop("regions", None)
+        ids = self.network.ids
         layouts = [region_layout(self.scenario.net_file, x).prefixed(f"{x}__") for x in ids]
-        config.update(net_file=str(self._merged), route_files=[], extra=["--additional-files", str(self._vtypes)],
-                      lights=[f"{x}__{x}" for x in ids], controlled=[f"{x}__{x}" for x in config["controlled"]],
-                      lanes=[[f"{x}__{lane}" for lane in lanes] for x, lanes in zip(ids, config["lanes"])],
-                      layouts=[asdict(x) for x in layouts], tables=[self._tables[x] for x in ids],
+        config.update(layouts=[asdict(x) for x in layouts], tables=[self._tables[x] for x in ids],
                       row_keys=[(x, 0) for x in ids], prefixes=[f"{x}__" for x in ids])
         return config
 
@@ -110,16 +96,6 @@ class IALSNetEnv(SumoNetEnv):
         influences = [self.predictors[x].sample(dsets[k][None], rng)[0].tolist()
                       for k, x in enumerate(self.network.ids)]
         return actions, influences
-
-    def _finish(self) -> dict[str, float]:
-        return self._sim.call("finish")
-
-    def close(self):
-        super().close()
-        folder = getattr(self, "_folder", None)
-        if folder is not None:
-            shutil.rmtree(folder, ignore_errors=True)
-            self._folder = None
 
 
 __all__ = ["IALSNetEnv", "resolve_predictors"]

@@ -100,42 +100,35 @@ class LocalNetCore(NetCore):
             self.sim_seconds += time.perf_counter() - start
 
 
-class LocalNetEnv(SumoNetEnv):
-    """``sumo_net_v0`` on the local simulators of every light's region (module docstring).
+class RegionsNetEnv(SumoNetEnv):
+    """``sumo_net_v0`` on every light's region, all side by side in one SUMO simulation (ids
+    prefixed ``"<light>__"``): the GS's agents, spaces, signal loop, observations and rewards. A
+    subclass says how vehicles come in: what it records before SUMO starts (:meth:`_prepare`)
+    and its core. ``episode_metrics()`` has only ``queue``: trip delays need the whole network."""
 
-    Takes ``sumo_net_v0``'s options (``net=``, ``learners=``, ...); ``record_seconds`` (default:
-    the map's episode) is how much GS is recorded for the influence, ``record_seed`` its SUMO
-    seed. ``episode_metrics()`` has only ``queue``: trip delays need the whole network.
-    """
-
-    CORE = "ials_zoo.sumo_net.local:LocalNetCore"
-
-    def __init__(self, record_seconds: int | None = None, record_seed: int = 0, **options):
+    def __init__(self, **options):
         scenario = scenario_of(**{k: options[k] for k in SCENARIO_OPTIONS if k in options})
-        self._folder = Path(tempfile.mkdtemp(prefix="ials_zoo_local_net_"))
+        self._folder = Path(tempfile.mkdtemp(prefix="ials_zoo_regions_"))
         try:
             self.regions = regions_of(scenario.net_file)
             self._merged = cut_regions(scenario.net_file, self.regions, self._folder)
             self._vtypes = vehicle_types(scenario.route_files, self._folder / "vtypes.add.xml")
-            seconds = int(record_seconds or scenario.end - scenario.begin)
-            self.influence = GSInfluence(record_influence(scenario, self.regions, seconds, record_seed),
-                                         list(self.regions))
+            self._prepare(scenario)
             super().__init__(**options)
         except BaseException:
             shutil.rmtree(self._folder, ignore_errors=True)
             raise
 
+    def _prepare(self, scenario) -> None:
+        """What the core's influence needs, made before SUMO starts."""
+
     def _core_config(self) -> dict:
         config = super()._core_config()
-
-        def local(light: str, name: str) -> str:
-            return f"{light}__{name}"
-
+        config.pop("regions", None)  # the GS's watched regions: these regions are the simulation
         ids = config["lights"]
         config.update(net_file=str(self._merged), route_files=[], extra=["--additional-files", str(self._vtypes)],
-                      lights=[local(x, x) for x in ids], controlled=[local(x, x) for x in config["controlled"]],
-                      lanes=[[local(x, lane) for lane in lanes] for x, lanes in zip(ids, config["lanes"])],
-                      influence=self.influence.steps)
+                      lights=[f"{x}__{x}" for x in ids], controlled=[f"{x}__{x}" for x in config["controlled"]],
+                      lanes=[[f"{x}__{lane}" for lane in lanes] for x, lanes in zip(ids, config["lanes"])])
         return config
 
     def _finish(self) -> dict[str, float]:
@@ -149,4 +142,28 @@ class LocalNetEnv(SumoNetEnv):
             self._folder = None
 
 
-__all__ = ["GSInfluence", "LocalNetCore", "LocalNetEnv", "record_influence"]
+class LocalNetEnv(RegionsNetEnv):
+    """``sumo_net_v0`` on the local simulators of every light's region (module docstring).
+
+    Takes ``sumo_net_v0``'s options (``net=``, ``learners=``, ...); ``record_seconds`` (default:
+    the map's episode) is how much GS is recorded for the influence, ``record_seed`` its SUMO
+    seed. ``episode_metrics()`` has only ``queue``: trip delays need the whole network.
+    """
+
+    CORE = "ials_zoo.sumo_net.local:LocalNetCore"
+
+    def __init__(self, record_seconds: int | None = None, record_seed: int = 0, **options):
+        self._record = (record_seconds, record_seed)
+        super().__init__(**options)
+
+    def _prepare(self, scenario) -> None:
+        record_seconds, record_seed = self._record
+        seconds = int(record_seconds or scenario.end - scenario.begin)
+        self.influence = GSInfluence(record_influence(scenario, self.regions, seconds, record_seed),
+                                     list(self.regions))
+
+    def _core_config(self) -> dict:
+        return {**super()._core_config(), "influence": self.influence.steps}
+
+
+__all__ = ["GSInfluence", "LocalNetCore", "LocalNetEnv", "RegionsNetEnv", "record_influence"]
