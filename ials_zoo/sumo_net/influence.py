@@ -5,8 +5,8 @@ the edges past short exits). What the rest of the network does to it is the vehi
 come in:
 
 * **influence sources**: per *entry point* and per second of a decision, the vehicles that
-  entered the region there during that second, as a class: 0, 1 or 2 (two or more; a third in
-  one second on one road is rare: ``docs/sumo_net.md``). The entry points are the chains'
+  entered the region there during that second, as a class: 0, 1 or 2 (two or more: a third in
+  one second on one road is rare). The entry points are the chains'
   first edges (:attr:`~ials_zoo.sumo_net.regions.NetRegion.sources`, in that order), then
   ``"inside"``: vehicles that appear on any other edge of the region from outside it (inserted
   there by the route files, or joining past a short exit). Sources are ordered second-major

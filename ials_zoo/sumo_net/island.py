@@ -12,9 +12,7 @@ its own program, the map's hour, SUMO seed 0; :func:`entry_tables`, cached under
 ``$IALS_ZOO_CACHE/sumo_net``, or ``~/.cache/ials_zoo/sumo_net``): its route inside the region, lane, position, type and speed
 factor, inserted at the highest safe speed. A vehicle that cannot be inserted within
 :data:`INSERT_PATIENCE` seconds is dropped, as the GS's could not have entered then. Vehicles
-leave at the end of the region's edges, so spill-back from beyond them is not simulated. (Letting them leave 50 m into a region's
-last edges instead took 10% of the vehicles out of ingolstadt21's multi-agent IALS and no
-measurable time: the vehicles that cost are the queues on the lights' incoming lanes.)
+leave at the end of the region's edges, so spill-back from beyond them is not simulated.
 """
 
 from __future__ import annotations
