@@ -29,8 +29,9 @@ def domains():
     return ["traffic_grid_v0", "warehouse_v0", TOY]
 
 
-# agents with their own spaces: the GS half of the contract, and one junction's IALS
-# (tests/test_sumo_net_ials.py) but no multi-agent IALS tools yet
+# agents with their own spaces: the GS half of the contract, one junction's IALS
+# (tests/test_sumo_net_ials.py) and DIALS on copies of its multi-agent IALS ParallelEnv
+# (tests/test_sumo_net_dials.py), but not the tools that stack agents of one shape
 OWN_SPACES = ["sumo_net_v0"]
 
 
@@ -47,6 +48,7 @@ def any_domain(request) -> Domain:
 
 
 def test_domains_with_their_own_spaces_say_so_and_the_multi_agent_tools_refuse_them_by_name():
+    from ials_zoo.baselines.dials import on_copies
     from ials_zoo.core.domains import ials_domain_ids
     from ials_zoo.errors import BadInput
 
@@ -63,6 +65,7 @@ def test_domains_with_their_own_spaces_say_so_and_the_multi_agent_tools_refuse_t
         with pytest.raises(BadInput, match="make_multi_agent_ials needs a local simulator and shared agent spaces"):
             ials_zoo.make_multi_agent_ials(env_id)
         assert d.ials_parallel_env is not None  # its own multi-agent IALS (tests/test_sumo_net_ials.py)
+        assert on_copies(d)  # which DIALS trains on
     gs_only = Domain(env_id="gs_only_v0", parallel_env=dict, possible_agents=list, default_agents=("a",),
                      episode_length=1)
     assert not gs_only.has_local_simulator

@@ -9,7 +9,7 @@ import pytest
 
 from ials_zoo.errors import BadInput
 from ials_zoo.sumo_net.network import read_network
-from ials_zoo.sumo_net.regions import CHAIN_CAP_METRES, SHORT_EXIT_METRES, cut_network, network_size, regions_of
+from ials_zoo.sumo_net.regions import CHAIN_CAP_METRES, EXIT_METRES, SHORT_EXIT_METRES, cut_network, network_size, regions_of
 from ials_zoo.sumo_net.replay import replay_regions
 from ials_zoo.sumo_net.scenario import make_scenario
 
@@ -44,6 +44,27 @@ def test_a_chain_stops_at_its_cap(cologne8):
     short = regions_of(cologne8, cap=1.0)
     assert all(len(c) == 1 for r in short.values() for c in r.chains)
     assert any(len(c) > 1 for r in regions_of(cologne8).values() for c in r.chains)
+
+
+def test_a_region_begins_at_the_cap_and_ends_a_few_metres_past_the_light(cologne8):
+    """From each entry offset to the stop line the chain is exactly the cap long (or shorter,
+    where the upstream junction is nearer); vehicles leave EXIT_METRES into the outgoing edges."""
+    import sumolib
+
+    net = sumolib.net.readNet(cologne8, withInternal=False)
+    length = {e.getID(): e.getLength() for e in net.getEdges()}
+    regions = regions_of(cologne8)
+    cut = 0
+    for r in regions.values():
+        assert len(r.entry_offsets) == len(r.sources)
+        for chain, offset in zip(r.chains, r.entry_offsets):
+            inside = sum(length[e] for e in chain) - offset
+            assert 0 <= offset < length[chain[0]]
+            assert inside == pytest.approx(CHAIN_CAP_METRES) if offset > 0 else inside <= CHAIN_CAP_METRES + 1e-6
+            cut += offset > 0
+        assert dict(r.exits) == {e: min(EXIT_METRES, length[e]) for e in r.outgoing + r.beyond}
+    assert cut > 0  # cologne8 has roads longer than the cap
+    assert all(o == 0 for r in regions_of(cologne8, cap=1e6).values() for o in r.entry_offsets)
 
 
 def test_a_cut_region_keeps_its_lights_program(cologne8, tmp_path):

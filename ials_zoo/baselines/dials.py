@@ -79,6 +79,7 @@ from ials_zoo.baselines.multiagent import (
 from ials_zoo.baselines.retrain import training_command
 from ials_zoo.core.domains import get_domain, ials_domain_ids
 from ials_zoo.core.extras import dials_of, study_of
+from ials_zoo.core.spaces import joint_sizes
 from ials_zoo.dials.backends import BACKENDS, InProcessBackend, check_ray_address, make_backend
 from ials_zoo.dials.shard import LEARNERS, ShardSpec, split_agents
 from ials_zoo.errors import BadInput
@@ -171,7 +172,11 @@ def check_args(args: Args):
     """Clear errors before anything starts; returns (domain, agents, options, refresh, copies)."""
     if args.env_id is None:
         raise BadInput(f"name the domain to train on: --env, one of {', '.join(ials_domain_ids())}")
-    domain = get_domain(args.env_id).require_ials("train dials")
+    domain = get_domain(args.env_id)
+    if on_copies(domain):
+        _check_copies_args(args)
+    else:
+        domain.require_ials("train dials")
     options = parse_env_options(args.env_options)
     agents = domain.check_agents(None if args.agents == "all" else args.agents, **options)
     check_seed(args.seed, "seed")
@@ -220,6 +225,24 @@ def check_args(args: Args):
             raise BadInput("--ray-address needs --backend ray")
         check_ray_address(args.ray_address)
     return domain, agents, options, refresh, copies
+
+
+def on_copies(domain) -> bool:
+    """Whether DIALS trains ``domain`` on copies of its multi-agent IALS ParallelEnv
+    (:mod:`ials_zoo.baselines.dials_copies`: agents with spaces of their own) rather than on
+    every agent's batched IALS."""
+    return domain.has_ials_parallel_env and not domain.has_ials
+
+
+def _check_copies_args(args) -> None:
+    if args.learner != "batched":
+        raise BadInput(f"--learner {args.learner}: agents with spaces of their own train with --learner batched "
+                       "(one torch program, observations padded)")
+    if args.backend != "process":
+        raise BadInput(f"--backend {args.backend}: agents with spaces of their own train on IALS copies in worker "
+                       "processes (--backend process); Ray is not wired for them yet")
+    if args.aip == "shipped":
+        raise BadInput(f"--aip shipped: no AIPs ship for {args.env_id}")
 
 
 def autoregressive_of(args, domain) -> bool:
@@ -301,26 +324,17 @@ def refresh_aips(env_id, agents, options, net, seed, domain, training: AIPTraini
                    "mean_test_cross_entropy": report["mean_test_cross_entropy"], "warm_start": bool(warm)}
 
 
-class ShardsLearner(JointActors):
-    """The driver's adapter for DIALS: the agents split into shards (:mod:`ials_zoo.dials.shard`),
-    each training its agents' PPO on their own IALS in a worker (``backend``), with the AIPs
-    retrained on GS data from the joint policy at the refresh points (``refresh``)."""
+class AIPRefreshes:
+    """The AIP rounds of a DIALS learner: at the refresh points, GS data from the joint policy and
+    every AIP retrained (:func:`refresh_aips`), then :meth:`use_aips` hands them to the
+    simulators. The learner has ``args``, ``domain``, ``agents``, ``options``, ``refresh``,
+    ``aip_training``, ``aips``, ``refreshes``, ``charged_seconds``, ``aip_split`` and ``training``."""
 
-    reports_aip_time = True
+    def use_aips(self, aips: dict) -> None:
+        raise NotImplementedError
 
-    def __init__(self, args: Args, domain, agents, options, refresh, copies, workers, ppo, frame_stack, updates,
-                 training: dict, out: Path):
-        self.args, self.out, self.domain, self.agents, self.options = args, out, domain, agents, options
-        self.obs_size, self.n_actions = int(np.prod(domain.observation_space.shape)), domain.n_actions
-        self.refresh = refresh
-        self.copies, self.workers, self.ppo, self.frame_stack, self.updates = copies, workers, ppo, frame_stack, updates
-        self.training, self.simulator = training, training["simulator"]
-        self.aip_training = aip_training_of(args, domain)
-        self.chunks = split_agents(agents, workers)
-        self.charged_seconds, self.refreshes, self.aip_split = 0.0, 0, {"collect": 0.0, "train": 0.0}
-        self.aips, self.state, self.backend = None, None, None
-
-    def load(self, state, info):
+    def load_aips(self, state, info) -> None:
+        """The run's first AIPs (``state`` None), or those of its checkpoint (``out/aips.pt``)."""
         args = self.args
         if state is None:
             self.aips, self.charged_seconds = initial_aips(args, args.env_id, self.agents, self.options, args.seed)
@@ -328,26 +342,14 @@ class ShardsLearner(JointActors):
                 self.training["aip"] = _fixed_aip_record(args.aip, args.env_id, self.aips)
             return
         self.aips = load_predictor_set(self.out / "aips.pt", env_id=args.env_id)
-        self.state = state
         self.charged_seconds, self.refreshes = float(info["aip_seconds"]), int(info["refreshes"])
         self.aip_split = info.get("aip_split", self.aip_split)
         self.training["aip"] = info.get("aip")
 
-    def start(self, steps):
-        args = self.args
-        specs = [ShardSpec(args.env_id, chunk, self.options, args.seed, self.copies, self.frame_stack, args.learner,
-                           self.ppo, self.updates, {a: self.aips[a] for a in chunk}) for chunk in self.chunks]
-        self.backend = (InProcessBackend(specs) if self.workers == 0
-                        else make_backend(args.backend, specs, args.ray_address))
-        if self.state is not None:
-            by_agent = {a: s for s in self.state["shards"] for a in s["agents"]}
-            self.backend.call("load_state", [(_shard_state(by_agent, c),) for c in self.chunks])
-            self.state = None
-
-    def actor_layers(self):
-        per_shard = self.backend.call("actor_layers")
-        return [tuple(np.concatenate([ls[i][j] for ls in per_shard]) for j in range(len(layer)))
-                for i, layer in enumerate(per_shard[0])]
+    def aip_info(self) -> dict:
+        """What :meth:`load_aips` reads back from a checkpoint's info."""
+        return {"aip_seconds": self.charged_seconds, "refreshes": self.refreshes, "aip_split": self.aip_split,
+                "aip": self.training["aip"]}
 
     def _next_refresh(self):
         """Steps per agent at which the AIPs are next retrained (None: never again)."""
@@ -380,12 +382,55 @@ class ShardsLearner(JointActors):
         self.charged_seconds += rep["collect_seconds"] + rep["train_seconds"]
         self.aip_split["collect"] += rep["collect_seconds"]
         self.aip_split["train"] += rep["train_seconds"]
-        self.backend.call("set_predictors", [(self.aips,)] * len(self.chunks))
+        self.use_aips(self.aips)
         self.refreshes += 1
         self.training["aip"] = {"variant": "trained", "file": None, "sha256": None,
                                 "collection_seconds": self.aip_split["collect"],
                                 "training_seconds": self.aip_split["train"], "refreshes": self.refreshes,
                                 "last": dict(rep, at_steps_per_agent=steps)}
+
+
+class ShardsLearner(AIPRefreshes, JointActors):
+    """The driver's adapter for DIALS: the agents split into shards (:mod:`ials_zoo.dials.shard`),
+    each training its agents' PPO on their own IALS in a worker (``backend``), with the AIPs
+    retrained on GS data from the joint policy at the refresh points (``refresh``)."""
+
+    reports_aip_time = True
+
+    def __init__(self, args: Args, domain, agents, options, refresh, copies, workers, ppo, frame_stack, updates,
+                 training: dict, out: Path):
+        self.args, self.out, self.domain, self.agents, self.options = args, out, domain, agents, options
+        self.obs_size, self.n_actions = int(np.prod(domain.observation_space.shape)), domain.n_actions
+        self.refresh = refresh
+        self.copies, self.workers, self.ppo, self.frame_stack, self.updates = copies, workers, ppo, frame_stack, updates
+        self.training, self.simulator = training, training["simulator"]
+        self.aip_training = aip_training_of(args, domain)
+        self.chunks = split_agents(agents, workers)
+        self.charged_seconds, self.refreshes, self.aip_split = 0.0, 0, {"collect": 0.0, "train": 0.0}
+        self.aips, self.state, self.backend = None, None, None
+
+    def load(self, state, info):
+        self.load_aips(state, info)
+        self.state = state
+
+    def start(self, steps):
+        args = self.args
+        specs = [ShardSpec(args.env_id, chunk, self.options, args.seed, self.copies, self.frame_stack, args.learner,
+                           self.ppo, self.updates, {a: self.aips[a] for a in chunk}) for chunk in self.chunks]
+        self.backend = (InProcessBackend(specs) if self.workers == 0
+                        else make_backend(args.backend, specs, args.ray_address))
+        if self.state is not None:
+            by_agent = {a: s for s in self.state["shards"] for a in s["agents"]}
+            self.backend.call("load_state", [(_shard_state(by_agent, c),) for c in self.chunks])
+            self.state = None
+
+    def actor_layers(self):
+        per_shard = self.backend.call("actor_layers")
+        return [tuple(np.concatenate([ls[i][j] for ls in per_shard]) for j in range(len(layer)))
+                for i, layer in enumerate(per_shard[0])]
+
+    def use_aips(self, aips: dict) -> None:
+        self.backend.call("set_predictors", [(aips,)] * len(self.chunks))
 
     def train(self, steps, target, advance):
         stats = self.backend.call("train", [(target,)] * len(self.chunks))
@@ -394,9 +439,7 @@ class ShardsLearner(JointActors):
     def checkpoint(self, out):
         save_aips(out / "aips.pt", self.aips)
         shard_states = self.backend.call("state")
-        return ({"shards": [dict(s, agents=c) for s, c in zip(shard_states, self.chunks)]},
-                {"aip_seconds": self.charged_seconds, "refreshes": self.refreshes, "aip_split": self.aip_split,
-                 "aip": self.training["aip"]})
+        return {"shards": [dict(s, agents=c) for s, c in zip(shard_states, self.chunks)]}, self.aip_info()
 
     def close(self):
         if self.backend is not None:
@@ -430,15 +473,24 @@ def main(args: Args | None = None) -> dict:
     plan = RunPlan("dials", args.env_id, agents, options, args.seed, total, per_update, eval_every, args.eval_episodes,
                    args.final_eval_episodes, frame_stack, out, settings_of(args), training, args.resume,
                    args.overwrite, args.progress, args.submitter, args.notes, command=training_command("dials", args))
-    learner = ShardsLearner(args, domain, agents, options, refresh, copies, workers, ppo, frame_stack,
-                            total // per_update, training, out)
+    if on_copies(domain):
+        from ials_zoo.baselines.dials_copies import IALSCopiesLearner
+
+        learner = IALSCopiesLearner(args, domain, agents, options, refresh, copies, max(workers, 0), ppo, frame_stack,
+                                    total // per_update, joint_sizes(domain, agents, options), training, out)
+        where = (f"every agent's IALS side by side, {copies} cop{'ies' if copies > 1 else 'y'} in "
+                 f"{min(workers, copies)} worker process{'es' if min(workers, copies) != 1 else ''}")
+    else:
+        learner = ShardsLearner(args, domain, agents, options, refresh, copies, workers, ppo, frame_stack,
+                                total // per_update, training, out)
+        where = f"{args.learner} PPO, {workers} worker{'s' if workers != 1 else ''}, {args.backend} backend"
     refresh_text = {None: "never", 0: "once, at the start"}.get(refresh) or f"every {refresh:,} steps"
     rounds = 0 if args.aip != "trained" or refresh is None else 1 + (0 if refresh == 0 else (total - 1) // refresh)
     collect = aip_training_of(args, domain).collect_steps
     rounds_text = (f"; {rounds} AIP round{'s' if rounds != 1 else ''} on the clock, each {collect:,} GS steps of "
                    "data and the AIPs' training (minutes each; the measured speed below leaves them out)") if rounds else ""
     return run(plan, learner, f"dials: {len(agents)} agents of {args.env_id} learn at once, each on its own IALS "
-               f"({args.learner} PPO, {workers} worker{'s' if workers != 1 else ''}, {args.backend} backend); AIPs: "
+               f"({where}); AIPs: "
                f"{args.aip}, retrained {refresh_text}{rounds_text}", domain)
 
 

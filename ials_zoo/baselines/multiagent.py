@@ -16,6 +16,7 @@ import numpy as np
 from ials_zoo.baselines.arguments import AblatedPPOSettings, arg, check_ppo_settings, hidden_sizes
 from ials_zoo.baselines.runs import DETERMINISTIC_RESULT
 from ials_zoo.core.extras import dials_of
+from ials_zoo.core.spaces import stack_observations
 from ials_zoo.errors import BadInput
 from ials_zoo.evaluation import evaluate_joint, load_model
 from ials_zoo.influence.files import save_predictor_set
@@ -173,7 +174,8 @@ class JointActor:
         self._buf = None
 
     def joint_act(self, observations: dict) -> dict:
-        obs = np.stack([observations[a] for a in self.net.agents]).astype(np.float32)
+        # agents with observations of their own lengths are zero-padded, as the learner saw them
+        obs = stack_observations(observations, self.net.agents, self.net.obs_size).astype(np.float32)
         k = self.net.frame_stack
         if self._buf is None:
             self._buf = np.zeros((len(obs), obs.shape[1] * k), np.float32)

@@ -5,6 +5,7 @@ trajectories, under several joint policies? (:mod:`ials_zoo.influence.fidelity`)
     ials-zoo fidelity --env traffic_grid_v0 --episodes 20 --policies random,constant,scripted
     ials-zoo fidelity --env warehouse_v0 --policies random,leaderboard/policies/<sha>.safetensors --out f.md
     ials-zoo fidelity --env warehouse_v0 --predictor on-policy-autoregressive [--aip-seeds 3]
+    ials-zoo fidelity --env sumo_net_v0 --options '{"net": "cologne8"}' --policies random,constant --predictor on-policy
 """
 
 from __future__ import annotations
@@ -17,13 +18,15 @@ from ials_zoo.evaluation import estimate_evaluation_seconds
 from ials_zoo.influence.base import MAX_INFLUENCE_LAGS
 from ials_zoo.influence.fidelity import ON_POLICY, fidelity_report, markdown
 from ials_zoo.influence.train import LR_SCHEDULES
-from ials_zoo.utils import atomic_write_text, check_output_file, check_seed, format_seconds
+from ials_zoo.utils import atomic_write_text, check_output_file, check_seed, format_seconds, parse_json_object
 
 MAX_EPISODES = 100_000  # per policy and simulator: 10**12 is a typo, not a study
 
 
 def configure(parser):
     parser.add_argument("--env", required=True, help="domain id")
+    parser.add_argument("--options", default=None,
+                        help="the domain's options as a JSON object, e.g. '{\"net\": \"cologne8\"}' for sumo_net_v0")
     parser.add_argument("--policies", default="random,constant,scripted",
                         help="joint policies, comma-separated: random, constant, scripted (GS only) or policy files")
     parser.add_argument("--episodes", type=int, default=20, help="episodes per policy and simulator")
@@ -62,7 +65,8 @@ def run(args) -> int:
     import os
 
 
-    domain = get_domain(args.env).require_ials("fidelity")
+    domain = get_domain(args.env).require_ials_parallel_env("fidelity")
+    options = parse_json_object(args.options, "--options") if args.options else {}
     if args.episodes < 2:
         raise BadInput(f"--episodes must be >= 2 (intervals over episodes), got {args.episodes}")
     if not args.tolerance >= 0:
@@ -76,7 +80,7 @@ def run(args) -> int:
     for p in policies:
         if p not in ("random", "constant", "scripted") and not os.path.isfile(p):
             raise BadInput(f"--policies: {p!r} is neither random, constant, scripted nor a policy file")
-    watched = None if args.agents is None else domain.check_agents(args.agents)
+    watched = None if args.agents is None else domain.check_agents(args.agents, **options)
     for name in ("collect_steps", "aip_epochs", "aip_seeds", "aip_influence_lags"):
         if getattr(args, name) is not None and getattr(args, name) < 1:
             raise BadInput(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
@@ -105,7 +109,7 @@ def run(args) -> int:
                              predictor=args.predictor, tolerance=args.tolerance, collect_steps=args.collect_steps,
                              aip_lr=args.aip_lr, aip_epochs=args.aip_epochs, aip_seeds=args.aip_seeds,
                              aip_lr_schedule=args.aip_lr_schedule, aip_influence_lags=args.aip_influence_lags,
-                             aip_clock_horizon=args.aip_clock_horizon)
+                             aip_clock_horizon=args.aip_clock_horizon, **options)
     text = markdown(report)
     print(text)
     if args.out:

@@ -110,17 +110,6 @@ def run(args) -> int:
     return 0
 
 
-def _train_each(data: dict, arch: str, settings: dict) -> tuple[dict, dict]:
-    """Every agent's AIP trained alone (:func:`train_predictor`); the report of a stacked training."""
-    preds, ce, seconds = {}, {}, 0.0
-    for agent, dataset in data.items():
-        preds[agent], report = train_predictor(dataset, arch=arch, **settings)
-        ce[agent] = report["cross_entropy"]["trained"]["test"]
-        seconds += report["train_seconds"]
-    return preds, {"test_cross_entropy": ce, "mean_test_cross_entropy": sum(ce.values()) / len(ce),
-                   "train_seconds": seconds}
-
-
 def _train_set(args, progress: bool) -> int:
     """Every listed agent's AIP from one GS run, into one predictor-set file."""
 
@@ -143,10 +132,7 @@ def _train_set(args, progress: bool) -> int:
                     dset_kind=args.dset_kind, progress=progress, autoregressive=args.autoregressive,
                     lr_schedule=args.lr_schedule or (d.aip_lr_schedule if mine else "linear"),
                     influence_lags=args.influence_lags)
-    if len({x.region.influence_classes + (x.region.dset_size(args.dset_kind),) for x in data.values()}) == 1:
-        preds, report = train_predictors(data, arch, **settings)
-    else:  # regions of their own sizes (a real network's junctions): one training each
-        preds, report = _train_each(data, arch, settings)
+    preds, report = train_predictors(data, arch, **settings)  # regions of several shapes: one training per shape
     collect_seconds = next(iter(data.values())).metadata["collect_seconds"]
     save_predictor_set(preds.values(), args.out, metadata={
         "steps": next(iter(data.values())).n_steps, "policy": "uniform_random (every listed agent)",

@@ -206,6 +206,21 @@ class Domain:
         """Whether one agent's IALS can be built (``make_ials``, ``train-aip``)."""
         return self.local_simulator is not None
 
+    @property
+    def has_ials_parallel_env(self) -> bool:
+        """Whether every agent's IALS runs as one PettingZoo ParallelEnv
+        (``make_ials_parallel_env``; what ``fidelity`` and DIALS need): agents that share their
+        spaces, or agents of their own spaces with the domain's own ``ials_parallel_env``."""
+        return self.has_ials or (self.has_local_simulator and self.ials_parallel_env is not None)
+
+    def require_ials_parallel_env(self, what: str) -> Domain:
+        """This domain, or a BadInput saying that ``what`` needs a multi-agent IALS it lacks."""
+        if not self.has_ials_parallel_env:
+            raise BadInput(f"{what} needs every agent's IALS as one ParallelEnv, which {self.env_id} does not have "
+                           f"yet; its GS is ials_zoo.{self.env_id}.parallel_env() (domains with one: "
+                           f"{', '.join(d for d in domain_ids() if get_domain(d).has_ials_parallel_env)})")
+        return self
+
     def require_local_simulator(self, what: str) -> Domain:
         """This domain, or a BadInput saying that ``what`` needs a local simulator it lacks."""
         if not self.has_local_simulator:

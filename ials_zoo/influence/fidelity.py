@@ -63,6 +63,7 @@ import numpy as np
 
 from ials_zoo.core.domains import get_domain
 from ials_zoo.core.extras import dials_of
+from ials_zoo.core.spaces import JointSizes, joint_sizes, stack_observations
 from ials_zoo.errors import BadInput
 from ials_zoo.evaluation import FrameStack, load_model
 from ials_zoo.influence.base import check_clock_horizon, check_influence_lags
@@ -80,19 +81,20 @@ class Trajectories:
     returns: dict = field(default_factory=dict)  # agent -> list of floats
 
 
-def _joint_actions(policy, agents, n_actions, rng, obs, stack):
-    if policy == "random":
-        return rng.integers(n_actions, size=len(agents))
+def _joint_actions(policy, agents, sizes: JointSizes, rng, obs, stack):
+    if policy == "random":  # each agent among its own actions
+        return rng.integers(np.asarray(sizes.action_counts or (sizes.n_actions,) * len(agents)))
     if policy == "constant":
         return np.zeros(len(agents), np.int64)
     return policy.act_all(stack)
 
 
 def run(env, agents: Sequence[str], watched: Sequence[str], policy, episodes: int, seed: int,
-        n_actions: int) -> Trajectories:
+        sizes: JointSizes) -> Trajectories:
     """Run ``episodes`` of a ParallelEnv (GS or multi-agent IALS) with a joint ``policy``
     (``"random"``, ``"constant"`` or a :class:`~ials_zoo.evaluation.NetworkPolicy`) and record
-    the ``watched`` agents' influence and returns."""
+    the ``watched`` agents' influence and returns. ``sizes``: the agents' joint sizes (their
+    observations zero-padded to the longest, as a joint policy reads them)."""
     out = Trajectories({a: [] for a in watched}, {a: [] for a in watched})
     frames = FrameStack(getattr(policy, "frame_stack", 1))
     rng = np.random.default_rng(seed)
@@ -100,17 +102,17 @@ def run(env, agents: Sequence[str], watched: Sequence[str], policy, episodes: in
         if not isinstance(policy, str):
             policy.reset(seed + e)
         obs, _ = env.reset(seed=seed + e)
-        x = frames.reset(np.stack([obs[a] for a in agents]))
+        x = frames.reset(stack_observations(obs, agents, sizes.obs_size))
         us = {a: [] for a in watched}
         totals = dict.fromkeys(watched, 0.0)
         while env.agents:
-            acts = _joint_actions(policy, agents, n_actions, rng, obs, x)
+            acts = _joint_actions(policy, agents, sizes, rng, obs, x)
             obs, rewards, _, _, infos = env.step({a: int(u) for a, u in zip(agents, acts)})
             for a in watched:
                 us[a].append(np.asarray(infos[a]["influence"], np.int64).ravel())
                 totals[a] += float(rewards[a])
             if env.agents:
-                x = frames.step(np.stack([obs[a] for a in agents]))
+                x = frames.step(stack_observations(obs, agents, sizes.obs_size))
         for a in watched:
             out.influence[a].append(np.stack(us[a]))
             out.returns[a].append(totals[a])
@@ -187,8 +189,9 @@ DATA_SEED_OFFSET = 100_000  # the AIPs' data episodes never repeat the evaluatio
 class _PolicyActor:
     """A joint policy as :func:`~ials_zoo.influence.dataset.collect_all` drives it."""
 
-    def __init__(self, policy, agents, seed: int):
+    def __init__(self, policy, agents, seed: int, width: int | None = None):
         self.policy, self.agents, self.seed, self.episode = policy, list(agents), int(seed), 0
+        self.width = width  # observations zero-padded to it (agents with spaces of their own)
         self.frames = FrameStack(getattr(policy, "frame_stack", 1))
         self.name, self.x = "joint policy", None
 
@@ -198,7 +201,7 @@ class _PolicyActor:
         self.x = None
 
     def joint_act(self, observations: dict) -> dict:
-        obs = np.stack([observations[a] for a in self.agents])
+        obs = stack_observations(observations, self.agents, self.width)
         self.x = self.frames.reset(obs) if self.x is None else self.frames.step(obs)
         return {a: int(u) for a, u in zip(self.agents, self.policy.act_all(self.x))}
 
@@ -236,7 +239,8 @@ def on_policy_training(env_id: str, autoregressive: bool, lr: float | None = Non
 
 def on_policy_aips(env_id: str, agents, policy, steps: int, seed: int, autoregressive: bool, options: dict,
                    lr: float | None = None, epochs: int | None = None, lr_schedule: str | None = None,
-                   influence_lags: int | None = None, clock_horizon: int | None = None) -> dict:
+                   influence_lags: int | None = None, clock_horizon: int | None = None,
+                   width: int | None = None) -> dict:
     """``{agent: AIP}`` trained on ``steps`` GS steps of the joint ``policy`` (every agent
     acting), with the domain's DIALS AIP architecture, at its ``fidelity_aip_lr``,
     ``fidelity_aip_epochs``, ``fidelity_aip_lr_schedule`` and (autoregressive)
@@ -249,7 +253,7 @@ def on_policy_aips(env_id: str, agents, policy, steps: int, seed: int, autoregre
     elif policy == "constant":
         actor = {a: (lambda obs: 0) for a in agents}
     else:
-        actor = _PolicyActor(policy, agents, seed)
+        actor = _PolicyActor(policy, agents, seed, width)
     lr, epochs, lr_schedule, lags = on_policy_training(env_id, autoregressive, lr, epochs, lr_schedule,
                                                        influence_lags)
     data = collect_all(env_id, agents, steps=steps, policy=actor, seed=seed, gs_options=options, progress=False)
@@ -294,6 +298,7 @@ def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: i
         raise BadInput(f"aip_seeds > 1 needs on-policy AIPs (trained per run); {predictor!r} is one fixed set")
     domain = get_domain(env_id)
     agents = domain.agents(**options)
+    sizes = joint_sizes(domain, agents, options)
     watched = list(watched or default_watched(domain, agents))
     report: dict = {"env_id": env_id, "episodes": episodes, "tolerance": tolerance, "watched": watched,
                     "predictor": str(predictor), "aip_lr": aip_lr, "aip_epochs": aip_epochs,
@@ -318,7 +323,7 @@ def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: i
         policy = spec if spec in ("random", "constant", "scripted") else load_model(spec)
         if progress:
             print(f"fidelity {env_id}: {name}: GS ...", flush=True)
-        gs_m = _gs_summary(domain, agents, watched, spec, policy, episodes, seed, options)
+        gs_m = _gs_summary(domain, agents, watched, spec, policy, episodes, seed, options, sizes)
         if spec == "scripted":
             report["policies"][name] = {"gs_only": gs_m}
             continue
@@ -333,10 +338,11 @@ def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: i
                           f"{f' (training {k + 1} of {aip_seeds})' if aip_seeds > 1 else ''} ...", flush=True)
                 aips = on_policy_aips(env_id, agents, policy, steps, seed + DATA_SEED_OFFSET + k,
                                       predictor == "on-policy-autoregressive", options, aip_lr, aip_epochs,
-                                      aip_lr_schedule, aip_influence_lags, report["aip_clock_horizon"])
+                                      aip_lr_schedule, aip_influence_lags, report["aip_clock_horizon"],
+                                      sizes.obs_size)
             ials_env = make_ials_parallel_env(env_id, agents, predictor=aips, seed=seed, **options)
             try:
-                ials = run(ials_env, agents, watched, policy, episodes, seed, domain.n_actions)
+                ials = run(ials_env, agents, watched, policy, episodes, seed, sizes)
             finally:
                 ials_env.close()
             ials_m = summarise(ials, domain.null_influence)
@@ -345,13 +351,15 @@ def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: i
     return report
 
 
-def _gs_summary(domain, agents, watched, spec, policy, episodes: int, seed: int, options: dict) -> dict:
+def _gs_summary(domain, agents, watched, spec, policy, episodes: int, seed: int, options: dict,
+                sizes: JointSizes) -> dict:
     """The GS's episodes under one joint policy, summarised (the scripted controllers drive
-    themselves: the learners' actions are ignored)."""
-    gs_env = domain.parallel_env(learners=agents, scripted_learners=(spec == "scripted"), **options)
+    themselves: the learners' actions are ignored). The GS reports its regions' influence with
+    the domain's ``collect_options`` (a real network watches its regions only when asked)."""
+    gs_env = domain.parallel_env(learners=agents, scripted_learners=(spec == "scripted"),
+                                 **{**domain.collect_options, **options})
     try:
-        gs = run(gs_env, agents, watched, "constant" if spec == "scripted" else policy, episodes, seed,
-                 domain.n_actions)
+        gs = run(gs_env, agents, watched, "constant" if spec == "scripted" else policy, episodes, seed, sizes)
     finally:
         gs_env.close()
     return summarise(gs, domain.null_influence)

@@ -404,7 +404,8 @@ def train_predictors(datasets: dict, arch: str, hidden: int | None = None, lr: f
     Every agent's network is a slice of stacked weights; the loss is the sum of the agents'
     losses and Adam works element-wise, so this is exactly training each network alone on its
     own data, in one batched computation per update (the agents' data sets come from one GS
-    run: same episodes, same length). ``init`` (``{agent: predictor}``) warm-starts from those
+    run: same episodes, same length). Regions of different shapes (a real network's junctions)
+    are trained in groups of one shape each (:func:`_train_by_shape`). ``init`` (``{agent: predictor}``) warm-starts from those
     networks (DIALS retrains its AIPs), else each starts from ``init_arrays`` seeded from
     ``seed`` and the agent's name. ``autoregressive``: every AIP also reads ``u_{t-1}`` (teacher
     forcing), or ``u_{t-1} .. u_{t-L}`` with ``influence_lags=L``; ``clock_horizon`` as for
@@ -420,10 +421,13 @@ def train_predictors(datasets: dict, arch: str, hidden: int | None = None, lr: f
     if not agents:
         raise BadInput("no data sets to train on")
     first = datasets[agents[0]]
-    for a in agents:
-        if datasets[a].influences.shape != first.influences.shape:
-            raise BadInput(f"the data sets differ in shape ({a}: {datasets[a].influences.shape} vs "
-                             f"{first.influences.shape}); collect them in one GS run")
+    if any(datasets[a].n_steps != first.n_steps for a in agents):
+        raise BadInput("the data sets differ in length; collect them in one GS run")
+    if len({_shape(datasets[a], dset_kind) for a in agents}) > 1:
+        return _train_by_shape(datasets, arch, hidden=hidden, lr=lr, epochs=epochs, batch_size=batch_size, seed=seed,
+                               init=init, dset_kind=dset_kind, test_fraction=test_fraction, progress=progress,
+                               autoregressive=autoregressive, lr_schedule=lr_schedule,
+                               influence_lags=influence_lags, clock_horizon=clock_horizon)
     hp = hyperparameters(arch, epochs, lr, hidden, batch_size, min_epochs=1, lr_schedule=lr_schedule)
     influence_lags = resolve_influence_lags(autoregressive, influence_lags)
     clock_horizon = check_clock_horizon(clock_horizon)
@@ -482,6 +486,29 @@ def train_predictors(datasets: dict, arch: str, hidden: int | None = None, lr: f
                  **({"influence_lags": influence_lags} if autoregressive else {}), "hyperparameters": hp, "agents": len(agents), "train_seconds": round(seconds, 3),
                  "test_cross_entropy": ce, "mean_test_cross_entropy": float(np.mean(list(ce.values()))),
                  "warm_start": bool(init)}
+
+
+def _shape(dataset, dset_kind: str) -> tuple:
+    return (tuple(dataset.region.influence_classes), dataset.region.dset_size(dset_kind))
+
+
+def _train_by_shape(datasets: dict, arch: str, **settings) -> tuple[dict, dict]:
+    """:func:`train_predictors` over regions of several shapes: one stacked training per shape,
+    the predictors back in the agents' order and one report (seconds summed)."""
+    groups: dict[tuple, dict] = {}
+    for a, d in datasets.items():
+        groups.setdefault(_shape(d, settings["dset_kind"]), {})[a] = d
+    preds, ce, seconds, report = {}, {}, 0.0, {}
+    for group in groups.values():
+        init = {a: p for a, p in (settings["init"] or {}).items() if a in group} or None
+        out, report = train_predictors(group, arch, **{**settings, "init": init})
+        preds.update(out)
+        ce.update(report["test_cross_entropy"])
+        seconds += report["train_seconds"]
+    return ({a: preds[a] for a in datasets},
+            dict(report, agents=len(datasets), train_seconds=round(seconds, 3), groups=len(groups),
+                 test_cross_entropy={a: ce[a] for a in datasets}, mean_test_cross_entropy=float(np.mean(list(ce.values()))),
+                 warm_start=bool(settings["init"])))
 
 
 __all__ = ["DEFAULTS", "LR_SCHEDULES", "format_report", "train_predictor", "train_predictors"]

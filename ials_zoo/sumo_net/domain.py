@@ -81,8 +81,9 @@ STUDY = StudySettings(multi_agent_budget=36_000, multi_agent_steps_per_second={"
 # own sizes): two GS hours of data; at 30 epochs and lr 3e-3 they stayed at twice the data
 # marginal's cross-entropy (0.30 against 0.16 on cologne8) and flooded their regions, at 150 they
 # reach it (docs/sumo_net.md)
+# two IALS copies, as IPPO's two GS copies: one per worker on 2 cores
 DIALS = DIALSSettings(aip_arch="mlp", aip_hidden=64, aip_lr=3e-3, aip_epochs=150, aip_batch=256,
-                      aip_lr_schedule="linear", collect_steps=720)
+                      aip_lr_schedule="linear", collect_steps=720, copies=2)
 
 TOOLS = {"resco-controllers": ("ials_zoo.sumo_net.study",
                                "fixed time, max pressure, greedy and actuated lights on RESCO's maps, beside RESCO's table")}

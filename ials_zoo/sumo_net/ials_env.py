@@ -48,7 +48,8 @@ class IALSNetEnv(RegionsNetEnv):
     Takes ``sumo_net_v0``'s options (``net=``, ``learners=``, ...) and ``predictors`` (an AIP
     set file, see :func:`resolve_predictors`; default ``"untrained"``), ``record_seconds`` /
     ``record_seed`` (the GS recording the entering vehicles are drawn from). Defaults to one
-    worker for the whole episode series (``fresh_process=False``): no route file is replayed.
+    simulation for the whole episode series (``fresh_process=False``: no route file is replayed),
+    in this process if no other simulation holds it (``backend="auto"``), else in a worker.
     ``infos[agent]`` holds the influence sources its AIP sampled and its d-sets.
     ``episode_metrics()`` has only ``queue``: trip delays need the whole network.
     """
@@ -56,12 +57,12 @@ class IALSNetEnv(RegionsNetEnv):
     CORE = REGION_CORE = "ials_zoo.sumo_net.island:IslandCore"
 
     def __init__(self, predictors="untrained", record_seconds: int | None = None, record_seed: int = 0,
-                 fresh_process: bool = False, **options):
+                 fresh_process: bool = False, backend: str = "auto", **options):
         if options.get("region_data") is not None:
             raise BadInputType("region_data: the IALS always reports its region data")
         self._aips = (predictors, {k: options[k] for k in SCENARIO_OPTIONS if k in options})
         self._record = (record_seconds, record_seed)
-        super().__init__(fresh_process=fresh_process, region_data=True, **options)
+        super().__init__(fresh_process=fresh_process, backend=backend, region_data=True, **options)
         self._region_rows = {x: k for k, x in enumerate(self.network.ids)}
         self._aip_rng = np.random.default_rng()
 
@@ -81,6 +82,13 @@ class IALSNetEnv(RegionsNetEnv):
         config.update(layouts=[asdict(x) for x in layouts], tables=[self._tables[x] for x in ids],
                       row_keys=[(x, 0) for x in ids], prefixes=[f"{x}__" for x in ids])
         return config
+
+    def set_predictors(self, predictors) -> None:
+        """New AIPs (as ``predictors`` in the constructor), from the next decision on (DIALS's
+        refresh); their memory starts empty."""
+        self.predictors = resolve_predictors(predictors, list(self.regions), self._aips[1])
+        for p in self.predictors.values():
+            p.reset(1)
 
     def reset(self, seed=None, options=None):
         obs, infos = super().reset(seed=seed, options=options)

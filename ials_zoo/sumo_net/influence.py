@@ -7,7 +7,8 @@ come in:
 * **influence sources**: per *entry point* and per second of a decision, the vehicles that
   entered the region there during that second, as a class: 0, 1 or 2 (two or more: a third in
   one second on one road is rare). The entry points are the chains'
-  first edges (:attr:`~ials_zoo.sumo_net.regions.NetRegion.sources`, in that order), then
+  first edges (:attr:`~ials_zoo.sumo_net.regions.NetRegion.sources`, in that order; a vehicle
+  enters there when it passes the edge's entry offset, 200 m before the stop line), then
   ``"inside"``: vehicles that appear on any other edge of the region from outside it (inserted
   there by the route files, or joining past a short exit). Sources are ordered second-major
   (``"<entry>@<second>"``), so one decision of 10 s has ``10 * (sources + 1)`` of them.
@@ -16,7 +17,7 @@ come in:
   (:mod:`ials_zoo.sumo_net.island`), so the AIP predicts only *when* vehicles come.
 * **d-set** (``"dset"``): the region's local occupancy where vehicles come in, without the
   light's state: per lane of every entry edge, :data:`CELLS` cells of :data:`CELL_METRES` m
-  from the lane's start, occupied or not.
+  from the entry offset, occupied or not.
 * **full** d-set: the d-set and, per incoming lane of the light (its observation's rows),
   whether its detection holds a queue and whether it holds approaching vehicles.
 
@@ -50,6 +51,10 @@ class RegionLayout:
         edges: every edge of the region.
         source_lanes: every lane of the entry edges, in edge then lane order.
         lanes: the light's incoming lanes (its observation's rows).
+        entry_offsets: per entry edge, the lane position (m) where the region begins.
+        lane_offsets: the same per source lane.
+        exits: ``(edge, position)``: where a vehicle whose way through the region ends on that
+            edge leaves it.
     """
 
     light: str
@@ -57,6 +62,9 @@ class RegionLayout:
     edges: tuple[str, ...]
     source_lanes: tuple[str, ...]
     lanes: tuple[str, ...]
+    entry_offsets: tuple[float, ...] = ()
+    lane_offsets: tuple[float, ...] = ()
+    exits: tuple[tuple[str, float], ...] = ()
 
     @property
     def points(self) -> tuple[str, ...]:
@@ -68,7 +76,8 @@ class RegionLayout:
         def p(ids):
             return tuple(prefix + x for x in ids)
 
-        return RegionLayout(prefix + self.light, p(self.sources), p(self.edges), p(self.source_lanes), p(self.lanes))
+        return RegionLayout(prefix + self.light, p(self.sources), p(self.edges), p(self.source_lanes), p(self.lanes),
+                            self.entry_offsets, self.lane_offsets, tuple((prefix + e, x) for e, x in self.exits))
 
 
 def region_layout(net_file: str, light: str) -> RegionLayout:
@@ -78,8 +87,11 @@ def region_layout(net_file: str, light: str) -> RegionLayout:
 
     region = regions_of(net_file)[light]
     lanes = next(x.lanes for x in read_network(net_file).lights if x.id == light)
-    source_lanes = tuple(lane for e in region.sources for lane in edge_lanes(net_file, e))
-    return RegionLayout(light, region.sources, region.edges, source_lanes, tuple(lanes))
+    per_source = [edge_lanes(net_file, e) for e in region.sources]
+    source_lanes = tuple(lane for x in per_source for lane in x)
+    lane_offsets = tuple(offset for x, offset in zip(per_source, region.entry_offsets) for _ in x)
+    return RegionLayout(light, region.sources, region.edges, source_lanes, tuple(lanes), region.entry_offsets,
+                        lane_offsets, region.exits)
 
 
 def _scenario(options: dict):
@@ -119,6 +131,8 @@ class EntryWatcher:
         self.layouts = list(layouts)
         self.decision = int(decision)
         self.point_of = [{e: j for j, e in enumerate(x.sources)} for x in self.layouts]
+        # the entry edges whose first metres are outside the region
+        self.offset_of = [{e: o for e, o in zip(x.sources, x.entry_offsets) if o > 0} for x in self.layouts]
         self.counts = [np.zeros((self.decision, len(x.points)), np.int64) for x in self.layouts]
         self.present: list[set] = [set() for _ in self.layouts]
         self.second = 0
@@ -137,12 +151,14 @@ class EntryWatcher:
         vehicle crossing a junction inside the region is on none of its edges, and stays known)."""
         s = min(self.second, self.decision - 1)
         alive = None
-        on_edge = raw.edge_getLastStepVehicleIDs
+        on_edge, position = raw.edge_getLastStepVehicleIDs, raw.vehicle_getLanePosition
         for r, layout in enumerate(self.layouts):
-            now, counts, point_of = {}, self.counts[r], self.point_of[r]
+            now, counts, point_of, offset_of = {}, self.counts[r], self.point_of[r], self.offset_of[r]
             for e in layout.edges:
+                offset = offset_of.get(e)
                 for x in on_edge(e):
-                    now[x] = e
+                    if offset is None or position(x) >= offset:
+                        now[x] = e
             before = self.present[r]
             gone = [x for x in before if x not in now]
             if gone:
@@ -167,10 +183,11 @@ class EntryWatcher:
         rows = []
         for layout in self.layouts:
             bits = np.zeros((len(layout.source_lanes), CELLS), np.uint8)
-            for i, lane in enumerate(layout.source_lanes):
+            offsets = layout.lane_offsets or (0.0,) * len(layout.source_lanes)
+            for i, (lane, offset) in enumerate(zip(layout.source_lanes, offsets)):
                 for x in ids(lane):
-                    k = int(position(x) // CELL_METRES)
-                    if k < CELLS:
+                    k = int((position(x) - offset) // CELL_METRES)
+                    if 0 <= k < CELLS:
                         bits[i, k] = 1
             rows.append(bits.reshape(-1))
         return rows

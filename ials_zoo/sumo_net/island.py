@@ -12,7 +12,8 @@ its own program, the map's hour, SUMO seed 0; :func:`entry_tables`, cached under
 ``$IALS_ZOO_CACHE/sumo_net``, or ``~/.cache/ials_zoo/sumo_net``): its route inside the region, lane, position, type and speed
 factor, inserted at the highest safe speed. A vehicle that cannot be inserted within
 :data:`INSERT_PATIENCE` seconds is dropped, as the GS's could not have entered then. Vehicles
-leave at the end of the region's edges, so spill-back from beyond them is not simulated.
+leave a few metres into the region's outgoing edges (:attr:`~ials_zoo.sumo_net.regions.NetRegion.exits`),
+so spill-back from beyond them is not simulated.
 """
 
 from __future__ import annotations
@@ -52,7 +53,10 @@ INSERT_PATIENCE = 2  # seconds a vehicle that could not enter at once may wait (
 
 def _table_path(scenario, light: str, seconds: int, seed: int) -> Path:
     root = os.environ.get("IALS_ZOO_CACHE")
-    key = json.dumps([scenario.name, os.path.getsize(scenario.net_file), scenario.begin, light, seconds, seed])
+    from ials_zoo.sumo_net.regions import CHAIN_CAP_METRES, EXIT_METRES  # the regions' shape
+
+    key = json.dumps([scenario.name, os.path.getsize(scenario.net_file), scenario.begin, light, seconds, seed,
+                      CHAIN_CAP_METRES, EXIT_METRES])
     h = hashlib.sha256(key.encode()).hexdigest()[:12]
     return (Path(root) if root else Path.home() / ".cache" / "ials_zoo") / "sumo_net" / f"entries_{h}.json"
 
@@ -141,6 +145,7 @@ class IslandCore(NetCore):
         super().__init__(**config)
         self.routes: dict[tuple, str] = {}  # (row, edges) -> a route added once per simulation
         self.layouts = [RegionLayout(**x) for x in layouts]
+        self.exits = [dict(x.exits) for x in self.layouts]  # per row: edge -> where its vehicles leave
         self.tables = tables  # per row, per entry point
         self.row_keys = [(str(a), int(j)) for a, j in row_keys]  # (light, copy): each row's own random stream
         self.prefixes = list(prefixes)
@@ -192,7 +197,9 @@ class IslandCore(NetCore):
                 if key not in self.routes:
                     self.routes[key] = f"{prefix}r{len(self.routes)}"
                     raw.route_add(self.routes[key], [prefix + e for e in edges])
-                raw.vehicle_add(name, self.routes[key], vtype, "now", str(lane), str(max(pos, 0.0)), "max")
+                leave = self.exits[r].get(prefix + edges[-1])
+                raw.vehicle_add(name, self.routes[key], vtype, "now", str(lane), str(max(pos, 0.0)), "max", "current",
+                                "max" if leave is None else str(leave))
                 raw.vehicle_setSpeedFactor(name, factor)
                 names.append(name)
         return names

@@ -39,8 +39,9 @@ def record_influence(scenario, regions: dict, seconds: int, seed: int = 0) -> li
     sim = SimHandle("ials_zoo.sumo_net.replay:ReplayCore", {}, "auto", timeout=3600.0)
     try:
         edges = {light: r.edges for light, r in regions.items()}
+        offsets = {light: {e: o for e, o in zip(r.sources, r.entry_offsets) if o > 0} for light, r in regions.items()}
         entries, _, _ = sim.call("record", scenario.net_file, scenario.route_files, scenario.begin, seconds,
-                                 edges, [], [], seconds + 1, seed)
+                                 edges, [], [], seconds + 1, seed, offsets)
     finally:
         sim.close()
     return entries

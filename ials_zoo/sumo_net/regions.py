@@ -5,18 +5,23 @@ A light's region (:class:`NetRegion`) is what its local simulator will simulate:
 * **incoming chains**: for every edge that feeds one of the light's controlled lanes, that edge
   and, upstream, the edges that lead into it one by one (through nodes that only join a road's
   pieces), up to the upstream junction (a node where several roads meet, another light, or the
-  network's fringe) or until the chain covers :data:`CHAIN_CAP_METRES` (twice RESCO's 200 m
-  detection, so a vehicle is simulated before the light can see it);
+  network's fringe) or until the chain covers :data:`CHAIN_CAP_METRES` (RESCO's 200 m
+  detection). The region begins that far upstream of the stop line: on the chain's first edge,
+  at its **entry offset** (:attr:`NetRegion.entry_offsets`; 0 where the upstream junction is
+  nearer). Before that point a vehicle is invisible to the light and is the rest of the network's
+  business; the first version began the chains at twice the detection, and its regions held 59% of
+  ingolstadt21's vehicle-steps (``docs/sumo_net.md``);
 * **outgoing edges**: every edge a controlled link leads to, so that every link of the light's
   program survives a cut (its phases keep their meaning) and spill-back from them is simulated;
   where one is shorter than :data:`SHORT_EXIT_METRES`, the edges after it too (**beyond**):
   a junction that close (ingolstadt21 has one 12 m past a light) backs its queue into the
   light's lanes, and without it the region's replay of ingolstadt21 missed a whole queue
-  (``docs/sumo_net.md``).
+  (``docs/sumo_net.md``). A vehicle leaves the region :data:`EXIT_METRES` into the last of
+  these edges on its way (:attr:`NetRegion.exits`): the light sees none of them, and on
+  ingolstadt21 the outgoing roads held 18% of the regions' vehicle-steps.
 
-The **influence sources** are the chains' first edges: a vehicle entering one from outside the
-region (from the upstream junction, or inserted there) is what the rest of the network does to
-the region. Vehicles inserted on a region's other edges are influence as well (their routes
+The **influence sources** are the chains' first edges: a vehicle crossing its entry offset (coming
+from upstream, or inserted there) is what the rest of the network does to the region. Vehicles inserted on a region's other edges are influence as well (their routes
 start inside). :func:`cut_network` writes a region's edges as a network of their own
 (``netconvert --keep-edges.explicit``), with the light's program.
 
@@ -34,8 +39,9 @@ from pathlib import Path
 from ials_zoo.errors import BadInput
 from ials_zoo.sumo.command import sumo_binary
 
-CHAIN_CAP_METRES = 400.0
+CHAIN_CAP_METRES = 200.0
 SHORT_EXIT_METRES = 50.0
+EXIT_METRES = 25.0
 
 
 @dataclass(frozen=True)
@@ -50,6 +56,9 @@ class NetRegion:
         sources: the chains' first edges (where influence enters), in ``incoming`` order.
         length: metres of lanes in the region (every lane of every edge).
         beyond: the edges after its short outgoing edges.
+        entry_offsets: per source, the lane position (m) where the region begins on it.
+        exits: ``(edge, position)`` for every outgoing and beyond edge: where a vehicle whose
+            way through the region ends there leaves it.
     """
 
     light: str
@@ -59,6 +68,8 @@ class NetRegion:
     sources: tuple[str, ...]
     length: float
     beyond: tuple[str, ...] = ()
+    entry_offsets: tuple[float, ...] = ()
+    exits: tuple[tuple[str, float], ...] = ()
 
     @property
     def edges(self) -> tuple[str, ...]:
@@ -102,16 +113,20 @@ def _chain(edge, lights: set, cap: float) -> tuple:
     return tuple(e.getID() for e in chain)
 
 
-def regions_of(net_file: str, cap: float = CHAIN_CAP_METRES,
-               short_exit: float = SHORT_EXIT_METRES) -> dict[str, NetRegion]:
+def regions_of(net_file: str, cap: float = CHAIN_CAP_METRES, short_exit: float = SHORT_EXIT_METRES,
+               exit_metres: float = EXIT_METRES) -> dict[str, NetRegion]:
     """Every light's region of the network ``net_file`` (module docstring), by light id;
-    ``short_exit``: outgoing edges shorter than that (m) bring the edges after them (0: none)."""
+    ``cap``: how far upstream of the stop line the region begins (m); ``short_exit``: outgoing
+    edges shorter than that (m) bring the edges after them (0: none); ``exit_metres``: how far
+    into its last edge a vehicle leaves (m; ``inf``: at the edge's end)."""
     if not os.path.isfile(net_file):
         raise BadInput(f"network file {net_file!r} does not exist")
     if not cap > 0:
         raise BadInput(f"the chains' length cap must be > 0 m, got {cap!r}")
     if not short_exit >= 0:
         raise BadInput(f"the short exits' length must be >= 0 m, got {short_exit!r}")
+    if not exit_metres > 0:
+        raise BadInput(f"the exits' distance must be > 0 m, got {exit_metres!r}")
     net = _read(str(net_file), os.path.getmtime(net_file))
     lights = {t.getID() for t in net.getTrafficLights()}
     # a light's nodes (a joint light controls several): their edges end chains too
@@ -129,8 +144,10 @@ def regions_of(net_file: str, cap: float = CHAIN_CAP_METRES,
                                      for x in net.getEdge(e).getOutgoing() if x.getID() not in inside))
         edges = dict.fromkeys([e for c in chains for e in c] + list(outgoing) + list(beyond))
         length = sum(lane.getLength() for e in edges for lane in net.getEdge(e).getLanes())
+        offsets = tuple(max(0.0, sum(net.getEdge(e).getLength() for e in c) - cap) for c in chains)
+        exits = tuple((e, min(exit_metres, net.getEdge(e).getLength())) for e in dict.fromkeys(outgoing + beyond))
         out[tls.getID()] = NetRegion(tls.getID(), incoming, chains, outgoing, tuple(c[0] for c in chains), length,
-                                     beyond)
+                                     beyond, offsets, exits)
     return out
 
 
@@ -177,4 +194,4 @@ def cut_network(net_file: str, region: NetRegion, out_file: str | os.PathLike, t
     return out_file
 
 
-__all__ = ["CHAIN_CAP_METRES", "SHORT_EXIT_METRES", "NetRegion", "cut_network", "edge_lanes", "netconvert", "network_size", "regions_of"]
+__all__ = ["CHAIN_CAP_METRES", "EXIT_METRES", "SHORT_EXIT_METRES", "NetRegion", "cut_network", "edge_lanes", "netconvert", "network_size", "regions_of"]

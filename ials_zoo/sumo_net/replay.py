@@ -139,15 +139,17 @@ class ReplayCore:
         return observe
 
     def record(self, net_file, route_files, begin: int, seconds: int, region_edges: dict, lanes, signals,
-               every: int, seed: int = 0):
+               every: int, seed: int = 0, entry_offsets: dict | None = None):
         """The GS's ``seconds`` from ``begin``: ``(entries per step, lane states per step, the
         lights' measures every ``every`` steps)``; an entry is ``(light, vehicle, edges inside,
         lane index, position, speed, type, speed factor)``; ``signals``: every light's ``(lanes,
-        lane lengths)``."""
+        lane lengths)``; ``entry_offsets``: per light, ``{edge: metres}`` of its entry edges
+        whose first metres are outside the region."""
         ls, v = self.ls, self.ls.vehicle
         self._run(sumo_command(seed, net=net_file, routes=list(route_files)), begin, seconds)
         observe = self._observer(signals, every)
         edges_of = {light: set(edges) for light, edges in region_edges.items()}
+        offsets = {light: (entry_offsets or {}).get(light, {}) for light in edges_of}
         present = {light: set() for light in edges_of}
         entries, states, measures, self.seconds_spent = [], [], [], 0.0
         try:
@@ -157,7 +159,8 @@ class ReplayCore:
                 self.seconds_spent += time.perf_counter() - t0
                 alive, step = set(v.getIDList()), []
                 for light, edges in edges_of.items():
-                    now = {x for e in edges for x in ls.edge.getLastStepVehicleIDs(e)}
+                    now = {x for e in edges for x in ls.edge.getLastStepVehicleIDs(e)
+                           if e not in offsets[light] or v.getLanePosition(x) >= offsets[light][e]}
                     # a vehicle crossing a junction inside the region is on none of its edges
                     known = {x for x in present[light] if x in alive and (x in now or v.getRoadID(x).startswith(":"))}
                     for x in sorted(now - known):

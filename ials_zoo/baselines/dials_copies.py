@@ -1,0 +1,63 @@
+"""DIALS where the agents have spaces of their own (a real network's junctions).
+
+Such a domain has no batched array IALS (:class:`~ials_zoo.core.multi.MultiAgentIALS` stacks
+agents of one shape); it has a multi-agent IALS ParallelEnv instead (``Domain.ials_parallel_env``:
+every agent's local simulator and AIP side by side in one simulation, the regions apart, each fed
+only by its own AIP). DIALS then trains every agent's PPO, as IPPO does on the GS (the same
+batched learner, observations zero-padded, missing actions masked), on ``--n-envs`` copies of
+that IALS spread over ``--workers`` worker processes, and retrains the AIPs at the refresh points
+on GS data from the joint policy (:class:`~ials_zoo.baselines.dials.AIPRefreshes`). The work is
+split by copies, not by agents: each worker steps every agent's region of its copies.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ials_zoo.baselines.dials import AIPRefreshes, aip_training_of
+from ials_zoo.baselines.ippo import GSCopiesLearner
+from ials_zoo.baselines.multiagent import save_aips
+from ials_zoo.learners.gs_vec import GSVecEnv
+from ials_zoo.learners.rollout import RolloutTrainer
+
+
+class IALSCopiesLearner(AIPRefreshes, GSCopiesLearner):
+    """The driver's adapter for DIALS on a multi-agent IALS ParallelEnv (module docstring)."""
+
+    reports_aip_time = True
+
+    def __init__(self, args, domain, agents, options, refresh, copies, workers, ppo, frame_stack, updates, sizes,
+                 training: dict, out: Path):
+        super().__init__(args.env_id, agents, options, copies, min(workers, copies), ppo, frame_stack, args.seed,
+                         updates, sizes)
+        self.args, self.domain, self.refresh, self.training, self.out = args, domain, refresh, training, out
+        self.simulator = training["simulator"]
+        self.aip_training = aip_training_of(args, domain)
+        self.charged_seconds, self.refreshes, self.aip_split = 0.0, 0, {"collect": 0.0, "train": 0.0}
+        self.aips = None
+
+    def load(self, state, info):
+        GSCopiesLearner.load(self, state, info)
+        self.load_aips(state, info)
+
+    def start(self, steps):
+        self.env = GSVecEnv(self.env_id, self.agents, self.copies, self.processes, seed=self.seed, simulator="ials",
+                            predictor=self.aips, **self.options)
+        self.trainer = RolloutTrainer(self.learner, self.env, self.frame_stack, seed=self.seed)
+        if self.episode_state is not None:  # the checkpoint's episodes, replayed to where they were
+            self.trainer.restore(self.episode_state)
+
+    def use_aips(self, aips: dict) -> None:
+        self.env.set_predictors(aips)
+        self.trainer.new_episodes()  # an episode runs on one set of AIPs throughout (and replays on it)
+
+    def train(self, steps, target, advance):
+        stats = GSCopiesLearner.train(self, steps, target, advance)
+        return dict(stats, aip_refreshes=self.refreshes)
+
+    def checkpoint(self, out):
+        save_aips(out / "aips.pt", self.aips)
+        return {"learner": self.learner.state_dict(), "trainer": self.trainer.state()}, self.aip_info()
+
+
+__all__ = ["IALSCopiesLearner"]
