@@ -99,6 +99,19 @@ def make_gs_vector_env(env_id: str, agents=None, n_envs: int = 1, processes: int
     return GSVecEnv(env_id, agents, n_envs, processes, seed, **options)
 
 
+def make_ials_vector_env(env_id: str, predictor="trained", agents=None, n_envs: int = 1, processes: int = 0,
+                         seed: int = 0, **options):
+    """``n_envs`` copies of the multi-agent IALS ParallelEnv (:func:`make_ials_parallel_env`),
+    arrays ``[agents, n_envs, ...]`` as :func:`make_gs_vector_env` gives them (observations
+    zero-padded to the longest agent's): what DIALS trains on where the agents have spaces of
+    their own (``sumo_net_v0``), and ``set_predictors(aips)`` swaps every copy's AIPs. Agents
+    that share their spaces have the faster :func:`make_multi_agent_ials`."""
+    from ials_zoo.learners.gs_vec import GSVecEnv
+
+    get_domain(env_id).require_ials_parallel_env("make_ials_vector_env")
+    return GSVecEnv(env_id, agents, n_envs, processes, seed, simulator="ials", predictor=predictor, **options)
+
+
 for _env_id in ials_domain_ids():  # every IALS domain's IALS as a Gymnasium id (ials_zoo.core.gym_ids)
     register_ials(_env_id)
 del _env_id
@@ -110,6 +123,7 @@ __all__ = [
     "get_domain",
     "make_gs_vector_env",
     "make_ials",
+    "make_ials_vector_env",
     "make_ials_parallel_env",
     "make_multi_agent_ials",
     "register_domain",

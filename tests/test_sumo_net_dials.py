@@ -45,9 +45,9 @@ def test_what_the_ials_copies_cannot_do_is_named_before_any_work(tmp_path, flag,
 
 
 def test_new_aips_drive_the_ials_copies_from_the_next_decision():
-    """``set_predictors`` reaches every copy in its worker: a uniform AIP (a third each of 0, 1
+    """``make_ials_vector_env``'s ``set_predictors`` reaches every copy in its worker: a uniform AIP (a third each of 0, 1
     and 2+ vehicles per second and entry point) after the recorded frequencies (a few percent)."""
-    from ials_zoo.learners.gs_vec import GSVecEnv
+    import ials_zoo
     from ials_zoo.sumo_net.island import gs_marginal_predictors
 
     light = "GS_cluster_357187_359543"
@@ -55,8 +55,7 @@ def test_new_aips_drive_the_ials_copies_from_the_next_decision():
     recorded = gs_marginal_predictors([light], **options)
     rewards = {}
     for name, later in (("recorded", None), ("uniform", {light: "uniform"})):
-        env = GSVecEnv("sumo_net_v0", [light], n_envs=2, processes=2, simulator="ials", predictor=recorded,
-                       **options)
+        env = ials_zoo.make_ials_vector_env("sumo_net_v0", recorded, [light], n_envs=2, processes=2, **options)
         try:
             env.reset(seed=0)
             got = []

@@ -249,4 +249,5 @@ def test_the_bench_reports_every_light_s_ials_and_the_multi_agent_ials_against_t
     multi = next(r for r in rows if "local_over_gs" in r)
     assert single["agents"] == multi["agents"] == 1 and single["gs_decisions_per_s"] > 0
     assert np.isfinite(single["speedup"]).all() and np.isfinite(multi["local_over_gs"]).all()
+    assert np.isfinite(multi["array_over_gs"]).all()
     assert "one light's IALS decisions/s" in capsys.readouterr().out

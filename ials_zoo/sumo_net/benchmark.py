@@ -23,6 +23,7 @@ import numpy as np
 
 from ials_zoo.errors import BadInput
 from ials_zoo.sumo_net.env import SumoNetEnv
+from ials_zoo.sumo_net.names import ENV_ID
 from ials_zoo.sumo_net.scenario import RESCO_MAPS
 
 DEFAULT_MAPS = ("cologne8", "grid4x4", "ingolstadt21")
@@ -92,33 +93,53 @@ def _random_episode(env, seed: int) -> float:
     return (time.perf_counter() - start) / n
 
 
+def _random_vector_episode(env, counts: list[int], decisions: int, seed: int) -> float:
+    """Seconds per decision of one episode of an array env (every light at random)."""
+    rng = np.random.default_rng(seed)
+    draws = np.stack([rng.integers(n, size=(decisions, env.n_envs)) for n in counts], axis=1)  # [T, A, copies]
+    start, n, done = time.perf_counter(), 0, False
+    env.reset(seed=seed)
+    while not done:
+        _, _, done = env.step(draws[n])
+        n += 1
+    return (time.perf_counter() - start) / n
+
+
 def bench_local(net: str, repeats: int = 3, max_cycles: int | None = None) -> dict:
     """The multi-agent IALS (:class:`ials_zoo.sumo_net.ials_env.IALSNetEnv`, every light's AIP
     the GS's recorded entry frequencies: :func:`~ials_zoo.sumo_net.island.gs_marginal_predictors`)
     against the GS, per agent-decision: both in a worker process (one pipe round trip per
-    decision each), episodes of the same seed alternating, one ratio per pair."""
+    decision each), episodes of the same seed alternating, one ratio per pair; and the array API
+    (:func:`ials_zoo.make_ials_vector_env`, one copy in this process's own worker) in the same turn."""
+    import ials_zoo
     from ials_zoo.sumo_net.ials_env import IALSNetEnv
     from ials_zoo.sumo_net.island import gs_marginal_predictors
 
     options = {"net": net, "backend": "worker", "fresh_process": False, "max_cycles": max_cycles}
     start = time.perf_counter()
     gs = SumoNetEnv(**options)
-    local, pairs = None, []
+    local = vector = None
+    runs = []
     try:
-        local = IALSNetEnv(predictors=gs_marginal_predictors(gs.possible_agents, net=net, max_cycles=max_cycles),
-                           **options)
+        aips = gs_marginal_predictors(gs.possible_agents, net=net, max_cycles=max_cycles)
+        local = IALSNetEnv(predictors=aips, **options)
         built = time.perf_counter() - start
+        vector = ials_zoo.make_ials_vector_env(ENV_ID, aips, **options)
+        counts = [gs.action_space(a).n for a in gs.possible_agents]
         for seed in range(repeats):
-            pairs.append((_random_episode(gs, seed), _random_episode(local, seed)))
+            runs.append((_random_episode(gs, seed), _random_episode(local, seed),
+                         _random_vector_episode(vector, counts, gs.scenario.decisions, seed)))
     finally:
         gs.close()
-        if local is not None:
-            local.close()
+        for env in (local, vector):
+            if env is not None:
+                env.close()
     agents = len(gs.possible_agents)
     return {"net": net, "agents": agents, "repeats": repeats, "build_seconds": built,
-            "gs_us_per_agent_decision": _stat([g / agents * 1e6 for g, _ in pairs]),
-            "local_us_per_agent_decision": _stat([x / agents * 1e6 for _, x in pairs]),
-            "local_over_gs": _stat([x / g for g, x in pairs])}
+            "gs_us_per_agent_decision": _stat([g / agents * 1e6 for g, _, _ in runs]),
+            "local_us_per_agent_decision": _stat([x / agents * 1e6 for _, x, _ in runs]),
+            "local_over_gs": _stat([x / g for g, x, _ in runs]),
+            "array_over_gs": _stat([v / g for g, _, v in runs])}
 
 
 def bench_single(net: str, repeats: int = 3, max_cycles: int | None = None) -> dict:
@@ -156,15 +177,17 @@ def bench_single(net: str, repeats: int = 3, max_cycles: int | None = None) -> d
 def print_local_rows(rows) -> None:
     multi = [r for r in rows if "local_over_gs" in r]
     print(f"\n{'map':<14}{'lights':>7}{'GS µs/agent-decision':>22}{'IALS µs/agent-decision':>24}"
-          f"{'IALS / GS':>22}{'built in':>10}")
+          f"{'IALS / GS':>22}{'arrays / GS':>22}{'built in':>10}")
     for r in multi:
         m, lo, hi = r["local_over_gs"]
+        am, alo, ahi = r["array_over_gs"]
         print(f"{r['net']:<14}{r['agents']:>7}{r['gs_us_per_agent_decision'][0]:>22,.0f}"
               f"{r['local_us_per_agent_decision'][0]:>24,.0f}{f'{m:.2f} [{lo:.2f}, {hi:.2f}]':>22}"
-              f"{r['build_seconds']:>9.0f}s")
+              f"{f'{am:.2f} [{alo:.2f}, {ahi:.2f}]':>22}{r['build_seconds']:>9.0f}s")
     print("The multi-agent IALS: every light's region side by side in one SUMO simulation, each fed by an AIP of the "
-          "GS's recorded entry frequencies (a trained MLP costs one call more per light and decision); built in: "
-          "cutting, merging, recording. Median [min, max] over episode pairs.")
+          "GS's recorded entry frequencies (a trained MLP costs one call more per light and decision); IALS: the "
+          "ParallelEnv, arrays: the same as make_ials_vector_env gives it (what DIALS steps); built in: cutting, "
+          "merging, recording. Median [min, max] over episode triples.")
     header = "one light's IALS decisions/s"
     print(f"\n{'map':<14}{'lights':>7}{'GS decisions/s':>16}{header:>32}{'speed-up':>24}")
     for r in (r for r in rows if "speedup" in r):

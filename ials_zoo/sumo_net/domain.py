@@ -1,7 +1,8 @@
-"""Any SUMO network as a zoo domain: the GS, and one junction's IALS (its region's local
-simulator, :mod:`ials_zoo.sumo_net.island`, with an AIP of :mod:`ials_zoo.sumo_net.influence`'s
-sources). Junctions have their own spaces, so the multi-agent IALS tools (DIALS, fidelity) do
-not take this domain yet; :mod:`ials_zoo.sumo_net.local` measures every region side by side."""
+"""Any SUMO network as a zoo domain: the GS, one junction's IALS (its region's local simulator,
+:mod:`ials_zoo.sumo_net.island`, with an AIP of :mod:`ials_zoo.sumo_net.influence`'s sources) and
+every junction's at once (:mod:`ials_zoo.sumo_net.ials_env`, which DIALS and ``fidelity`` run
+on). Junctions have their own spaces, so the tools that stack agents of one shape do not take
+this domain."""
 
 from __future__ import annotations
 
