@@ -9,7 +9,14 @@ import pytest
 
 from ials_zoo.errors import BadInput
 from ials_zoo.sumo_net.network import read_network
-from ials_zoo.sumo_net.regions import CHAIN_CAP_METRES, EXIT_METRES, SHORT_EXIT_METRES, cut_network, network_size, regions_of
+from ials_zoo.sumo_net.regions import (
+    CHAIN_CAP_METRES,
+    EXIT_METRES,
+    SHORT_EXIT_METRES,
+    cut_network,
+    network_size,
+    regions_of,
+)
 from ials_zoo.sumo_net.replay import replay_regions
 from ials_zoo.sumo_net.scenario import make_scenario
 

@@ -405,7 +405,8 @@ def train_predictors(datasets: dict, arch: str, hidden: int | None = None, lr: f
     losses and Adam works element-wise, so this is exactly training each network alone on its
     own data, in one batched computation per update (the agents' data sets come from one GS
     run: same episodes, same length). Regions of different shapes (a real network's junctions)
-    are trained in groups of one shape each (:func:`_train_by_shape`). ``init`` (``{agent: predictor}``) warm-starts from those
+    are trained in groups of one shape each (:func:`_train_by_shape`). ``init``
+    (``{agent: predictor}``) warm-starts from those
     networks (DIALS retrains its AIPs), else each starts from ``init_arrays`` seeded from
     ``seed`` and the agent's name. ``autoregressive``: every AIP also reads ``u_{t-1}`` (teacher
     forcing), or ``u_{t-1} .. u_{t-L}`` with ``influence_lags=L``; ``clock_horizon`` as for
@@ -413,8 +414,6 @@ def train_predictors(datasets: dict, arch: str, hidden: int | None = None, lr: f
     ``({agent: predictor}, report)`` with each agent's train/test
     cross-entropy and the training seconds.
     """
-    import torch
-
     if arch not in ARCHS:
         raise BadInput(f"unknown AIP architecture {arch!r}; expected one of {sorted(ARCHS)}")
     agents = list(datasets)
@@ -440,6 +439,27 @@ def train_predictors(datasets: dict, arch: str, hidden: int | None = None, lr: f
     train_idx, test_idx = first.split(test_fraction, seed=seed)
     arrays = [_initial_arrays(a, (init or {}).get(a), arch, D, H, n_logits, dset_kind, autoregressive, seed,
                               influence_lags, clock_horizon) for a in agents]
+    X = np.stack([inputs[a][train_idx] for a in agents])
+    U = np.stack([datasets[a].influences[train_idx] for a in agents])
+    net, seconds = _fit_group(arch, arrays, X, U, hp, [agent_key(a) for a in agents], seed, offsets, progress,
+                              lr_schedule)
+    kind = dict(dset_kind=dset_kind, autoregressive=autoregressive, influence_lags=influence_lags,
+                clock_horizon=clock_horizon)
+    out, ce = _stacked_predictors(net, datasets, arch, hp, seed, seconds, test_idx if len(test_idx) else train_idx,
+                                  kind)
+    return out, {"arch": arch, "autoregressive": bool(autoregressive),
+                 **({"influence_lags": influence_lags} if autoregressive else {}), "hyperparameters": hp, "agents": len(agents), "train_seconds": round(seconds, 3),
+                 "test_cross_entropy": ce, "mean_test_cross_entropy": float(np.mean(list(ce.values()))),
+                 "warm_start": bool(init)}
+
+
+def _fit_group(arch: str, arrays: list, X: np.ndarray, U: np.ndarray, hp: dict, keys: list, seed: int, offsets,
+               progress: bool, lr_schedule: str):
+    """The stacked network of ``arrays`` fitted to inputs ``X`` and influences ``U`` (``[G, episodes,
+    T, ...]``), one thread; returns it and the seconds the fit took. ``keys``: each member's
+    stream (its agent's name)."""
+    import torch
+
     keep_freed_memory()
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
@@ -447,15 +467,14 @@ def train_predictors(datasets: dict, arch: str, hidden: int | None = None, lr: f
         torch.manual_seed(seed)
         net = _stacked_modules()[arch](arrays)
         opt = torch.optim.Adam(net.parameters(), lr=float(hp["lr"]))
-        X = torch.from_numpy(np.stack([inputs[a][train_idx] for a in agents]))
-        U = torch.from_numpy(np.stack([datasets[a].influences[train_idx] for a in agents]))
-        G = len(agents)
+        X, U = torch.from_numpy(X), torch.from_numpy(U)
+        G = len(keys)
         if arch == "mlp":
-            X, U = X.reshape(G, -1, D), U.reshape(G, -1, U.shape[-1])
+            X, U = X.reshape(G, -1, X.shape[-1]), U.reshape(G, -1, U.shape[-1])
             batch = int(hp["batch_size"])
         else:
             batch = int(hp["batch_episodes"])
-        rngs = [np.random.default_rng([seed, agent_key(a)]) for a in agents]
+        rngs = [np.random.default_rng([seed, k]) for k in keys]
         bar = None
         if progress:
             from tqdm.auto import tqdm
@@ -463,29 +482,30 @@ def train_predictors(datasets: dict, arch: str, hidden: int | None = None, lr: f
             bar = tqdm(total=int(hp["epochs"]), desc=f"train {G} {arch} AIPs", unit="epoch")
         t0 = time.perf_counter()
         _fit_stacked(net, opt, X, U, batch, int(hp["epochs"]), rngs, offsets, bar, lr_schedule)
-        seconds = time.perf_counter() - t0
+        return net, time.perf_counter() - t0
     finally:
         torch.set_num_threads(threads)
+
+
+def _stacked_predictors(net, datasets: dict, arch: str, hp: dict, seed: int, seconds: float, test_idx,
+                        kind: dict) -> tuple[dict, dict]:
+    """Every agent's trained predictor out of the stacked ``net`` (its slice), with its metadata,
+    and its held-out cross-entropy. ``kind``: ``dset_kind``, ``autoregressive``,
+    ``influence_lags``, ``clock_horizon``."""
     out, ce = {}, {}
-    for g, a in enumerate(agents):
-        pred = ARCHS[arch](datasets[a].region, dset_kind=dset_kind, hidden=H, arrays=net.arrays(g),
-                           autoregressive=autoregressive, influence_lags=influence_lags,
-                           clock_horizon=clock_horizon)
-        test = cross_entropy_per_source(pred, datasets[a], test_idx if len(test_idx) else train_idx)
-        pred.metadata.update({"variant": "trained", "arch": arch, "autoregressive": bool(autoregressive),
-                              **({"influence_lags": influence_lags} if autoregressive else {}),
-                              **({"clock_horizon": clock_horizon} if clock_horizon else {}),
+    for g, (a, data) in enumerate(datasets.items()):
+        pred = ARCHS[arch](data.region, hidden=int(hp["hidden"]), arrays=net.arrays(g), **kind)
+        test = cross_entropy_per_source(pred, data, test_idx)
+        pred.metadata.update({"variant": "trained", "arch": arch, "autoregressive": bool(kind["autoregressive"]),
+                              **({"influence_lags": kind["influence_lags"]} if kind["autoregressive"] else {}),
+                              **({"clock_horizon": kind["clock_horizon"]} if kind["clock_horizon"] else {}),
                               "hyperparameters": {**hp, "seed": int(seed)},
-                              "dataset": {"steps": datasets[a].n_steps,
-                                          "collect_seconds": datasets[a].metadata.get("collect_seconds"),
-                                          "policy": datasets[a].metadata.get("policy")},
+                              "dataset": {"steps": data.n_steps, "collect_seconds": data.metadata.get("collect_seconds"),
+                                          "policy": data.metadata.get("policy")},
                               "train_seconds": round(seconds, 3), "test_cross_entropy": float(np.mean(test))})
         out[a] = pred
         ce[a] = float(np.mean(test))
-    return out, {"arch": arch, "autoregressive": bool(autoregressive),
-                 **({"influence_lags": influence_lags} if autoregressive else {}), "hyperparameters": hp, "agents": len(agents), "train_seconds": round(seconds, 3),
-                 "test_cross_entropy": ce, "mean_test_cross_entropy": float(np.mean(list(ce.values()))),
-                 "warm_start": bool(init)}
+    return out, ce
 
 
 def _shape(dataset, dset_kind: str) -> tuple:
