@@ -197,15 +197,18 @@ def test_every_internal_link_of_the_site_resolves(site):
 
 
 def test_the_fast_api_example_of_the_guide_runs():
-    """The guide's example, as written (its 2x2 floor keeps it quick)."""
+    """The guide's examples, as written (a 2x2 floor and a three-light city keep them quick)."""
     import re
 
     text = (DOCS / "guide" / "fast_api.md").read_text()
-    (code,) = re.findall(r"```python\n(.*?)```", text, re.S)
+    code, city = re.findall(r"```python\n(.*?)```", text, re.S)
     namespace: dict = {}
     exec(compile(code, "fast_api.md", "exec"), namespace)
     assert namespace["done"] is True and namespace["rewards"].shape == (4, namespace["copies"])
     assert namespace["gs_obs"].shape[:2] == (4, 2) and namespace["gs_rewards"].shape == (4, 2)
+    exec(compile(city, "fast_api.md", "exec"), namespace)
+    assert namespace["city_obs"].shape[:2] == (3, 2) and namespace["city_rewards"].shape == (3, 2)
+    assert namespace["city_done"] is False
 
 
 def test_the_readme_example_runs():
