@@ -1,6 +1,7 @@
 """Learning curves of IPPO on RESCO's maps (docs/sumo_net.md): the GS score (mean over lights
 of the episode return, RESCO's wait_norm reward) against steps per light and against
-wall-clock, one line per seed, from the runs of docs/sumo_net_ippo.sh.
+wall-clock, one line per seed, from the runs of docs/sumo_net_ippo.sh (or of docs/sumo_net_dials.sh:
+runs/dials_net).
 
 Usage: python docs/sumo_net_curves.py [runs/ippo_net] [docs/sumo_net_ippo_curves.png]
 """
@@ -36,7 +37,11 @@ def main(runs="runs/ippo_net", out="docs/sumo_net_ippo_curves.png"):
                    ylabel="mean return over lights")
         row[1].set(title=f"{net}: vs wall-clock", xlabel="training minutes (2 cores)")
         row[0].legend(fontsize=8)
-    fig.suptitle("IPPO on RESCO's maps: bash docs/sumo_net_ippo.sh; python docs/sumo_net_curves.py", fontsize=9)
+    if "dials" in Path(runs).name:  # docs/sumo_net_dials.sh's runs (wall-clock: AIP rounds included)
+        title = f"DIALS on RESCO's maps: bash docs/sumo_net_dials.sh; python docs/sumo_net_curves.py {runs} {out}"
+    else:
+        title = "IPPO on RESCO's maps: bash docs/sumo_net_ippo.sh; python docs/sumo_net_curves.py"
+    fig.suptitle(title, fontsize=9)
     fig.tight_layout()
     fig.savefig(out, dpi=90)
     print(f"wrote {out}")
