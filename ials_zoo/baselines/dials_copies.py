@@ -18,7 +18,6 @@ from ials_zoo.baselines.dials import AIPRefreshes, aip_training_of
 from ials_zoo.baselines.ippo import GSCopiesLearner
 from ials_zoo.baselines.multiagent import save_aips
 from ials_zoo.learners.gs_vec import GSVecEnv
-from ials_zoo.learners.rollout import RolloutTrainer
 
 
 class IALSCopiesLearner(AIPRefreshes, GSCopiesLearner):
@@ -40,12 +39,9 @@ class IALSCopiesLearner(AIPRefreshes, GSCopiesLearner):
         GSCopiesLearner.load(self, state, info)
         self.load_aips(state, info)
 
-    def start(self, steps):
-        self.env = GSVecEnv(self.env_id, self.agents, self.copies, self.processes, seed=self.seed, simulator="ials",
-                            predictor=self.aips, **self.options)
-        self.trainer = RolloutTrainer(self.learner, self.env, self.frame_stack, seed=self.seed)
-        if self.episode_state is not None:  # the checkpoint's episodes, replayed to where they were
-            self.trainer.restore(self.episode_state)
+    def _make_env(self):
+        return GSVecEnv(self.env_id, self.agents, self.copies, self.processes, seed=self.seed, simulator="ials",
+                        predictor=self.aips, **self.options)
 
     def use_aips(self, aips: dict) -> None:
         self.env.set_predictors(aips)
@@ -57,7 +53,8 @@ class IALSCopiesLearner(AIPRefreshes, GSCopiesLearner):
 
     def checkpoint(self, out):
         save_aips(out / "aips.pt", self.aips)
-        return {"learner": self.learner.state_dict(), "trainer": self.trainer.state()}, self.aip_info()
+        state, _ = GSCopiesLearner.checkpoint(self, out)
+        return state, self.aip_info()
 
 
 __all__ = ["IALSCopiesLearner"]

@@ -101,8 +101,11 @@ class GSCopiesLearner(JointActors):
             self.learner.load_state_dict(state["learner"])
             self.episode_state = state.get("trainer")
 
+    def _make_env(self):
+        return GSVecEnv(self.env_id, self.agents, self.copies, self.processes, seed=self.seed, **self.options)
+
     def start(self, steps):
-        self.env = GSVecEnv(self.env_id, self.agents, self.copies, self.processes, seed=self.seed, **self.options)
+        self.env = self._make_env()
         self.trainer = RolloutTrainer(self.learner, self.env, self.frame_stack, seed=self.seed)
         if self.episode_state is not None:  # the checkpoint's episodes, replayed to where they were
             self.trainer.restore(self.episode_state)

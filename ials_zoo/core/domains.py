@@ -213,29 +213,27 @@ class Domain:
         spaces, or agents of their own spaces with the domain's own ``ials_parallel_env``."""
         return self.has_ials or (self.has_local_simulator and self.ials_parallel_env is not None)
 
+    def _require(self, has: str, what: str, needs: str, having: str) -> Domain:
+        """This domain if its property ``has`` holds, else a BadInput saying that ``what`` needs
+        ``needs`` and naming the domains that have it (``having``)."""
+        if not getattr(self, has):
+            others = ", ".join(d for d in domain_ids() if getattr(get_domain(d), has))
+            raise BadInput(f"{what} needs {needs}, which {self.env_id} does not have yet; its GS is "
+                           f"ials_zoo.{self.env_id}.parallel_env() ({having}: {others})")
+        return self
+
     def require_ials_parallel_env(self, what: str) -> Domain:
         """This domain, or a BadInput saying that ``what`` needs a multi-agent IALS it lacks."""
-        if not self.has_ials_parallel_env:
-            raise BadInput(f"{what} needs every agent's IALS as one ParallelEnv, which {self.env_id} does not have "
-                           f"yet; its GS is ials_zoo.{self.env_id}.parallel_env() (domains with one: "
-                           f"{', '.join(d for d in domain_ids() if get_domain(d).has_ials_parallel_env)})")
-        return self
+        return self._require("has_ials_parallel_env", what, "every agent's IALS as one ParallelEnv", "domains with one")
 
     def require_local_simulator(self, what: str) -> Domain:
         """This domain, or a BadInput saying that ``what`` needs a local simulator it lacks."""
-        if not self.has_local_simulator:
-            raise BadInput(f"{what} needs a local simulator, which {self.env_id} does not have yet; its GS is "
-                           f"ials_zoo.{self.env_id}.parallel_env() (domains with one: "
-                           f"{', '.join(d for d in domain_ids() if get_domain(d).has_local_simulator)})")
-        return self
+        return self._require("has_local_simulator", what, "a local simulator", "domains with one")
 
     def require_ials(self, what: str) -> Domain:
-        """This domain, or a BadInput saying that ``what`` needs a local simulator it lacks."""
-        if not self.has_ials:
-            raise BadInput(f"{what} needs a local simulator and shared agent spaces, which {self.env_id} does not "
-                           f"have yet; its GS is ials_zoo.{self.env_id}.parallel_env() (domains with an IALS: "
-                           f"{', '.join(ials_domain_ids())})")
-        return self
+        """This domain, or a BadInput saying that ``what`` needs a local simulator and shared
+        agent spaces."""
+        return self._require("has_ials", what, "a local simulator and shared agent spaces", "domains with an IALS")
 
     @property
     def n_actions(self) -> int:
