@@ -248,10 +248,23 @@ def _train(dataset, arch, dset_kind, epochs, seed, progress, lr, hidden, batch_s
     history = _fit(net, opt, X, U, batch, int(hp["epochs"]), rng, offsets, bar, lr_schedule)
     train_seconds = time.perf_counter() - t0
 
-    trained = ARCHS[arch](region, dset_kind=dset_kind, hidden=int(hp["hidden"]), arrays=net.to_numpy(),
-                          autoregressive=autoregressive, influence_lags=influence_lags, clock_horizon=clock_horizon)
-    untrained = ARCHS[arch](region, dset_kind=dset_kind, hidden=int(hp["hidden"]), arrays=init,
-                            autoregressive=autoregressive, influence_lags=influence_lags, clock_horizon=clock_horizon)
+    kind = dict(dset_kind=dset_kind, autoregressive=autoregressive, influence_lags=influence_lags,
+                clock_horizon=clock_horizon)
+    return _trained_with_report(dataset, arch, hp, kind, (net.to_numpy(), init), (train_idx, test_idx),
+                                (seed, test_fraction), train_seconds, history)
+
+
+def _trained_with_report(dataset, arch: str, hp: dict, kind: dict, arrays: tuple, split: tuple, seeding: tuple,
+                         train_seconds: float, history: list):
+    """The trained predictor (``arrays``: its weights and its initial ones) and its report: its
+    cross-entropies beside the untrained, uniform and marginal predictors'. ``kind``:
+    ``dset_kind``, ``autoregressive``, ``influence_lags``, ``clock_horizon``."""
+    region, (train_idx, test_idx), (seed, test_fraction) = dataset.region, split, seeding
+    dset_kind, autoregressive = kind["dset_kind"], kind["autoregressive"]
+    influence_lags, clock_horizon = kind["influence_lags"], kind["clock_horizon"]
+    u_all = dataset.influences
+    trained = ARCHS[arch](region, hidden=int(hp["hidden"]), arrays=arrays[0], **kind)
+    untrained = ARCHS[arch](region, hidden=int(hp["hidden"]), arrays=arrays[1], **kind)
     uniform = UniformPredictor(region, dset_kind=dset_kind, probs=untrained_probs(region))
     marginal = MarginalPredictor.fit(dataset, dset_kind=dset_kind, episodes=train_idx)
     ce = _cross_entropies({"trained": trained, "untrained": untrained, "uniform": uniform, "marginal": marginal},
