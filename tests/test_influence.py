@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from ials_zoo.core.region import RegionSpec
-from ials_zoo.influence.constant import FixedPredictor, MarginalPredictor, UniformPredictor
+from ials_zoo.influence.constant import FixedPredictor, MarginalPredictor, RecordedPredictor, UniformPredictor
 from ials_zoo.influence.dataset import InfluenceDataset
 from ials_zoo.influence.files import load_predictor, save_predictor
 from ials_zoo.influence.metrics import cross_entropy_per_source, evaluate_cross_entropy
@@ -167,6 +167,25 @@ def test_constant_predictors():
     np.testing.assert_allclose(marg.table[1], expected / expected.sum())
     with pytest.raises(ValueError, match="summing to 1"):
         UniformPredictor(region, probs=[[0.5, 0.6], [0.25] * 4])
+
+
+def test_recorded_predictor_replays_its_episode_whatever_the_dsets():
+    region = _region()
+    u = np.array([[0, 3], [1, 0], [1, 2]])
+    rec = RecordedPredictor(region, u)
+    rng = np.random.default_rng(0)
+    for _ in range(2):  # a reset starts the recording again
+        rec.reset(2)
+        draws = [rec.sample(rng.integers(0, 2, (2, D)).astype(np.uint8), rng) for _ in range(4)]
+        np.testing.assert_array_equal(draws[:3], np.stack([u, u], axis=1))
+        np.testing.assert_array_equal(draws[3], [u[-1], u[-1]])  # past the end: the last step
+    rec.reset(1)
+    p0, p1 = rec.probs(np.zeros((1, D), np.uint8))
+    np.testing.assert_array_equal(p1[0], [0, 0, 0, 1])
+    with pytest.raises(ValueError, match="shape"):
+        RecordedPredictor(region, u[:, :1])
+    with pytest.raises(ValueError, match="outside"):
+        RecordedPredictor(region, [[2, 0]])  # source 0 has 2 classes
 
 
 def test_cross_entropy_definition():

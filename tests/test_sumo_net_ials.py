@@ -205,7 +205,7 @@ class _Seconds:
         self.seconds, self.t = seconds, 0
 
     def edge_getLastStepVehicleIDs(self, edge):
-        return [v for v, (road, _) in self.seconds[self.t].items() if road == edge]
+        return [v for v, x in self.seconds[self.t].items() if x[0] == edge]
 
     def vehicle_getIDList(self):
         return list(self.seconds[self.t])
@@ -216,20 +216,35 @@ class _Seconds:
     def vehicle_getLanePosition(self, vehicle):
         return self.seconds[self.t][vehicle][1]
 
+    def vehicle_getSpeed(self, vehicle):
+        return (self.seconds[self.t][vehicle] + (10.0,))[2]
+
+    def edge_getLastStepHaltingNumber(self, edge):
+        return sum(self.vehicle_getSpeed(v) < 0.1 for v in self.edge_getLastStepVehicleIDs(edge))
+
+
+class _NoLanes:
+    def lane_getLastStepVehicleIDs(self, lane):
+        return []
+
+    def vehicle_getLanePosition(self, vehicle):
+        raise AssertionError("no vehicles")
+
 
 def test_the_entry_watcher_counts_each_vehicle_once_where_it_came_in():
     from ials_zoo.sumo_net.influence import EntryWatcher, RegionLayout
 
     # the region begins 100 m into in_a (its entry offset) and at in_b's start
     layout = RegionLayout("J", sources=("in_a", "in_b"), edges=("in_a", "in_b", "out"), source_lanes=(), lanes=(),
-                          entry_offsets=(100.0, 0.0))
+                          entry_offsets=(100.0, 0.0), exits=(("out", 25.0),))
     seconds = [{"a": ("in_a", 150), "x": ("far", 0), "f": ("in_a", 50)},     # a comes in on in_a; f is not in yet
                {"a": (":J_0", 1), "b": ("in_b", 10), "c": ("in_b", 20), "f": ("in_a", 90)},  # a crosses the
                # junction; b and c come in on in_b
-               {"a": ("out", 5), "b": ("in_b", 20), "c": ("in_b", 30), "d": ("out", 9), "f": ("in_a", 105)},  # a
-               # goes on; d appears past the light; f passes the entry offset
-               {"b": ("in_b", 30), "e": ("in_a", 100), "f": ("in_a", 115)}]  # a and c left (c vanished: it
-               # arrived); e comes in right at the offset
+               {"a": ("out", 5), "b": ("in_b", 20), "c": ("in_b", 30), "d": ("out", 9, 0.0), "f": ("in_a", 105)},
+               # a goes on; d appears past the light, halting in the region's part of out: the exit is blocked;
+               # f passes the entry offset
+               {"b": ("in_b", 30), "e": ("in_a", 100), "f": ("in_a", 115), "d": ("out", 30, 0.0)}]  # a and c
+               # left (c vanished: it arrived); e comes in right at the offset; d halts past the exit: free
     raw = _Seconds(seconds)
     watcher = EntryWatcher([layout], decision=4)
     watcher.reset()
@@ -237,8 +252,11 @@ def test_the_entry_watcher_counts_each_vehicle_once_where_it_came_in():
         raw.t = t
         watcher.after_step(raw)
     np.testing.assert_array_equal(watcher.counts[0], [[1, 0, 0], [0, 2, 0], [1, 0, 1], [1, 0, 0]])
-    # points in ("in_a", "in_b", "inside") order per second, second-major; two or more is class 2
-    np.testing.assert_array_equal(watcher.influences()[0], [1, 0, 0, 0, 2, 0, 1, 0, 1, 1, 0, 0])
+    # per second ("in_a", "in_b", "inside", "exit:out"), second-major; two or more is class 2
+    np.testing.assert_array_equal(watcher.influences()[0], [1, 0, 0, 0, 0, 2, 0, 0, 1, 0, 1, 1, 1, 0, 0, 0])
+    raw.t = 2
+    watcher.measure_exits(raw)
+    assert watcher.dsets(_NoLanes())[0].tolist() == [1]  # the d-set ends with the exits' blocks now
 
 
 def test_the_bench_reports_every_light_s_ials_and_the_multi_agent_ials_against_the_gs(capsys):

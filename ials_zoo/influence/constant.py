@@ -133,3 +133,34 @@ class MarginalPredictor(_ConstantPredictor):
         u = dataset.influences if episodes is None else dataset.influences[episodes]
         probs = cls.marginal_probs(u, dataset.region.influence_classes)
         return cls(dataset.region, probs, dset_kind, metadata={"fitted_on_steps": int(u.shape[0] * u.shape[1])})
+
+
+class RecordedPredictor(InfluencePredictor):
+    """Not a model: the influence of one recorded GS episode, replayed step by step (the same
+    ``u_t`` for every history, whatever the d-sets). It tests the local simulator alone: fed
+    the GS's own sources under a joint policy, does it give the GS's rewards? Past the
+    recording's end it repeats the last step."""
+
+    name = "recorded"
+
+    def __init__(self, region, influences, dset_kind="dset", metadata=None):
+        super().__init__(region, dset_kind, metadata)
+        u = np.asarray(influences, dtype=np.int64)
+        if u.ndim != 2 or u.shape[1] != self.n_sources or len(u) == 0:
+            raise BadInput(f"recorded influences must have shape [steps >= 1, {self.n_sources}], got {u.shape}")
+        if (u < 0).any() or (u >= self.n_classes[None, :]).any():
+            raise BadInput("recorded influences hold a class outside a source's classes")
+        self.influences = u
+
+    def probs_padded(self, dsets):
+        u = self._next(dsets)
+        return np.broadcast_to(np.eye(self.max_classes)[u], (self.n, self.n_sources, self.max_classes))
+
+    def sample(self, dsets, rng):
+        return np.broadcast_to(self._next(dsets), (self.n, self.n_sources)).copy()
+
+    def _next(self, dsets) -> np.ndarray:
+        self._check_dsets(dsets)
+        u = self.influences[min(self._t, len(self.influences) - 1)]
+        self._t += 1
+        return u

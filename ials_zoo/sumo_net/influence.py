@@ -15,9 +15,17 @@ come in:
   *Where* an entering vehicle goes inside the region, on which lane and how fast it drives are
   not sources: the local simulator draws them from the GS's own entries at that entry point
   (:mod:`ials_zoo.sumo_net.island`), so the AIP predicts only *when* vehicles come.
+  After the entry points, per second, one source per **exit** (``"exit:<edge>@<second>"``, two
+  classes): 1 if the region's end of that outgoing road is blocked, a vehicle halting
+  (SUMO's < 0.1 m/s) within its first metres (up to where vehicles leave the region,
+  :attr:`~ials_zoo.sumo_net.regions.NetRegion.exits`). This is what the rest of the network does
+  to the region from downstream: a queue spilling back from the next junction. Without it, fed
+  the GS's own entries, the local simulators of ingolstadt21 under a learned joint policy
+  showed half the GS's waiting, and the policy DIALS trained there gridlocked the GS
+  (``docs/sumo_net.md``).
 * **d-set** (``"dset"``): the region's local occupancy where vehicles come in, without the
   light's state: per lane of every entry edge, :data:`CELLS` cells of :data:`CELL_METRES` m
-  from the entry offset, occupied or not.
+  from the entry offset, occupied or not; then per exit, whether it is blocked now.
 * **full** d-set: the d-set and, per incoming lane of the light (its observation's rows),
   whether its detection holds a queue and whether it holds approaching vehicles.
 
@@ -37,6 +45,8 @@ from ials_zoo.sumo_net.core import NetCore
 from ials_zoo.sumo_net.names import ENV_ID, SCENARIO_OPTIONS
 
 ENTRY_CLASSES = 3  # 0, 1, 2 or more vehicles in one second at one entry point
+EXIT_CLASSES = 2  # an exit free or blocked
+HALTING_SPEED = 0.1  # m/s: SUMO's own threshold of a halting vehicle
 INSIDE = "inside"
 CELLS, CELL_METRES = 4, 25.0
 
@@ -71,6 +81,16 @@ class RegionLayout:
         """The entry points: the entry edges, then :data:`INSIDE`."""
         return (*self.sources, INSIDE)
 
+    @property
+    def exit_edges(self) -> tuple[str, ...]:
+        """The edges where vehicles leave the region (their exit sources' order)."""
+        return tuple(e for e, _ in self.exits)
+
+    @property
+    def per_second(self) -> int:
+        """Influence sources per second: the entry points, then the exits."""
+        return len(self.points) + len(self.exits)
+
     def prefixed(self, prefix: str) -> RegionLayout:
         """The same region in a simulation whose ids carry ``prefix``."""
         def p(ids):
@@ -102,6 +122,7 @@ def _scenario(options: dict):
 
 def dset_names(layout: RegionLayout) -> dict[str, tuple[str, ...]]:
     cells = tuple(f"occ_{lane}_{k}" for lane in layout.source_lanes for k in range(CELLS))
+    cells += tuple(f"blocked_{e}" for e in layout.exit_edges)
     light = tuple(f"{what}_{lane}" for lane in layout.lanes for what in ("queue", "approach"))
     return {"dset": cells, "full": cells + light}
 
@@ -110,11 +131,13 @@ def region_spec(agent: str, **options) -> RegionSpec:
     """The region layout of light ``agent`` under ``sumo_net_v0``'s options, without SUMO."""
     scenario = _scenario(options)
     layout = region_layout(scenario.net_file, agent)
-    names = tuple(f"{p}@{s}" for s in range(scenario.decision_seconds) for p in layout.points)
+    per_second = (*layout.points, *(f"exit:{e}" for e in layout.exit_edges))
+    names = tuple(f"{p}@{s}" for s in range(scenario.decision_seconds) for p in per_second)
+    classes = ((ENTRY_CLASSES,) * len(layout.points) + (EXIT_CLASSES,) * len(layout.exits)) * scenario.decision_seconds
     params = {"network": scenario.name, "begin": scenario.begin, "end": scenario.end,
               "decision_seconds": scenario.decision_seconds, "yellow_seconds": scenario.yellow_seconds}
     return RegionSpec(domain=ENV_ID, agent=agent, influence_names=names,
-                      influence_classes=(ENTRY_CLASSES,) * len(names), dset_names=dset_names(layout), params=params)
+                      influence_classes=classes, dset_names=dset_names(layout), params=params)
 
 
 def full_dset(dset: np.ndarray, measures: np.ndarray) -> np.ndarray:
@@ -134,15 +157,19 @@ class EntryWatcher:
         # the entry edges whose first metres are outside the region
         self.offset_of = [{e: o for e, o in zip(x.sources, x.entry_offsets) if o > 0} for x in self.layouts]
         self.counts = [np.zeros((self.decision, len(x.points)), np.int64) for x in self.layouts]
+        self.blocked = [np.zeros((self.decision, len(x.exits)), np.int64) for x in self.layouts]
+        self.blocked_now = [np.zeros(len(x.exits), np.uint8) for x in self.layouts]
         self.present: list[set] = [set() for _ in self.layouts]
         self.second = 0
 
     def reset(self) -> None:
         self.present = [set() for _ in self.layouts]
+        for b in self.blocked_now:
+            b[:] = 0
         self.start_decision()
 
     def start_decision(self) -> None:
-        for c in self.counts:
+        for c in (*self.counts, *self.blocked):
             c[:] = 0
         self.second = 0
 
@@ -171,17 +198,28 @@ class EntryWatcher:
                 if x not in before:
                     counts[s, point_of.get(e, len(point_of))] += 1
             self.present[r] = kept | set(now)
+        self.measure_exits(raw)
+        for b, now_blocked in zip(self.blocked, self.blocked_now):
+            b[s] = now_blocked
         self.second += 1
 
+    def measure_exits(self, raw) -> None:
+        """Which exits of every region are blocked now (a vehicle halting in the region's part
+        of the road)."""
+        for layout, now_blocked in zip(self.layouts, self.blocked_now):
+            now_blocked[:] = [_blocked(raw, e, leave) for e, leave in layout.exits]
+
     def influences(self) -> list[np.ndarray]:
-        """Per region, the last decision's entries as classes (int64, second-major)."""
-        return [np.minimum(c, ENTRY_CLASSES - 1).reshape(-1) for c in self.counts]
+        """Per region, the last decision's sources as classes (int64, second-major: each
+        second's entries, then its exits)."""
+        return [np.concatenate([np.minimum(c, ENTRY_CLASSES - 1), b], axis=1).reshape(-1)
+                for c, b in zip(self.counts, self.blocked)]
 
     def dsets(self, raw) -> list[np.ndarray]:
-        """Per region, the occupancy cells of its entry lanes now (uint8)."""
+        """Per region, the occupancy cells of its entry lanes and its exits' blocks now (uint8)."""
         ids, position = raw.lane_getLastStepVehicleIDs, raw.vehicle_getLanePosition
         rows = []
-        for layout in self.layouts:
+        for layout, blocked in zip(self.layouts, self.blocked_now):
             bits = np.zeros((len(layout.source_lanes), CELLS), np.uint8)
             offsets = layout.lane_offsets or (0.0,) * len(layout.source_lanes)
             for i, (lane, offset) in enumerate(zip(layout.source_lanes, offsets)):
@@ -189,8 +227,16 @@ class EntryWatcher:
                     k = int((position(x) - offset) // CELL_METRES)
                     if 0 <= k < CELLS:
                         bits[i, k] = 1
-            rows.append(bits.reshape(-1))
+            rows.append(np.concatenate([bits.reshape(-1), blocked]))
         return rows
+
+
+def _blocked(raw, edge: str, leave: float) -> int:
+    """1 if a vehicle halts on ``edge`` before ``leave`` m (where the region ends on it)."""
+    if not raw.edge_getLastStepHaltingNumber(edge):
+        return 0
+    speed, position = raw.vehicle_getSpeed, raw.vehicle_getLanePosition
+    return int(any(speed(x) < HALTING_SPEED and position(x) <= leave for x in raw.edge_getLastStepVehicleIDs(edge)))
 
 
 class RegionNetCore(NetCore):
@@ -221,5 +267,5 @@ class RegionNetCore(NetCore):
         return measures, phases, now, (self.watcher.influences(), self.watcher.dsets(raw))
 
 
-__all__ = ["CELLS", "CELL_METRES", "ENTRY_CLASSES", "EntryWatcher", "INSIDE", "RegionLayout", "RegionNetCore",
+__all__ = ["CELLS", "CELL_METRES", "ENTRY_CLASSES", "EXIT_CLASSES", "EntryWatcher", "INSIDE", "RegionLayout", "RegionNetCore",
            "full_dset", "region_layout", "region_spec"]

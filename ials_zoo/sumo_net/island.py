@@ -49,6 +49,7 @@ from ials_zoo.utils import check_seed, parse_untrusted_json_object
 MAX_TABLE_BYTES = 64 << 20
 SUMO_SEEDS = 2**31 - 1
 INSERT_PATIENCE = 2  # seconds a vehicle that could not enter at once may wait (then it is dropped)
+BLOCKED_SPEED = 0.01  # m/s: a blocked exit's speed limit (below SUMO's halting speed, 0.1)
 
 
 def _table_path(scenario, light: str, seconds: int, seed: int) -> Path:
@@ -119,10 +120,10 @@ def _record_tables(scenario, lights: list, seconds: int, seed: int) -> dict[str,
 
 
 def gs_marginal_predictors(lights, record_seconds: int | None = None, record_seed: int = 0, **options) -> dict:
-    """Per light, an AIP that needs no training: every source drawn from the GS's own frequency of
-    0, 1 and 2+ entering vehicles per second at that entry point (:func:`entry_histograms`; a
-    :class:`~ials_zoo.influence.constant.MarginalPredictor`). Costs what a trained MLP costs to
-    within a call, so the benchmark uses it."""
+    """Per light, an AIP that needs no training: every entry source drawn from the GS's own
+    frequency of 0, 1 and 2+ entering vehicles per second at that entry point
+    (:func:`entry_histograms`; a :class:`~ials_zoo.influence.constant.MarginalPredictor`), every
+    exit free. Costs what a trained MLP costs to within a call, so the benchmark uses it."""
     from ials_zoo.influence.constant import MarginalPredictor
     from ials_zoo.sumo_net.env import scenario_of
 
@@ -132,7 +133,9 @@ def gs_marginal_predictors(lights, record_seconds: int | None = None, record_see
     for light, hist in entry_histograms(scenario, list(lights), record_seconds, record_seed).items():
         region = region_spec(light, **scenario_options)
         per_point = [(np.asarray(h, np.float64) + 0.5) / (np.sum(h) + 0.5 * ENTRY_CLASSES) for h in hist]
-        probs = [per_point[j] for _ in range(scenario.decision_seconds) for j in range(len(hist))]
+        free = np.array([1.0, 0.0])  # the recording counts entries only: every exit stays free
+        exits = len(region_layout(scenario.net_file, light).exits)
+        probs = [p for _ in range(scenario.decision_seconds) for p in (*per_point, *(free,) * exits)]
         out[light] = MarginalPredictor(region, probs, metadata={"from": "the GS's entries per second"})
     return out
 
@@ -157,33 +160,57 @@ class IslandCore(NetCore):
         self.inserted = 0
         self.waiting: list[tuple[str, int]] = []  # our vehicles not inserted yet, with their wait (s)
         self.due: dict[int, list] = {}
+        self.exit_lanes: list | None = None  # per row, per exit: its lanes and their own speed limits
+        self.blocking = [np.zeros(len(x.exits), np.int64) for x in self.layouts]
 
     def reset(self, seed: int, tripinfo: str | None = None):
         self.rngs = [np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(agent_key(a), j)))
                      for a, j in self.row_keys]
         self.watcher.reset()
         self.waiting, self.plan, self.second, self.routes, self.due = [], self._no_plan(), 0, {}, {}
-        return self._with_region(super().reset(seed % SUMO_SEEDS, None))  # SUMO's seeds are 31-bit
+        for b in self.blocking:
+            b[:] = 0  # a new simulation: every road at its own speed limit
+        result = super().reset(seed % SUMO_SEEDS, None)  # SUMO's seeds are 31-bit
+        if self.exit_lanes is None:
+            raw = self.ls._libsumo
+            self.exit_lanes = [[[(f"{e}_{i}", raw.lane_getMaxSpeed(f"{e}_{i}")) for i in range(raw.edge_getLaneNumber(e))]
+                                for e in x.exit_edges] for x in self.layouts]
+        return self._with_region(result)
 
     def step(self, actions, influences=None):
-        points = [len(x.points) for x in self.layouts]
-        self.plan = [np.asarray(u, np.int64).reshape(self.decision, p) for u, p in zip(influences, points)]
+        self.plan = [np.asarray(u, np.int64).reshape(self.decision, x.per_second)
+                     for u, x in zip(influences, self.layouts)]
         self.due = {}  # second -> [(row, entry point, vehicles)]: only what comes in
-        for r, plan in enumerate(self.plan):
-            for second, j in zip(*np.nonzero(plan)):
-                self.due.setdefault(int(second), []).append((r, int(j), int(plan[second, j])))
+        for r, (plan, layout) in enumerate(zip(self.plan, self.layouts)):
+            entries = plan[:, :len(layout.points)]
+            for second, j in zip(*np.nonzero(entries)):
+                self.due.setdefault(int(second), []).append((r, int(j), int(entries[second, j])))
         self.watcher.start_decision()
         self.second = 0
         return self._with_region(super().step(actions))
 
     def _no_plan(self) -> list:
-        return [np.zeros((self.decision, len(x.points)), np.int64) for x in self.layouts]
+        return [np.zeros((self.decision, x.per_second), np.int64) for x in self.layouts]
 
     def _with_region(self, result):
         """The core's result and the region data: what entered (measured if watched, else what
-        the sources said) and the d-sets."""
+        the sources said) and the d-sets (the exits' blocks measured as in the GS)."""
+        raw = self.ls._libsumo
+        if not self.watch:
+            self.watcher.measure_exits(raw)
         told = self.watcher.influences() if self.watch else [p.reshape(-1) for p in self.plan]
-        return (*result, (told, self.watcher.dsets(self.ls._libsumo)))
+        return (*result, (told, self.watcher.dsets(raw)))
+
+    def _block_exits(self, raw, second: int) -> None:
+        """Each exit as its source says this second: blocked, its lanes' speed limit
+        :data:`BLOCKED_SPEED` (a vehicle reaching it halts and the queue backs up, as behind
+        a jam in the GS), or free at its own limit. A call only where a state changes."""
+        for r, (plan, layout) in enumerate(zip(self.plan, self.layouts)):
+            want = plan[second, len(layout.points):]
+            for k in np.nonzero(want != self.blocking[r])[0]:
+                for lane, limit in self.exit_lanes[r][k]:
+                    raw.lane_setMaxSpeed(lane, BLOCKED_SPEED if want[k] else limit)
+            self.blocking[r][:] = want
 
     def _insert(self, raw, second: int) -> list[str]:
         names = []
@@ -207,7 +234,9 @@ class IslandCore(NetCore):
     def _advance(self, seconds: int) -> None:
         raw = self.ls._libsumo
         for _ in range(seconds):
-            self.waiting += [(name, 0) for name in self._insert(raw, min(self.second, self.decision - 1))]
+            second = min(self.second, self.decision - 1)
+            self._block_exits(raw, second)
+            self.waiting += [(name, 0) for name in self._insert(raw, second)]
             super()._advance(1)
             self.second += 1
             if self.waiting:
