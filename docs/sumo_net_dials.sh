@@ -5,16 +5,17 @@
 # and 24,000 steps per light; GS evaluations as IPPO's, the protocol's 20-episode final score.
 # variant "untrained": untrained-DIALS (random AIPs, never trained), the control.
 # Resumable: a finished run is skipped, an interrupted one continues with --resume.
-# Usage: bash docs/sumo_net_dials.sh "ingolstadt21 cologne8" "0 1 2" [trained|untrained]
+# Usage: bash docs/sumo_net_dials.sh "ingolstadt21 cologne8" "0 1 2" [trained|untrained] [runs folder]
 set -euo pipefail
 maps=${1:-"ingolstadt21 cologne8"}
 seeds=${2:-"0 1 2"}
 variant=${3:-trained}
+root=${4:-runs/dials_net}
 for seed in $seeds; do
   for net in $maps; do
     aips=(--refresh 12000)
-    out="runs/dials_net/${net}_s${seed}"
-    if [ "$variant" = untrained ]; then aips=(--aip untrained --refresh never); out="runs/dials_net/${net}_untrained_s${seed}"; fi
+    out="$root/${net}_s${seed}"
+    if [ "$variant" = untrained ]; then aips=(--aip untrained --refresh never); out="$root/${net}_untrained_s${seed}"; fi
     if [ -f "$out/result.json" ]; then echo "done: $out"; continue; fi
     resume=(); [ -f "$out/checkpoint.json" ] && resume=(--resume)
     evals=(--eval-every 7200 --eval-episodes 5)
