@@ -373,6 +373,21 @@ def _initial_arrays(agent: str, old, arch: str, D: int, H: int, n_logits: int, d
     return {k: np.asarray(v, np.float32) for k, v in old._arrays().items()}
 
 
+def _sources_by_classes(offsets) -> list[tuple]:
+    """``[(k, sources, logit indices [sources, k])]``: the sources grouped by their class count, so
+    that one cross-entropy call covers each group (a region of ingolstadt21 has ~150 sources of
+    two or three classes; a call per source dominated the AIPs' training)."""
+    import torch
+
+    sizes = np.diff(offsets)
+    out = []
+    for k in sorted(set(sizes.tolist())):
+        sources = np.nonzero(sizes == k)[0]
+        logits = np.asarray(offsets)[sources][:, None] + np.arange(k)[None, :]
+        out.append((int(k), torch.from_numpy(sources), torch.from_numpy(logits)))
+    return out
+
+
 def _fit_stacked(net, opt, X, U, batch: int, epochs: int, rngs, offsets, bar, schedule: str = "linear") -> None:
     """Adam on every agent's own shuffled minibatches (``X [G, items, ...]``, one generator per
     agent): the loss is the sum of the agents' mean cross-entropies, so each network's
@@ -382,6 +397,7 @@ def _fit_stacked(net, opt, X, U, batch: int, epochs: int, rngs, offsets, bar, sc
     G, n_items, n_logits = X.shape[0], X.shape[1], offsets[-1]
     scheduler = _scheduler(opt, schedule, epochs * -(-n_items // batch))
     gi = torch.arange(G)[:, None]
+    by_classes = _sources_by_classes(offsets)
     for _ in range(epochs):
         perm = torch.from_numpy(np.stack([r.permutation(n_items) for r in rngs]))
         for start in range(0, n_items, batch):
@@ -389,11 +405,11 @@ def _fit_stacked(net, opt, X, U, batch: int, epochs: int, rngs, offsets, bar, sc
             flat = net(X[gi, idx]).reshape(G, -1, n_logits)
             u = U[gi, idx].reshape(G, -1, U.shape[-1])
             loss = 0.0
-            for m in range(len(offsets) - 1):
-                lm = flat[:, :, offsets[m]:offsets[m + 1]]
-                ce = torch.nn.functional.cross_entropy(lm.reshape(-1, lm.shape[-1]), u[:, :, m].reshape(-1),
-                                                       reduction="none").reshape(G, -1).mean(dim=1)
-                loss = loss + ce
+            for k, sources, logits in by_classes:  # every source of k classes in one call
+                lm = flat[:, :, logits]  # [G, batch, sources, k]
+                ce = torch.nn.functional.cross_entropy(lm.reshape(-1, k), u[:, :, sources].reshape(-1),
+                                                       reduction="none").reshape(G, -1, len(sources))
+                loss = loss + ce.mean(dim=1).sum(dim=1)
             loss = (loss / (len(offsets) - 1)).sum()  # the agents' losses are independent
             opt.zero_grad(set_to_none=True)
             loss.backward()

@@ -12,8 +12,10 @@ its own program, the map's hour, SUMO seed 0; :func:`entry_tables`, cached under
 ``$IALS_ZOO_CACHE/sumo_net``, or ``~/.cache/ials_zoo/sumo_net``): its route inside the region, lane, position, type and speed
 factor, inserted at the highest safe speed. A vehicle that cannot be inserted within
 :data:`INSERT_PATIENCE` seconds is dropped, as the GS's could not have entered then. Vehicles
-leave a few metres into the region's outgoing edges (:attr:`~ials_zoo.sumo_net.regions.NetRegion.exits`),
-so spill-back from beyond them is not simulated.
+leave a few metres into the region's outgoing edges (:attr:`~ials_zoo.sumo_net.regions.NetRegion.exits`).
+What happens beyond an exit is an influence source too: while it says the exit is blocked, that
+road's lanes are held at :data:`BLOCKED_SPEED`, so the vehicles reaching it halt and the queue
+spills back into the region as behind a jam in the GS.
 """
 
 from __future__ import annotations
