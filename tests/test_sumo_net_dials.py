@@ -20,14 +20,23 @@ DIALS = dict(env_id="sumo_net_v0", env_options=json.dumps(OPTIONS), n_envs=2, sa
              eval_every=64, refresh="128", collect_steps=60, aip_epochs=2, workers=2)
 
 
-def test_dials_trains_lights_of_their_own_shapes_on_ials_copies_and_resumes_bitwise(tmp_path, monkeypatch):
+@pytest.fixture(scope="module")
+def whole_run(tmp_path_factory):
+    """The reference run: IALS copies in 2 worker processes, never stopped."""
+    from ials_zoo.baselines import dials
+
+    out = tmp_path_factory.mktemp("dials_copies") / "whole"
+    return dials.main(dials.Args(**DIALS, out_dir=str(out))), out
+
+
+def test_dials_trains_lights_of_their_own_shapes_on_ials_copies_and_resumes_bitwise(tmp_path, monkeypatch, whole_run):
     from ials_zoo.baselines import dials
     from ials_zoo.influence.files import load_predictor_set
 
-    whole = dials.main(dials.Args(**DIALS, out_dir=str(tmp_path / "whole"))), tmp_path / "whole"
+    whole = whole_run
     result = whole[0]
     assert result["training"]["simulator"] == "dials" and result["training"]["aip"]["refreshes"] == 2
-    aips = load_predictor_set(tmp_path / "whole" / "aips.pt", env_id="sumo_net_v0")
+    aips = load_predictor_set(whole[1] / "aips.pt", env_id="sumo_net_v0")
     assert len({(p.region.n_sources, p.region.dset_size("dset")) for p in aips.values()}) == 3  # three shapes
     assert all(p.metadata["variant"] == "trained" for p in aips.values())
     resumed = _stopped_and_resumed(monkeypatch, dials, tmp_path / "resumed", DIALS)
@@ -35,12 +44,35 @@ def test_dials_trains_lights_of_their_own_shapes_on_ials_copies_and_resumes_bitw
     assert _progress_rows(whole[1]) == _progress_rows(resumed[1])
 
 
-@pytest.mark.parametrize("flag,value", [("learner", "sb3"), ("backend", "ray"), ("aip", "shipped")])
+def test_dials_on_a_two_node_ray_cluster_is_the_same_run(tmp_path, whole_run):
+    """The IALS copies as Ray actors, one on each node of a two-node cluster
+    (``ray.cluster_utils.Cluster``, both on this machine): the same weights, curve and scores as
+    in worker processes."""
+    ray = pytest.importorskip("ray")
+    from ray.cluster_utils import Cluster
+
+    from ials_zoo.baselines import dials
+
+    cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 1, "include_dashboard": False})
+    try:
+        cluster.add_node(num_cpus=1)
+        cluster.wait_for_nodes()
+        args = dials.Args(**DIALS, backend="ray", ray_address=cluster.address, out_dir=str(tmp_path / "ray"))
+        on_ray = dials.main(args), tmp_path / "ray"
+        assert on_ray[0]["training"]["backend"] == "ray"
+        assert_same_run(whole_run, on_ray)
+    finally:
+        if ray.is_initialized():
+            ray.shutdown()
+        cluster.shutdown()
+
+
+@pytest.mark.parametrize("flag,value", [("learner", "sb3"), ("aip", "shipped"), ("workers", 0)])
 def test_what_the_ials_copies_cannot_do_is_named_before_any_work(tmp_path, flag, value):
     from ials_zoo.baselines import dials
 
     with pytest.raises(BadInput, match=f"--{flag}"):
-        dials.main(dials.Args(**{**DIALS, flag: value}, out_dir=str(tmp_path / "run")))
+        dials.main(dials.Args(**{**DIALS, flag: value, "backend": "ray"}, out_dir=str(tmp_path / "run")))
     assert not (tmp_path / "run").exists()
 
 

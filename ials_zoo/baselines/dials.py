@@ -238,9 +238,8 @@ def _check_copies_args(args) -> None:
     if args.learner != "batched":
         raise BadInput(f"--learner {args.learner}: agents with spaces of their own train with --learner batched "
                        "(one torch program, observations padded)")
-    if args.backend != "process":
-        raise BadInput(f"--backend {args.backend}: agents with spaces of their own train on IALS copies in worker "
-                       "processes (--backend process); Ray is not wired for them yet")
+    if args.backend == "ray" and args.workers == 0:
+        raise BadInput("--workers 0 with --backend ray: the IALS copies run in Ray actors, at least one")
     if args.aip == "shipped":
         raise BadInput(f"--aip shipped: no AIPs ship for {args.env_id}")
 
@@ -478,8 +477,10 @@ def main(args: Args | None = None) -> dict:
 
         learner = IALSCopiesLearner(args, domain, agents, options, refresh, copies, max(workers, 0), ppo, frame_stack,
                                     total // per_update, joint_sizes(domain, agents, options), training, out)
-        where = (f"every agent's IALS side by side, {copies} cop{'ies' if copies > 1 else 'y'} in "
-                 f"{min(workers, copies)} worker process{'es' if min(workers, copies) != 1 else ''}")
+        n = min(workers, copies)
+        holders = (f"{n} Ray actor{'s' if n != 1 else ''}" if args.backend == "ray"
+                   else f"{n} worker process{'es' if n != 1 else ''}")
+        where = f"every agent's IALS side by side, {copies} cop{'ies' if copies > 1 else 'y'} in {holders}"
     else:
         learner = ShardsLearner(args, domain, agents, options, refresh, copies, workers, ppo, frame_stack,
                                 total // per_update, training, out)

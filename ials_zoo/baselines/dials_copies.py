@@ -5,7 +5,7 @@ agents of one shape); it has a multi-agent IALS ParallelEnv instead (``Domain.ia
 every agent's local simulator and AIP side by side in one simulation, the regions apart, each fed
 only by its own AIP). DIALS then trains every agent's PPO, as IPPO does on the GS (the same
 batched learner, observations zero-padded, missing actions masked), on ``--n-envs`` copies of
-that IALS spread over ``--workers`` worker processes, and retrains the AIPs at the refresh points
+that IALS spread over ``--workers`` worker processes (or Ray actors, ``--backend ray``), and retrains the AIPs at the refresh points
 on GS data from the joint policy (:class:`~ials_zoo.baselines.dials.AIPRefreshes`). The work is
 split by copies, not by agents: each worker steps every agent's region of its copies.
 """
@@ -41,7 +41,8 @@ class IALSCopiesLearner(AIPRefreshes, GSCopiesLearner):
 
     def _make_env(self):
         return GSVecEnv(self.env_id, self.agents, self.copies, self.processes, seed=self.seed, simulator="ials",
-                        predictor=self.aips, **self.options)
+                        predictor=self.aips, backend=self.args.backend, ray_address=self.args.ray_address,
+                        **self.options)
 
     def use_aips(self, aips: dict) -> None:
         self.env.set_predictors(aips)

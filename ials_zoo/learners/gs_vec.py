@@ -3,8 +3,9 @@ of a domain's multi-agent IALS ParallelEnv (``simulator="ials"``: DIALS where th
 spaces of their own, every region in one simulation per copy).
 
 Copies run in this process (``processes=0``) or spread over ``processes`` worker processes
-(fresh interpreters that die with this one), which step their copies while the others do
-theirs. A domain whose GS holds a process-wide resource (SUMO) puts at most one copy in this
+(fresh interpreters that die with this one), or Ray actors (``backend="ray"``, on a local Ray
+of their own or the cluster at ``ray_address``: :class:`~ials_zoo.ray_actors.RayActors`), which
+step their copies while the others do theirs. A domain whose GS holds a process-wide resource (SUMO) puts at most one copy in this
 process and the others in workers of its own lease, which step one after the other; use
 ``processes`` to step them at once. ``reset(seed)`` resets copy ``j`` with
 ``derived_seed(seed, "copy", j)``; ``reset()`` with the constructor's ``seed + j`` the first
@@ -20,6 +21,7 @@ from ials_zoo.core.spaces import sizes_of_env, stack_observations
 from ials_zoo.core.streams import derived_seed
 from ials_zoo.errors import BadInput
 from ials_zoo.processes import Worker, call_all, start_all
+from ials_zoo.ray_actors import where
 
 
 class _Copies:
@@ -63,6 +65,33 @@ class _Copies:
         for env in self.envs:
             env.close()
 
+    def where(self) -> tuple[int, str]:
+        return where()
+
+
+class _ProcessWorkers:
+    """The shares of copies in worker processes (module docstring)."""
+
+    def __init__(self, arguments: list[tuple], simulator: str):
+        self.workers = []
+        try:
+            for i, args in enumerate(arguments):
+                n = len(args[3])
+                self.workers.append(Worker(_Copies, args, name=f"{simulator.upper()} worker {i}",
+                                           detail=f"{n} cop{'ies' if n > 1 else 'y'}"))
+            start_all(self.workers)
+        except BaseException:
+            self.close()
+            raise
+
+    def call(self, method: str, args: list | None = None) -> list:
+        return call_all(self.workers, method, args)
+
+    def close(self):
+        for w in self.workers:
+            w.close()
+        self.workers = []
+
 
 class GSVecEnv:
     """``n_envs`` GS copies of ``agents`` (default: every agent) (module docstring);
@@ -70,30 +99,33 @@ class GSVecEnv:
     AIP set file or a spec)."""
 
     def __init__(self, env_id: str, agents=None, n_envs: int = 1, processes: int = 0, seed: int = 0,
-                 simulator: str = "gs", predictor=None, **options):
+                 simulator: str = "gs", predictor=None, backend: str = "process", ray_address: str | None = None,
+                 **options):
         domain = get_domain(env_id)
         if simulator not in ("gs", "ials"):
             raise BadInput(f"simulator must be 'gs' or 'ials', got {simulator!r}")
+        if backend not in ("process", "ray"):
+            raise BadInput(f"backend must be 'process' or 'ray', got {backend!r}")
         self.agents = domain.check_agents(agents, **options)
         self.n_envs, self.processes = int(n_envs), int(processes)
         if self.n_envs < 1 or self.processes < 0:
             raise BadInput("n_envs must be >= 1 and processes >= 0")
+        if backend == "ray" and self.processes == 0:
+            raise BadInput("backend 'ray' needs processes >= 1 (the number of Ray actors)")
         self.observation_space, self.action_space = domain.observation_space, domain.action_space
         seeds = [seed + j for j in range(self.n_envs)]
-        self._local, self._workers, self._shares = None, [], []
+        self._local, self._workers, self._shares = None, None, []
         if self.processes == 0:
             self._local = _Copies(env_id, self.agents, options, seeds, simulator, predictor)
             return
         shares = [[int(x) for x in s] for s in np.array_split(seeds, min(self.processes, self.n_envs)) if len(s)]
-        try:
-            for i, share in enumerate(shares):
-                self._workers.append(Worker(_Copies, (env_id, self.agents, options, share, simulator, predictor),
-                                            name=f"{simulator.upper()} worker {i}",
-                                            detail=f"{len(share)} cop{'ies' if len(share) > 1 else 'y'}"))
-            start_all(self._workers)
-        except BaseException:
-            self.close()
-            raise
+        arguments = [(env_id, self.agents, options, share, simulator, predictor) for share in shares]
+        if backend == "ray":
+            from ials_zoo.ray_actors import RayActors
+
+            self._workers = RayActors(_Copies, arguments, ray_address, what=f"{simulator.upper()} Ray actor")
+        else:
+            self._workers = _ProcessWorkers(arguments, simulator)
         self._shares = [len(share) for share in shares]
 
     def _bounds(self):
@@ -105,13 +137,13 @@ class GSVecEnv:
         if self._local is not None:
             return self._local.reset(seeds)
         shares = [(None if seeds is None else seeds[a:b],) for a, b in self._bounds()]
-        return np.concatenate(call_all(self._workers, "reset", shares), axis=1)
+        return np.concatenate(self._workers.call("reset", shares), axis=1)
 
     def step(self, actions):
         actions = np.asarray(actions)
         if self._local is not None:
             return self._local.step(actions)
-        parts = call_all(self._workers, "step", [(actions[:, a:b],) for a, b in self._bounds()])
+        parts = self._workers.call("step", [(actions[:, a:b],) for a, b in self._bounds()])
         return (np.concatenate([p[0] for p in parts], axis=1), np.concatenate([p[1] for p in parts], axis=1),
                 parts[0][2])
 
@@ -120,14 +152,14 @@ class GSVecEnv:
         if self._local is not None:
             self._local.set_predictors(predictors)
         else:
-            call_all(self._workers, "set_predictors", [(predictors,)] * len(self._workers))
+            self._workers.call("set_predictors", [(predictors,)] * len(self._shares))
 
     def close(self):
         if self._local is not None:
             self._local.close()
-        for w in self._workers:
-            w.close()
-        self._workers = []
+        if self._workers is not None:
+            self._workers.close()
+            self._workers = None
 
 
 __all__ = ["GSVecEnv"]
