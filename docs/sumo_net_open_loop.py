@@ -17,7 +17,8 @@ episode's decisions) on:
         --policy runs/dials_net/ingolstadt21_s0/policy.safetensors \\
         --aips runs/dials_net/ingolstadt21_s0/aips.pt --episodes 2 --out runs/open_loop/dials.json
 
-``--policy random`` draws each light's green uniformly. Results go to ``--out`` as JSON after every episode (a rerun skips the
+``--policy random`` draws each light's green uniformly; ``constant`` holds every light on its
+first green (queues grow on every other road and spill back). Results go to ``--out`` as JSON after every episode (a rerun skips the
 episodes done).
 """
 
@@ -44,6 +45,8 @@ def _actor(policy_path: str, env, seed: int, deterministic: bool):
     if policy_path == "random":
         sizes = {a: int(env.action_space(a).n) for a in agents}
         return lambda obs: {a: int(rng.integers(sizes[a])) for a in agents}
+    if policy_path == "constant":
+        return lambda obs: {a: 0 for a in agents}
     net = load_policy_file(policy_path).subset(agents)
 
     def act(obs: dict) -> dict:
@@ -71,10 +74,10 @@ def _run(env, act, seed: int, forced: list | None = None) -> dict:
     return out
 
 
-def _gs_episode(net: str, policy: str, seed: int, deterministic: bool) -> dict:
+def _gs_episode(net: str, policy: str, seed: int, deterministic: bool, max_cycles: int | None) -> dict:
     import ials_zoo.sumo_net_v0 as sumo_net
 
-    env = sumo_net.parallel_env(net=net, region_data=True)
+    env = sumo_net.parallel_env(net=net, region_data=True, max_cycles=max_cycles)
     try:
         return _run(env, _actor(policy, env, seed, deterministic), seed)
     finally:
@@ -89,7 +92,7 @@ def _ials_returns(ials, episode: dict, aips, policy: str, seed: int, determinist
     agents = list(ials.possible_agents)
     steps = len(episode[agents[0]]["actions"])
     forced = [{a: episode[a]["actions"][t] for a in agents} for t in range(steps)]
-    recorded = {a: RecordedPredictor(region_spec(a, net=ials.scenario.name), episode[a]["influence"])
+    recorded = {a: RecordedPredictor(ials.predictors[a].region, episode[a]["influence"])
                 for a in agents}
     out = {}
     for kind, predictors, actions in (("recorded", recorded, forced), ("aips", aips, forced),
@@ -119,16 +122,17 @@ def _table(results: list[dict]) -> str:
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--net", default="ingolstadt21")
-    parser.add_argument("--policy", required=True, help="a joint policy file (every light), or random")
+    parser.add_argument("--policy", required=True, help="a joint policy file (every light), random or constant")
     parser.add_argument("--aips", required=True, help="an AIP set file (ials-zoo train-aip --agent all, or DIALS's), or a spec (untrained, uniform)")
     parser.add_argument("--episodes", type=int, default=2)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--max-cycles", type=int, default=None, help="decisions per episode (default: the map's hour)")
     parser.add_argument("--deterministic", action="store_true")
     parser.add_argument("--kinds", default="recorded,aips,closed", help="which IALS runs, comma-separated")
     parser.add_argument("--out", required=True)
     args = parser.parse_args(argv)
     for flag, path in (("--policy", args.policy), ("--aips", args.aips)):
-        if not Path(path).is_file() and path not in ("random", "untrained", "uniform"):
+        if not Path(path).is_file() and path not in ("random", "constant", "untrained", "uniform"):
             raise SystemExit(f"{flag}: no file {path!r}")
     kinds = args.kinds.split(",")
     if not set(kinds) <= {"recorded", "aips", "closed"}:
@@ -139,11 +143,11 @@ def main(argv=None) -> None:
     results = json.loads(out.read_text())["episodes"] if out.is_file() else []
     from ials_zoo.sumo_net.ials_env import IALSNetEnv
 
-    ials = IALSNetEnv(net=args.net, predictors=args.aips)
+    ials = IALSNetEnv(net=args.net, predictors=args.aips, max_cycles=args.max_cycles)
     try:
         for e in range(len(results), args.episodes):
             start, seed = time.perf_counter(), args.seed + e
-            episode = _gs_episode(args.net, args.policy, seed, args.deterministic)
+            episode = _gs_episode(args.net, args.policy, seed, args.deterministic, args.max_cycles)
             row = {"seed": seed, "gs": {a: float(np.sum(x["rewards"])) for a, x in episode.items()}}
             row.update(_ials_returns(ials, episode, args.aips, args.policy, seed, args.deterministic, kinds))
             results.append(row)

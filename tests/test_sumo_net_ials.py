@@ -102,6 +102,32 @@ def test_fed_the_gs_influence_the_local_simulator_lets_the_same_vehicles_in_and_
     assert abs(ls_mean - gs_mean) < 0.1 * abs(gs_mean), (gs_mean, ls_mean)  # measured 0.3%
 
 
+def test_an_exit_the_sources_block_holds_its_vehicles_and_the_queue_backs_up():
+    """An exit source set to blocked holds the region's end of that road: the local simulator
+    measures it blocked (a vehicle halting there, as the GS defines it) nearly every second it
+    is told so, never when free, and the light waits longer behind it."""
+    ls = get_domain("sumo_net_v0").local_simulator(LIGHT, measure_entries=True, **LS_OPTIONS)
+    is_exit = np.array([n.startswith("exit:") for n in ls.regions[0].influence_names])
+    told, seen, waits = {}, {}, {}
+    try:
+        for blocked in (False, True):
+            ls.reset(seed=0)
+            rng = np.random.default_rng(1)
+            told[blocked], seen[blocked], waits[blocked] = [], [], []
+            for k in range(40):
+                u = np.where(is_exit, int(blocked and k >= 10), rng.random(is_exit.size) < 0.05)
+                _, reward, _ = ls.step(np.array([k % 2]), u[None].astype(np.int64))
+                if k >= 10:
+                    told[blocked].append(u[is_exit])
+                    seen[blocked].append(ls.last_entries[0][is_exit])
+                    waits[blocked].append(-float(reward[0]))
+    finally:
+        ls.close()
+    assert np.mean(seen[False]) == 0
+    assert np.mean(np.asarray(seen[True])[np.asarray(told[True]) == 1]) > 0.8, np.mean(seen[True])  # measured 0.98
+    assert np.mean(waits[True]) > 5 * np.mean(waits[False]), (np.mean(waits[True]), np.mean(waits[False]))  # 3.0, 0.09
+
+
 def test_make_ials_of_a_junction_passes_gymnasiums_checker():
     env = ials_zoo.make_ials("sumo_net_v0", LIGHT, predictor="untrained", seed=0, **{**LS_OPTIONS, "max_cycles": 20})
     try:
