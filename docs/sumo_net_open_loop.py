@@ -87,7 +87,6 @@ def _gs_episode(net: str, policy: str, seed: int, deterministic: bool, max_cycle
 def _ials_returns(ials, episode: dict, aips, policy: str, seed: int, deterministic: bool, kinds) -> dict:
     """Per kind (recorded, aips, closed), per agent: the IALS's episode return."""
     from ials_zoo.influence.constant import RecordedPredictor
-    from ials_zoo.sumo_net.influence import region_spec
 
     agents = list(ials.possible_agents)
     steps = len(episode[agents[0]]["actions"])
