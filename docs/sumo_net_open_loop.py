@@ -105,6 +105,20 @@ def _ials_returns(ials, episode: dict, aips, policy: str, seed: int, determinist
     return out
 
 
+def _exit_histogram(ials, episode: dict) -> list[int]:
+    """Over every light's exits and decisions of the GS episode: how many decisions had 0, 1, ...
+    of their seconds blocked (whether a block lasts the decision or flickers)."""
+    counts = None
+    for a, x in episode.items():
+        names = ials.predictors[a].region.influence_names
+        seconds = 1 + max(int(n.rpartition("@")[2]) for n in names)
+        is_exit = np.array([n.startswith("exit:") for n in names]).reshape(seconds, -1)[0]
+        u = np.asarray(x["influence"]).reshape(len(x["influence"]), seconds, -1)[:, :, is_exit]
+        h = np.bincount(u.sum(axis=1).reshape(-1), minlength=seconds + 1)
+        counts = h if counts is None else counts + h
+    return counts.tolist()
+
+
 def _table(results: list[dict]) -> str:
     agents = list(results[0]["gs"])
     kinds = [k for k in ("gs", "recorded", "aips", "closed") if k in results[0]]
@@ -147,7 +161,8 @@ def main(argv=None) -> None:
         for e in range(len(results), args.episodes):
             start, seed = time.perf_counter(), args.seed + e
             episode = _gs_episode(args.net, args.policy, seed, args.deterministic, args.max_cycles)
-            row = {"seed": seed, "gs": {a: float(np.sum(x["rewards"])) for a, x in episode.items()}}
+            row = {"seed": seed, "gs": {a: float(np.sum(x["rewards"])) for a, x in episode.items()},
+                   "exit_blocked_seconds": _exit_histogram(ials, episode)}
             row.update(_ials_returns(ials, episode, args.aips, args.policy, seed, args.deterministic, kinds))
             results.append(row)
             out.parent.mkdir(parents=True, exist_ok=True)
@@ -158,6 +173,9 @@ def main(argv=None) -> None:
     finally:
         ials.close()
     print(_table(results))
+    if "exit_blocked_seconds" in results[0]:
+        print("decisions by blocked seconds (0..10), every exit:", np.sum([r["exit_blocked_seconds"] for r in results],
+                                                                       axis=0).tolist())
 
 
 if __name__ == "__main__":

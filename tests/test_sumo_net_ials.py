@@ -36,7 +36,9 @@ def data():
 def test_the_gs_reports_region_data_only_when_asked_with_the_layout_of_the_region_spec():
     domain = get_domain("sumo_net_v0")
     region = domain.region_spec(LIGHT, **OPTIONS)
-    assert region.n_sources == 10 * (len(region.influence_names) // 10) and region.influence_classes[0] == 3
+    exits = [n for n in region.influence_names if n.startswith("exit:")]  # one per exit and decision
+    assert len(exits) == 4 and region.influence_classes[-4:] == (2,) * 4 and region.influence_classes[0] == 3
+    assert region.n_sources == 10 * ((region.n_sources - 4) // 10) + 4  # entries: per second of the decision
     env = SumoNetEnv(learners=[LIGHT], region_data=True, **OPTIONS)
     plain = SumoNetEnv(learners=[LIGHT], max_cycles=2, net=NET)
     try:
@@ -105,7 +107,8 @@ def test_fed_the_gs_influence_the_local_simulator_lets_the_same_vehicles_in_and_
 def test_an_exit_the_sources_block_holds_its_vehicles_and_the_queue_backs_up():
     """An exit source set to blocked holds the region's end of that road: the local simulator
     measures it blocked (a vehicle halting there, as the GS defines it) nearly every second it
-    is told so, never when free, and the light waits longer behind it."""
+    is told so (per decision: blocked for at least half its seconds), never when free, and the
+    light waits longer behind it."""
     ls = get_domain("sumo_net_v0").local_simulator(LIGHT, measure_entries=True, **LS_OPTIONS)
     is_exit = np.array([n.startswith("exit:") for n in ls.regions[0].influence_names])
     told, seen, waits = {}, {}, {}
@@ -124,8 +127,8 @@ def test_an_exit_the_sources_block_holds_its_vehicles_and_the_queue_backs_up():
     finally:
         ls.close()
     assert np.mean(seen[False]) == 0
-    assert np.mean(np.asarray(seen[True])[np.asarray(told[True]) == 1]) > 0.8, np.mean(seen[True])  # measured 0.98
-    assert np.mean(waits[True]) > 5 * np.mean(waits[False]), (np.mean(waits[True]), np.mean(waits[False]))  # 3.0, 0.09
+    assert np.mean(np.asarray(seen[True])[np.asarray(told[True]) == 1]) > 0.8, np.mean(seen[True])  # measured 0.91: an exit no vehicle reached yet is free
+    assert np.mean(waits[True]) > 5 * np.mean(waits[False]), (np.mean(waits[True]), np.mean(waits[False]))  # 2.75, 0.03
 
 
 def test_make_ials_of_a_junction_passes_gymnasiums_checker():
@@ -152,13 +155,16 @@ def test_an_aip_trained_on_gs_data_brings_vehicles_at_the_gs_rate(data):
     pred, report = train_predictor(data, arch="mlp", epochs=30, lr=3e-3, progress=False)
     ce = report["cross_entropy"]
     assert ce["trained"]["test"] < 1.02 * ce["marginal"]["test"] < ce["untrained"]["test"]
-    gs_rate = np.asarray(data.influences).sum() / data.n_steps
-    rates = {}
+    is_entry = np.array([not n.startswith("exit:") for n in data.region.influence_names])  # vehicles, not blocks
+    gs_rate = np.asarray(data.influences)[..., is_entry].sum() / data.n_steps
+    gs_blocked = np.asarray(data.influences)[..., ~is_entry].mean()  # exits blocked, per exit and decision
+    rates, blocked = {}, {}
     recorded = gs_marginal_predictors([LIGHT], **LS_OPTIONS)[LIGHT]
     for name, predictor in (("trained", pred), ("recorded", recorded), ("uniform", "uniform")):
         env = ials_zoo.make_ials("sumo_net_v0", LIGHT, predictor=predictor, seed=0, measure_entries=True,
                                  **LS_OPTIONS)
         entered = steps = 0
+        blocks = []
         try:
             for episode in range(2):
                 env.reset(seed=episode)
@@ -166,13 +172,18 @@ def test_an_aip_trained_on_gs_data_brings_vehicles_at_the_gs_rate(data):
                 done = False
                 while not done:
                     *_, term, trunc, _ = env.step(env.action_space.sample())
-                    entered, steps, done = entered + int(env.ls.last_entries.sum()), steps + 1, term or trunc
+                    entered += int(env.ls.last_entries[0][is_entry].sum())
+                    blocks.append(env.ls.last_entries[0][~is_entry])
+                    steps, done = steps + 1, term or trunc
         finally:
             env.close()
-        rates[name] = entered / steps
-    assert abs(rates["trained"] - gs_rate) < 0.15 * gs_rate, (rates, gs_rate)
-    assert abs(rates["recorded"] - gs_rate) < 0.15 * gs_rate, (rates, gs_rate)
-    assert rates["uniform"] > 1.3 * gs_rate, (rates, gs_rate)  # measured 1.49: a flooded region fills up
+        rates[name], blocked[name] = entered / steps, float(np.mean(blocks))
+    assert abs(rates["trained"] - gs_rate) < 0.1 * gs_rate, (rates, gs_rate)  # measured 1.01x
+    assert abs(rates["recorded"] - gs_rate) < 0.1 * gs_rate, (rates, gs_rate)  # 0.96x (every exit free)
+    assert abs(blocked["trained"] - gs_blocked) < 0.05, (blocked, gs_blocked)
+    # a uniform AIP blocks every exit one decision in two (its flood of entries then jams against the blocks:
+    # how many get in varied from 0.88x to 1.0x the GS's rate, so that is not checked)
+    assert blocked["uniform"] > gs_blocked + 0.2, (blocked, gs_blocked)
 
 
 def test_train_aip_of_every_junction_feeds_the_multi_agent_ials(tmp_path):
@@ -264,10 +275,11 @@ def test_the_entry_watcher_counts_each_vehicle_once_where_it_came_in():
     layout = RegionLayout("J", sources=("in_a", "in_b"), edges=("in_a", "in_b", "out"), source_lanes=(), lanes=(),
                           entry_offsets=(100.0, 0.0), exits=(("out", 25.0),))
     seconds = [{"a": ("in_a", 150), "x": ("far", 0), "f": ("in_a", 50)},     # a comes in on in_a; f is not in yet
-               {"a": (":J_0", 1), "b": ("in_b", 10), "c": ("in_b", 20), "f": ("in_a", 90)},  # a crosses the
-               # junction; b and c come in on in_b
+               {"a": (":J_0", 1), "b": ("in_b", 10), "c": ("in_b", 20), "f": ("in_a", 90), "g": ("out", 3, 0.0)},
+               # a crosses the junction; b and c come in on in_b; g appears on out (inserted there), halting in
+               # the region's part of it: the exit is blocked
                {"a": ("out", 5), "b": ("in_b", 20), "c": ("in_b", 30), "d": ("out", 9, 0.0), "f": ("in_a", 105)},
-               # a goes on; d appears past the light, halting in the region's part of out: the exit is blocked;
+               # a goes on; g left; d appears past the light, halting in the region's part of out: blocked;
                # f passes the entry offset
                {"b": ("in_b", 30), "e": ("in_a", 100), "f": ("in_a", 115), "d": ("out", 30, 0.0)}]  # a and c
                # left (c vanished: it arrived); e comes in right at the offset; d halts past the exit: free
@@ -277,9 +289,13 @@ def test_the_entry_watcher_counts_each_vehicle_once_where_it_came_in():
     for t in range(4):
         raw.t = t
         watcher.after_step(raw)
-    np.testing.assert_array_equal(watcher.counts[0], [[1, 0, 0], [0, 2, 0], [1, 0, 1], [1, 0, 0]])
-    # per second ("in_a", "in_b", "inside", "exit:out"), second-major; two or more is class 2
-    np.testing.assert_array_equal(watcher.influences()[0], [1, 0, 0, 0, 0, 2, 0, 0, 1, 0, 1, 1, 1, 0, 0, 0])
+    np.testing.assert_array_equal(watcher.counts[0], [[1, 0, 0], [0, 2, 1], [1, 0, 1], [1, 0, 0]])
+    np.testing.assert_array_equal(watcher.blocked[0][:, 0], [0, 1, 1, 0])
+    # per second ("in_a", "in_b", "inside"), second-major, two or more is class 2; then the exit, blocked for
+    # at least half the decision
+    np.testing.assert_array_equal(watcher.influences()[0], [1, 0, 0, 0, 2, 1, 1, 0, 1, 1, 0, 0, 1])
+    watcher.blocked[0][1] = 0  # blocked one second of four: free
+    assert watcher.influences()[0][-1] == 0
     raw.t = 2
     watcher.measure_exits(raw)
     assert watcher.dsets(_NoLanes())[0].tolist() == [1]  # the d-set ends with the exits' blocks now

@@ -41,7 +41,7 @@ class IALSCopiesLearner(AIPRefreshes, GSCopiesLearner):
 
     def _make_env(self):
         return GSVecEnv(self.env_id, self.agents, self.copies, self.processes, seed=self.seed, simulator="ials",
-                        predictor=self.aips, backend=self.args.backend, ray_address=self.args.ray_address,
+                        predictor=self.aips, copies_on=self.args.backend, ray_address=self.args.ray_address,
                         **self.options)
 
     def use_aips(self, aips: dict) -> None:

@@ -3,7 +3,7 @@ of a domain's multi-agent IALS ParallelEnv (``simulator="ials"``: DIALS where th
 spaces of their own, every region in one simulation per copy).
 
 Copies run in this process (``processes=0``) or spread over ``processes`` worker processes
-(fresh interpreters that die with this one), or Ray actors (``backend="ray"``, on a local Ray
+(fresh interpreters that die with this one), or Ray actors (``copies_on="ray"``, on a local Ray
 of their own or the cluster at ``ray_address``: :class:`~ials_zoo.ray_actors.RayActors`), which
 step their copies while the others do theirs. A domain whose GS holds a process-wide resource (SUMO) puts at most one copy in this
 process and the others in workers of its own lease, which step one after the other; use
@@ -99,19 +99,19 @@ class GSVecEnv:
     AIP set file or a spec)."""
 
     def __init__(self, env_id: str, agents=None, n_envs: int = 1, processes: int = 0, seed: int = 0,
-                 simulator: str = "gs", predictor=None, backend: str = "process", ray_address: str | None = None,
+                 simulator: str = "gs", predictor=None, copies_on: str = "process", ray_address: str | None = None,
                  **options):
         domain = get_domain(env_id)
         if simulator not in ("gs", "ials"):
             raise BadInput(f"simulator must be 'gs' or 'ials', got {simulator!r}")
-        if backend not in ("process", "ray"):
-            raise BadInput(f"backend must be 'process' or 'ray', got {backend!r}")
+        if copies_on not in ("process", "ray"):
+            raise BadInput(f"copies_on must be 'process' or 'ray', got {copies_on!r}")
         self.agents = domain.check_agents(agents, **options)
         self.n_envs, self.processes = int(n_envs), int(processes)
         if self.n_envs < 1 or self.processes < 0:
             raise BadInput("n_envs must be >= 1 and processes >= 0")
-        if backend == "ray" and self.processes == 0:
-            raise BadInput("backend 'ray' needs processes >= 1 (the number of Ray actors)")
+        if copies_on == "ray" and self.processes == 0:
+            raise BadInput("copies_on='ray' needs processes >= 1 (the number of Ray actors)")
         self.observation_space, self.action_space = domain.observation_space, domain.action_space
         seeds = [seed + j for j in range(self.n_envs)]
         self._local, self._workers, self._shares = None, None, []
@@ -120,7 +120,7 @@ class GSVecEnv:
             return
         shares = [[int(x) for x in s] for s in np.array_split(seeds, min(self.processes, self.n_envs)) if len(s)]
         arguments = [(env_id, self.agents, options, share, simulator, predictor) for share in shares]
-        if backend == "ray":
+        if copies_on == "ray":
             from ials_zoo.ray_actors import RayActors
 
             self._workers = RayActors(_Copies, arguments, ray_address, what=f"{simulator.upper()} Ray actor")

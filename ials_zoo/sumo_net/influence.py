@@ -15,14 +15,16 @@ come in:
   *Where* an entering vehicle goes inside the region, on which lane and how fast it drives are
   not sources: the local simulator draws them from the GS's own entries at that entry point
   (:mod:`ials_zoo.sumo_net.island`), so the AIP predicts only *when* vehicles come.
-  After the entry points, per second, one source per **exit** (``"exit:<edge>@<second>"``, two
-  classes): 1 if the region's end of that outgoing road is blocked, a vehicle halting
-  (SUMO's < 0.1 m/s) within its first metres (up to where vehicles leave the region,
-  :attr:`~ials_zoo.sumo_net.regions.NetRegion.exits`). This is what the rest of the network does
-  to the region from downstream: a queue spilling back from the next junction. Without it, fed
-  the GS's own entries, the local simulators of ingolstadt21 under a learned joint policy
-  showed half the GS's waiting, and the policy DIALS trained there gridlocked the GS
-  (``docs/sumo_net.md``).
+  After every second's entries, one source per **exit** and decision (``"exit:<edge>"``, two
+  classes): 1 if the region's end of that outgoing road was blocked for at least half of the
+  decision's seconds, a vehicle halting (SUMO's < 0.1 m/s) within its first metres (up to where
+  vehicles leave the region, :attr:`~ials_zoo.sumo_net.regions.NetRegion.exits`). This is what
+  the rest of the network does to the region from downstream: a queue spilling back from the
+  next junction. Without it, fed the GS's own entries, the local simulators of ingolstadt21
+  under a learned joint policy showed half the GS's waiting, and the policy DIALS trained there
+  gridlocked the GS (``docs/sumo_net.md``). One source per decision, not per second: a block
+  lasts (on ingolstadt21 under DIALS's policy, 96% of the decisions with a blocked second were
+  blocked throughout), and an AIP drawing every second on its own made blocks flicker.
 * **d-set** (``"dset"``): the region's local occupancy where vehicles come in, without the
   light's state: per lane of every entry edge, :data:`CELLS` cells of :data:`CELL_METRES` m
   from the entry offset, occupied or not; then per exit, whether it is blocked now.
@@ -86,10 +88,6 @@ class RegionLayout:
         """The edges where vehicles leave the region (their exit sources' order)."""
         return tuple(e for e, _ in self.exits)
 
-    @property
-    def per_second(self) -> int:
-        """Influence sources per second: the entry points, then the exits."""
-        return len(self.points) + len(self.exits)
 
     def prefixed(self, prefix: str) -> RegionLayout:
         """The same region in a simulation whose ids carry ``prefix``."""
@@ -131,9 +129,9 @@ def region_spec(agent: str, **options) -> RegionSpec:
     """The region layout of light ``agent`` under ``sumo_net_v0``'s options, without SUMO."""
     scenario = _scenario(options)
     layout = region_layout(scenario.net_file, agent)
-    per_second = (*layout.points, *(f"exit:{e}" for e in layout.exit_edges))
-    names = tuple(f"{p}@{s}" for s in range(scenario.decision_seconds) for p in per_second)
-    classes = ((ENTRY_CLASSES,) * len(layout.points) + (EXIT_CLASSES,) * len(layout.exits)) * scenario.decision_seconds
+    names = tuple(f"{p}@{s}" for s in range(scenario.decision_seconds) for p in layout.points)
+    classes = (ENTRY_CLASSES,) * len(names) + (EXIT_CLASSES,) * len(layout.exits)
+    names += tuple(f"exit:{e}" for e in layout.exit_edges)
     params = {"network": scenario.name, "begin": scenario.begin, "end": scenario.end,
               "decision_seconds": scenario.decision_seconds, "yellow_seconds": scenario.yellow_seconds}
     return RegionSpec(domain=ENV_ID, agent=agent, influence_names=names,
@@ -210,10 +208,10 @@ class EntryWatcher:
             now_blocked[:] = [_blocked(raw, e, leave) for e, leave in layout.exits]
 
     def influences(self) -> list[np.ndarray]:
-        """Per region, the last decision's sources as classes (int64, second-major: each
-        second's entries, then its exits)."""
-        return [np.concatenate([np.minimum(c, ENTRY_CLASSES - 1), b], axis=1).reshape(-1)
-                for c, b in zip(self.counts, self.blocked)]
+        """Per region, the last decision's sources as classes (int64): every second's entries
+        (second-major), then each exit (blocked for at least half the decision)."""
+        return [np.concatenate([np.minimum(c, ENTRY_CLASSES - 1).reshape(-1), 2 * b.sum(axis=0) >= self.decision])
+                .astype(np.int64) for c, b in zip(self.counts, self.blocked)]
 
     def dsets(self, raw) -> list[np.ndarray]:
         """Per region, the occupancy cells of its entry lanes and its exits' blocks now (uint8)."""

@@ -13,8 +13,8 @@ its own program, the map's hour, SUMO seed 0; :func:`entry_tables`, cached under
 factor, inserted at the highest safe speed. A vehicle that cannot be inserted within
 :data:`INSERT_PATIENCE` seconds is dropped, as the GS's could not have entered then. Vehicles
 leave a few metres into the region's outgoing edges (:attr:`~ials_zoo.sumo_net.regions.NetRegion.exits`).
-What happens beyond an exit is an influence source too: while it says the exit is blocked, that
-road's lanes are held at :data:`BLOCKED_SPEED`, so the vehicles reaching it halt and the queue
+What happens beyond an exit is an influence source too: for a decision it says the exit is
+blocked, that road's lanes are held at :data:`BLOCKED_SPEED`, so the vehicles reaching it halt and the queue
 spills back into the region as behind a jam in the GS.
 """
 
@@ -137,7 +137,7 @@ def gs_marginal_predictors(lights, record_seconds: int | None = None, record_see
         per_point = [(np.asarray(h, np.float64) + 0.5) / (np.sum(h) + 0.5 * ENTRY_CLASSES) for h in hist]
         free = np.array([1.0, 0.0])  # the recording counts entries only: every exit stays free
         exits = len(region_layout(scenario.net_file, light).exits)
-        probs = [p for _ in range(scenario.decision_seconds) for p in (*per_point, *(free,) * exits)]
+        probs = [p for _ in range(scenario.decision_seconds) for p in per_point] + [free] * exits
         out[light] = MarginalPredictor(region, probs, metadata={"from": "the GS's entries per second"})
     return out
 
@@ -170,6 +170,7 @@ class IslandCore(NetCore):
                      for a, j in self.row_keys]
         self.watcher.reset()
         self.waiting, self.plan, self.second, self.routes, self.due = [], self._no_plan(), 0, {}, {}
+        self.inserted = 0  # vehicle names depend on the episode alone (SUMO orders some work by them)
         for b in self.blocking:
             b[:] = 0  # a new simulation: every road at its own speed limit
         result = super().reset(seed % SUMO_SEEDS, None)  # SUMO's seeds are 31-bit
@@ -180,19 +181,20 @@ class IslandCore(NetCore):
         return self._with_region(result)
 
     def step(self, actions, influences=None):
-        self.plan = [np.asarray(u, np.int64).reshape(self.decision, x.per_second)
-                     for u, x in zip(influences, self.layouts)]
+        sizes = [self.decision * len(x.points) for x in self.layouts]
+        self.plan = [np.asarray(u, np.int64) for u in influences]  # per row: every second's entries, then exits
         self.due = {}  # second -> [(row, entry point, vehicles)]: only what comes in
-        for r, (plan, layout) in enumerate(zip(self.plan, self.layouts)):
-            entries = plan[:, :len(layout.points)]
+        for r, (plan, layout, n) in enumerate(zip(self.plan, self.layouts, sizes)):
+            entries = plan[:n].reshape(self.decision, len(layout.points))
             for second, j in zip(*np.nonzero(entries)):
                 self.due.setdefault(int(second), []).append((r, int(j), int(entries[second, j])))
+        self._block_exits(self.ls._libsumo, [plan[n:] for plan, n in zip(self.plan, sizes)])
         self.watcher.start_decision()
         self.second = 0
         return self._with_region(super().step(actions))
 
     def _no_plan(self) -> list:
-        return [np.zeros((self.decision, x.per_second), np.int64) for x in self.layouts]
+        return [np.zeros(self.decision * len(x.points) + len(x.exits), np.int64) for x in self.layouts]
 
     def _with_region(self, result):
         """The core's result and the region data: what entered (measured if watched, else what
@@ -200,15 +202,14 @@ class IslandCore(NetCore):
         raw = self.ls._libsumo
         if not self.watch:
             self.watcher.measure_exits(raw)
-        told = self.watcher.influences() if self.watch else [p.reshape(-1) for p in self.plan]
+        told = self.watcher.influences() if self.watch else [p.copy() for p in self.plan]
         return (*result, (told, self.watcher.dsets(raw)))
 
-    def _block_exits(self, raw, second: int) -> None:
-        """Each exit as its source says this second: blocked, its lanes' speed limit
+    def _block_exits(self, raw, exits: list) -> None:
+        """Each exit as its source says for this decision: blocked, its lanes' speed limit
         :data:`BLOCKED_SPEED` (a vehicle reaching it halts and the queue backs up, as behind
         a jam in the GS), or free at its own limit. A call only where a state changes."""
-        for r, (plan, layout) in enumerate(zip(self.plan, self.layouts)):
-            want = plan[second, len(layout.points):]
+        for r, want in enumerate(exits):
             for k in np.nonzero(want != self.blocking[r])[0]:
                 for lane, limit in self.exit_lanes[r][k]:
                     raw.lane_setMaxSpeed(lane, BLOCKED_SPEED if want[k] else limit)
@@ -236,9 +237,7 @@ class IslandCore(NetCore):
     def _advance(self, seconds: int) -> None:
         raw = self.ls._libsumo
         for _ in range(seconds):
-            second = min(self.second, self.decision - 1)
-            self._block_exits(raw, second)
-            self.waiting += [(name, 0) for name in self._insert(raw, second)]
+            self.waiting += [(name, 0) for name in self._insert(raw, min(self.second, self.decision - 1))]
             super()._advance(1)
             self.second += 1
             if self.waiting:
