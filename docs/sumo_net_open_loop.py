@@ -107,10 +107,17 @@ def _ials_returns(ials, episode: dict, aips, policy: str, seed: int, determinist
 
 def _exit_histogram(ials, episode: dict) -> list[int]:
     """Over every light's exits and decisions of the GS episode: how many decisions had 0, 1, ...
-    of their seconds blocked (whether a block lasts the decision or flickers)."""
+    of their seconds blocked (whether a block lasts the decision or flickers; exits drawn per
+    second, commit 89aae0a), or, with one exit source per decision, how many were free and
+    blocked."""
     counts = None
     for a, x in episode.items():
         names = ials.predictors[a].region.influence_names
+        if any(n.startswith("exit:") and "@" not in n for n in names):  # one source per exit and decision
+            is_exit = np.array([n.startswith("exit:") for n in names])
+            h = np.bincount(np.asarray(x["influence"])[:, is_exit].reshape(-1), minlength=2)
+            counts = h if counts is None else counts + h
+            continue
         seconds = 1 + max(int(n.rpartition("@")[2]) for n in names)
         is_exit = np.array([n.startswith("exit:") for n in names]).reshape(seconds, -1)[0]
         u = np.asarray(x["influence"]).reshape(len(x["influence"]), seconds, -1)[:, :, is_exit]
@@ -174,7 +181,7 @@ def main(argv=None) -> None:
         ials.close()
     print(_table(results))
     if "exit_blocked_seconds" in results[0]:
-        print("decisions by blocked seconds (0..10), every exit:", np.sum([r["exit_blocked_seconds"] for r in results],
+        print("exit-decisions by blocked seconds (0..10), or free / blocked:", np.sum([r["exit_blocked_seconds"] for r in results],
                                                                        axis=0).tolist())
 
 
