@@ -159,10 +159,9 @@ class AgentShard:
 
     def where(self) -> tuple[int, str]:
         """This shard's process id and host (so that a backend can watch it)."""
-        import os
-        import socket
+        from ials_zoo.ray_actors import where
 
-        return os.getpid(), socket.gethostname()
+        return where()
 
     def predictors(self) -> dict:
         """The weights of the AIP each agent's IALS samples from now: ``{agent: {name: array}}``

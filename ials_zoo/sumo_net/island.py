@@ -136,7 +136,7 @@ def gs_marginal_predictors(lights, record_seconds: int | None = None, record_see
         region = region_spec(light, **scenario_options)
         per_point = [(np.asarray(h, np.float64) + 0.5) / (np.sum(h) + 0.5 * ENTRY_CLASSES) for h in hist]
         free = np.array([1.0, 0.0])  # the recording counts entries only: every exit stays free
-        exits = len(region_layout(scenario.net_file, light).exits)
+        exits = sum(n.startswith("exit:") for n in region.influence_names)
         probs = [p for _ in range(scenario.decision_seconds) for p in per_point] + [free] * exits
         out[light] = MarginalPredictor(region, probs, metadata={"from": "the GS's entries per second"})
     return out
@@ -164,6 +164,7 @@ class IslandCore(NetCore):
         self.due: dict[int, list] = {}
         self.exit_lanes: list | None = None  # per row, per exit: its lanes and their own speed limits
         self.blocking = [np.zeros(len(x.exits), np.int64) for x in self.layouts]
+        self.entry_sources = [self.decision * len(x.points) for x in self.layouts]  # per row, before its exits
 
     def reset(self, seed: int, tripinfo: str | None = None):
         self.rngs = [np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(agent_key(a), j)))
@@ -181,7 +182,7 @@ class IslandCore(NetCore):
         return self._with_region(result)
 
     def step(self, actions, influences=None):
-        sizes = [self.decision * len(x.points) for x in self.layouts]
+        sizes = self.entry_sources
         self.plan = [np.asarray(u, np.int64) for u in influences]  # per row: every second's entries, then exits
         self.due = {}  # second -> [(row, entry point, vehicles)]: only what comes in
         for r, (plan, layout, n) in enumerate(zip(self.plan, self.layouts, sizes)):
