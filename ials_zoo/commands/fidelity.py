@@ -5,7 +5,7 @@ trajectories, under several joint policies? (:mod:`ials_zoo.influence.fidelity`)
     ials-zoo fidelity --env traffic_grid_v0 --episodes 20 --policies random,constant,scripted
     ials-zoo fidelity --env warehouse_v0 --policies random,leaderboard/policies/<sha>.safetensors --out f.md
     ials-zoo fidelity --env warehouse_v0 --predictor on-policy-autoregressive [--aip-seeds 3]
-    ials-zoo fidelity --env sumo_net_v0 --options '{"net": "cologne8"}' --policies random,constant --predictor on-policy
+    ials-zoo fidelity --env sumo_net_v0 --net cologne8 --policies random,constant --predictor on-policy
 """
 
 from __future__ import annotations
@@ -27,6 +27,8 @@ def configure(parser):
     parser.add_argument("--env", required=True, help="domain id")
     parser.add_argument("--options", default=None,
                         help="the domain's options as a JSON object, e.g. '{\"net\": \"cologne8\"}' for sumo_net_v0")
+    parser.add_argument("--net", default=None, metavar="NAME",
+                        help="the network, for a domain whose tracks are networks: --options' `net`, e.g. cologne8")
     parser.add_argument("--policies", default="random,constant,scripted",
                         help="joint policies, comma-separated: random, constant, scripted (GS only) or policy files")
     parser.add_argument("--episodes", type=int, default=20, help="episodes per policy and simulator")
@@ -61,12 +63,24 @@ def configure(parser):
     parser.add_argument("--out", default=None, help="also write the Markdown report here (atomic)")
 
 
+def _options(domain, args) -> dict:
+    """``--options`` with ``--net`` merged in (they must not disagree)."""
+    options = parse_json_object(args.options, "--options") if args.options else {}
+    if args.net is not None:
+        if "net" not in domain.track_options:
+            raise BadInput(f"--net: {domain.env_id} takes no network")
+        if options.get("net", args.net) != args.net:
+            raise BadInput(f"--net {args.net!r} and --options' net {options['net']!r} disagree; give one")
+        options["net"] = args.net
+    return options
+
+
 def run(args) -> int:
     import os
 
 
     domain = get_domain(args.env).require_ials_parallel_env("fidelity")
-    options = parse_json_object(args.options, "--options") if args.options else {}
+    options = _options(domain, args)
     if args.episodes < 2:
         raise BadInput(f"--episodes must be >= 2 (intervals over episodes), got {args.episodes}")
     if not args.tolerance >= 0:
