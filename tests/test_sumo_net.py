@@ -4,6 +4,7 @@ bookkeeping (traffic_signal.py's observe, re-implemented on libsumo getters), ha
 controller choices."""
 
 import os
+import shutil
 import subprocess
 import xml.etree.ElementTree as ET
 
@@ -102,6 +103,29 @@ def test_one_env_repeats_an_episode_exactly_reset_after_reset():
     assert runs[0] == runs[1] == runs[2] and len(set(pids)) == 3  # three processes
     with pytest.raises(BadInput, match="fresh_process"):
         sumo_net_v0.parallel_env(net="cologne1", backend="inprocess")
+
+
+def test_an_episodes_tripinfo_is_read_when_asked_and_never_left_behind(tmp_path):
+    """Training never asks for the metrics, so the tripinfo is read only by episode_metrics(),
+    which gives RESCO's figures of the file SUMO wrote; an episode never asked about leaves no file."""
+    env = sumo_net_v0.parallel_env(net="cologne1", end=25_500)  # 30 decisions
+    episode = os.path.join(env._tmp, "tripinfo_{}.xml")
+    try:
+        for n in (1, 2):
+            env.reset(seed=3)
+            assert not os.path.exists(episode.format(n - 1))  # the last one, never asked about
+            while env.agents:
+                env.step({a: 0 for a in env.agents})
+            assert os.path.exists(episode.format(n))  # SUMO wrote it; nobody read it
+        shutil.copy(episode.format(2), tmp_path / "trip.xml")
+        metrics = env.episode_metrics()
+        assert os.listdir(env._tmp) == []  # read once, then removed
+        assert metrics == env.episode_metrics()
+    finally:
+        env.close()
+    s = env.scenario
+    reference = episode_metrics(str(tmp_path / "trip.xml"), s.route_files, s.end)
+    assert {k: metrics[k] for k in reference} == reference and metrics["queue"] > 0
 
 
 class _RescoSignal:

@@ -5,11 +5,13 @@ measured inside the same episode: the wall-clock of SUMO's own start (loading th
 ``simulationStep`` calls and end (``close``: the last tripinfo written), the simulation the GS
 asked for and nothing else. The GS's share of
 raw speed is that time over the GS's whole wall-clock from ``reset`` to the last step
-(observing, rewards, the Python env, reading SUMO's tripinfo, and in the default mode a fresh
+(observing, rewards, the Python env, and in the default mode a fresh
 worker process per episode, forked from a zygote, and one pipe round trip per decision). One ratio per episode, taken
 in one run, so machine load largely cancels out; median [min, max] over ``repeats`` episodes
 (seeds 0, 1, ...), for two modes: the env's default (``fresh_process=True``: every episode in
 a new worker, which makes episodes reproducible) and in this process (``fresh_process=False``).
+Reading the episode's tripinfo for its metrics (RESCO's delay) is timed apart: only an
+evaluation asks for it, a training loop never does.
 
 Then the IALS against the GS: every light's at once, per agent-decision, both ParallelEnvs in a
 worker (:func:`bench_local`), and each light's own, decisions per second (:func:`bench_single`).
@@ -38,7 +40,7 @@ def bench_map(net: str, repeats: int = 3, max_cycles: int | None = None, mode: s
     """One map's figures in one mode: decisions/s, µs per agent-decision, SUMO steps/s, share of raw."""
     env = SumoNetEnv(net=net, max_cycles=max_cycles, **MODES[mode])
     rng = np.random.default_rng(0)
-    shares, decisions_per_s, raw_steps_per_s = [], [], []
+    shares, decisions_per_s, raw_steps_per_s, metrics_s = [], [], [], []
     try:
         if env.fresh_process:  # the zygote that forks the workers starts once per process: not timed
             env.reset(seed=repeats)
@@ -55,6 +57,9 @@ def bench_map(net: str, repeats: int = 3, max_cycles: int | None = None, mode: s
                 n += 1
             wall = time.perf_counter() - t0
             sim = env._sim.call("timing") - before  # the episode's worker lives until the next reset
+            t0 = time.perf_counter()
+            env.episode_metrics()  # what an evaluation adds to the episode (training never reads them)
+            metrics_s.append(time.perf_counter() - t0)
             shares.append(sim / wall)
             decisions_per_s.append(n / wall)
             raw_steps_per_s.append(n * env.scenario.decision_seconds / sim)
@@ -64,21 +69,22 @@ def bench_map(net: str, repeats: int = 3, max_cycles: int | None = None, mode: s
     return {"net": net, "mode": mode, "agents": agents, "repeats": repeats,
             "gs_share_of_raw": _stat(shares), "gs_decisions_per_s": _stat(decisions_per_s),
             "us_per_agent_decision": _stat([1e6 / (d * agents) for d in decisions_per_s]),
-            "raw_sumo_steps_per_s": _stat(raw_steps_per_s)}
+            "raw_sumo_steps_per_s": _stat(raw_steps_per_s), "metrics_read_s": _stat(metrics_s)}
 
 
 def print_rows(rows) -> None:
     print(f"\n{'map':<14}{'mode':<36}{'lights':>7}{'GS decisions/s':>22}{'µs/agent-decision':>19}"
-          f"{'raw SUMO steps/s':>18}{'GS / raw SUMO':>22}")
+          f"{'raw SUMO steps/s':>18}{'GS / raw SUMO':>22}{'metrics read (ms)':>19}")
     for r in rows:
         def f(key, fmt):
             m, lo, hi = r[key]
             return f"{m:{fmt}} [{lo:{fmt}}, {hi:{fmt}}]"
         print(f"{r['net']:<14}{r['mode']:<36}{r['agents']:>7}{f('gs_decisions_per_s', '.1f'):>22}"
               f"{r['us_per_agent_decision'][0]:>19,.0f}{r['raw_sumo_steps_per_s'][0]:>18,.0f}"
-              f"{f('gs_share_of_raw', '.2f'):>22}")
+              f"{f('gs_share_of_raw', '.2f'):>22}{r['metrics_read_s'][0] * 1e3:>19,.0f}")
     print("GS / raw SUMO: the share of the GS's wall-clock (reset to the last step) spent in SUMO's own start and "
-          "steps of the same episode (1.0 = no overhead); median [min, max] over the repeats. All lights random.")
+          "steps of the same episode (1.0 = no overhead); median [min, max] over the repeats. All lights random. "
+          "Metrics read: reading the episode's tripinfo (RESCO's delay), which only an evaluation asks for.")
 
 
 def _random_episode(env, seed: int) -> float:
