@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from ials_zoo.cli import main
+from ials_zoo.errors import BadInput
 from ials_zoo.influence.fidelity import compare, episode_metrics
 
 
@@ -168,3 +169,20 @@ def test_traffic_on_policy_aips_read_their_last_three_draws_and_a_clock(monkeypa
     assert arrivals["gs"] > 0 and arrivals["ials"] > 0
     assert ("reading their last 3 draws, reading a clock (min(t, 100) / 100), trained on 600 GS steps"
             in fidelity.markdown(report))
+
+
+def test_a_cycle_plan_holds_each_action_h_steps_per_agent_and_restarts():
+    """cycle:H, a fixed-time plan: every agent steps through its own actions, H steps each."""
+    from ials_zoo.core.spaces import JointSizes
+    from ials_zoo.influence.fidelity import _joint_policy
+
+    sizes = JointSizes(obs_size=4, n_actions=3, action_counts=(2, 3))
+    plan = _joint_policy("cycle:2", sizes, 2)
+    seen = [plan.act_all(None).tolist() for _ in range(7)]
+    assert seen == [[0, 0], [0, 0], [1, 1], [1, 1], [0, 2], [0, 2], [1, 0]]
+    plan.reset(5)
+    assert plan.act_all(None).tolist() == [0, 0]
+    for bad in ("cycle:0", "cycle:x", "cycle:"):
+        with pytest.raises(BadInput, match="cycle:H"):
+            _joint_policy(bad, sizes, 2)
+    assert main(["fidelity", "--env", "warehouse_v0", "--policies", "cycle:-1"]) == 2

@@ -16,7 +16,7 @@ from ials_zoo.core.domains import get_domain
 from ials_zoo.errors import BadInput
 from ials_zoo.evaluation import estimate_evaluation_seconds
 from ials_zoo.influence.base import MAX_INFLUENCE_LAGS
-from ials_zoo.influence.fidelity import ON_POLICY, fidelity_report, markdown
+from ials_zoo.influence.fidelity import ON_POLICY, fidelity_report, markdown, parse_cycle
 from ials_zoo.influence.train import LR_SCHEDULES
 from ials_zoo.utils import atomic_write_text, check_output_file, check_seed, format_seconds, parse_json_object
 
@@ -30,7 +30,8 @@ def configure(parser):
     parser.add_argument("--net", default=None, metavar="NAME",
                         help="the network, for a domain whose tracks are networks: --options' `net`, e.g. cologne8")
     parser.add_argument("--policies", default="random,constant,scripted",
-                        help="joint policies, comma-separated: random, constant, scripted (GS only) or policy files")
+                        help="joint policies, comma-separated: random, constant, cycle:H (each agent cycles through "
+                             "its actions, H steps each: a fixed-time plan), scripted (GS only) or policy files")
     parser.add_argument("--episodes", type=int, default=20, help="episodes per policy and simulator")
     parser.add_argument("--agents", default=None, help="agents to report, comma-separated (default: a corner, an "
                         "edge and the domain's default agent)")
@@ -92,8 +93,8 @@ def run(args) -> int:
     if args.episodes > MAX_EPISODES:
         raise BadInput(f"--episodes must be <= {MAX_EPISODES:,}, got {args.episodes:,}")
     for p in policies:
-        if p not in ("random", "constant", "scripted") and not os.path.isfile(p):
-            raise BadInput(f"--policies: {p!r} is neither random, constant, scripted nor a policy file")
+        if p not in ("random", "constant", "scripted") and parse_cycle(p) is None and not os.path.isfile(p):
+            raise BadInput(f"--policies: {p!r} is neither random, constant, cycle:H, scripted nor a policy file")
     watched = None if args.agents is None else domain.check_agents(args.agents, **options)
     for name in ("collect_steps", "aip_epochs", "aip_seeds", "aip_influence_lags"):
         if getattr(args, name) is not None and getattr(args, name) < 1:

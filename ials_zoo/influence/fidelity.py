@@ -48,7 +48,9 @@ them it holds. Training ``k`` collects its data (and seeds its training) from
 ``seed + 100000 + k``, so ``--seed 0``'s second training is ``--seed 1``'s first; the
 evaluation episodes differ. Joint policies:
 ``random`` (uniform), ``constant`` (every agent always takes action 0: lights that keep their
-phase, robots that walk to a shelf and stay there, the lingering case), a joint policy file
+phase, robots that walk to a shelf and stay there, the lingering case), ``cycle:H`` (every agent
+cycles through its actions, holding each for H steps: in traffic a fixed-time plan of H-decision
+greens, every light starting on its first), a joint policy file
 (e.g. the board's), ``scripted`` (the GS only: scripted controllers have no IALS form).
 """
 
@@ -183,6 +185,44 @@ def compare(gs: list[float], ials: list[float], tolerance: float) -> dict:
 
 
 ON_POLICY = ("on-policy", "on-policy-autoregressive")
+
+
+class CyclePolicy:
+    """``cycle:H``: at step ``t`` every agent takes action ``(t // H) % n`` of its ``n`` (a
+    fixed-time plan); a joint policy as :func:`run` and :class:`_PolicyActor` drive one."""
+
+    frame_stack = 1
+
+    def __init__(self, hold: int, action_counts):
+        self.hold, self.counts, self.t = int(hold), np.asarray(action_counts, np.int64), 0
+
+    def reset(self, seed) -> None:
+        self.t = 0
+
+    def act_all(self, obs) -> np.ndarray:
+        actions = (self.t // self.hold) % self.counts
+        self.t += 1
+        return actions
+
+
+def parse_cycle(spec: str) -> int | None:
+    """H of a ``cycle:H`` policy spec (an int >= 1), None for another spec; BadInput if malformed."""
+    if not spec.startswith("cycle:"):
+        return None
+    hold = spec.partition(":")[2]
+    if not hold.isdigit() or int(hold) < 1:
+        raise BadInput(f"a cycle policy is cycle:H with H an int >= 1 (steps per action), got {spec!r}")
+    return int(hold)
+
+
+def _joint_policy(spec: str, sizes: JointSizes, n_agents: int):
+    """The policy a spec names: "random", "constant", "scripted" stay names; cycle:H, a file."""
+    if spec in ("random", "constant", "scripted"):
+        return spec
+    hold = parse_cycle(spec)
+    if hold is not None:
+        return CyclePolicy(hold, sizes.action_counts or (sizes.n_actions,) * n_agents)
+    return load_model(spec)
 DATA_SEED_OFFSET = 100_000  # the AIPs' data episodes never repeat the evaluation's
 
 
@@ -320,7 +360,7 @@ def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: i
         if predictor in ON_POLICY else None
     for spec in policies:
         name = str(spec)
-        policy = spec if spec in ("random", "constant", "scripted") else load_model(spec)
+        policy = _joint_policy(spec, sizes, len(agents))
         if progress:
             print(f"fidelity {env_id}: {name}: GS ...", flush=True)
         gs_m = _gs_summary(domain, agents, watched, spec, policy, episodes, seed, options, sizes)
