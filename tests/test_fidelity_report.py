@@ -186,3 +186,18 @@ def test_a_cycle_plan_holds_each_action_h_steps_per_agent_and_restarts():
         with pytest.raises(BadInput, match="cycle:H"):
             _joint_policy(bad, sizes, 2)
     assert main(["fidelity", "--env", "warehouse_v0", "--policies", "cycle:-1"]) == 2
+
+
+def test_the_report_opens_with_how_many_agents_hold_per_metric():
+    from ials_zoo.influence.fidelity import METRICS, markdown
+
+    def row(holds):
+        return {"gs": 1.0, "ials": 1.0, "low": -1.0, "high": 1.0, "holds": holds}
+
+    agents = {"a": {k: row(True) for k in METRICS}, "b": {k: row(k != "gap") for k in METRICS}}
+    agents["b"]["return"] = row(None)  # not comparable (no values): not counted
+    report = {"env_id": "x", "episodes": 2, "tolerance": 0.1, "policies": {"random": agents, "scripted": {"gs_only": {}}}}
+    summary = markdown(report).split("**random**")[0]
+    cells = {k: c.strip() for k, c in zip(METRICS, summary.split("| random |")[1].split("\n")[0].split("|"))}
+    assert cells["gap"] == "1 / 2" and cells["active"] == "2 / 2" and cells["return"] == "1 / 1"
+    assert "| scripted |" not in summary

@@ -418,8 +418,24 @@ def _merge_trainings(trainings: list[dict], watched) -> dict:
     return rows
 
 
+def _summary_lines(report: dict) -> list[str]:
+    """One row per joint policy: for each metric, how many watched agents' rows hold (under the
+    first AIP training), so that a reader sees at a glance where the IALS departs from the GS."""
+    compared = {n: rows for n, rows in report["policies"].items() if "gs_only" not in rows}
+    if not compared:
+        return []
+    lines = ["| joint policy | " + " | ".join(METRICS) + " |", "|---" * (len(METRICS) + 1) + "|"]
+    for name, rows in compared.items():
+        cells = []
+        for k in METRICS:
+            held = [c[k]["holds"] for c in rows.values() if c[k]["holds"] is not None]
+            cells.append(f"{sum(held)} / {len(held)}" if held else "-")
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    return ["Agents whose row holds, per joint policy and metric:", "", *lines, ""]
+
+
 def markdown(report: dict) -> str:
-    """The report as Markdown tables, one per joint policy."""
+    """The report as Markdown: a summary, then one table per joint policy."""
     training = ""
     if report.get("predictor") in ON_POLICY:
         schedule = {"linear": " decayed linearly to 0", "constant": " (constant)"}.get(report.get("aip_lr_schedule"), "")
@@ -439,6 +455,7 @@ def markdown(report: dict) -> str:
              f"policy, GS vs IALS (AIPs: {report.get('predictor', 'trained')}{training}), mean over episodes; a row holds "
              f"when the 95% Welch interval of GS - IALS contains 0 or |GS - IALS| <= {report['tolerance']:.0%} of the GS "
              "value.", ""]
+    lines += _summary_lines(report)
     for name, rows in report["policies"].items():
         lines += [f"**{name}**", ""]
         if "gs_only" in rows:
