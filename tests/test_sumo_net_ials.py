@@ -186,7 +186,7 @@ def test_an_aip_trained_on_gs_data_brings_vehicles_at_the_gs_rate(data):
     assert blocked["uniform"] > gs_blocked + 0.2, (blocked, gs_blocked)
 
 
-def test_train_aip_of_every_junction_feeds_the_multi_agent_ials(tmp_path):
+def test_train_aip_of_every_junction_feeds_the_multi_agent_ials(tmp_path, capsys):
     """``train-aip --agent all`` on a network whose junctions have regions of their own sizes
     trains each AIP alone into one set, which drives every region of the multi-agent IALS: a
     PettingZoo ParallelEnv with the GS's agents and spaces."""
@@ -197,9 +197,10 @@ def test_train_aip_of_every_junction_feeds_the_multi_agent_ials(tmp_path):
     from ials_zoo.sumo_net.ials_env import IALSNetEnv
 
     out = tmp_path / "aips.pt"
-    options = '{"net": "cologne3", "max_cycles": 30}'
-    assert main(["train-aip", "--env", "sumo_net_v0", "--options", options, "--agent", "all", "--steps", "60",
-                 "--epochs", "2", "--out", str(out), "--no-progress"]) == 0
+    assert main(["train-aip", "--env", "sumo_net_v0", "--net", "cologne3", "--options", '{"max_cycles": 30}',
+                 "--agent", "all", "--steps", "60", "--epochs", "2", "--out", str(out), "--no-progress"]) == 0
+    said = capsys.readouterr().out
+    assert said.index("60 GS steps (2 episodes) to collect, about") < said.index("wrote")  # an estimate first
     aips = load_predictor_set(out, "sumo_net_v0")
     gs = SumoNetEnv(net="cologne3", max_cycles=20)
     assert sorted(aips) == sorted(gs.possible_agents)

@@ -14,7 +14,7 @@ records every listed region at once (all of them acting randomly) into
 
 from __future__ import annotations
 
-from ials_zoo.commands import CommandError
+from ials_zoo.commands import NET_HELP, CommandError, with_network
 from ials_zoo.core.domains import domain_ids, get_domain
 from ials_zoo.influence.dataset import collect_all
 from ials_zoo.utils import check_output_file, check_seed, parse_json_object, remove_stale_temporaries
@@ -36,6 +36,7 @@ def add_collect_arguments(parser, required: bool = True) -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--options", default="{}",
                         help='GS options as JSON, e.g. \'{"item_lifetime": 8}\'')
+    parser.add_argument("--net", default=None, metavar="NAME", help=NET_HELP)
     parser.add_argument("--workers", type=int, default=1,
                         help="GS processes collecting at once (each records steps/workers; worth it for SUMO)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
@@ -50,8 +51,11 @@ def check_collect_arguments(args) -> dict:
         raise CommandError(f"--workers must be >= 1, got {args.workers}")
     check_seed(args.seed, "--seed")
     options = _json_dict(args.options)
+    if args.net is not None and args.env is None:
+        raise CommandError("--net needs --env")
     if args.env is not None:
         domain = get_domain(args.env)
+        options = with_network(domain, options, args.net)
         if args.agent is not None and args.agent != "all":
             for a in args.agent.split(","):
                 domain.check_agent(a.strip(), **options)

@@ -13,7 +13,7 @@ import time
 
 import numpy as np
 
-from ials_zoo.commands import CommandError
+from ials_zoo.commands import NET_HELP, CommandError, with_network
 from ials_zoo.core.domains import default_domain, domain_ids, get_domain
 from ials_zoo.core.extras import viewer_of
 from ials_zoo.utils import check_output_file
@@ -28,8 +28,7 @@ def configure(parser):
     parser.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
     parser.add_argument("--agent", default=None,
                         help="the randomly acting agent (default: the domain's first paper agent)")
-    parser.add_argument("--net", default=None, metavar="NAME",
-                        help="the network, for a domain whose tracks are networks (its `net` option, e.g. a RESCO map)")
+    parser.add_argument("--net", default=None, metavar="NAME", help=NET_HELP)
     parser.add_argument("--gif", default=None, metavar="PATH",
                         help="save the episode as an animated GIF here")
 
@@ -42,11 +41,7 @@ def run(args) -> int:
         raise CommandError(f"--steps must be >= 1, got {steps}")
     if args.seed < 0:
         raise CommandError(f"--seed must be >= 0, got {args.seed}")
-    network = {}
-    if args.net is not None:
-        if "net" not in domain.track_options:
-            raise CommandError(f"--net: {domain.env_id} takes no network")
-        network = {"net": args.net}
+    network = with_network(domain, {}, args.net)
     try:
         agent = args.agent or (domain.agents(**network)[0] if network else domain.default_agents[0])
         domain.check_agent(agent, **network)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 
+from ials_zoo.commands import NET_HELP, with_network
 from ials_zoo.core.domains import get_domain
 from ials_zoo.errors import BadInput
 from ials_zoo.evaluation import estimate_evaluation_seconds
@@ -27,8 +28,7 @@ def configure(parser):
     parser.add_argument("--env", required=True, help="domain id")
     parser.add_argument("--options", default=None,
                         help="the domain's options as a JSON object, e.g. '{\"net\": \"cologne8\"}' for sumo_net_v0")
-    parser.add_argument("--net", default=None, metavar="NAME",
-                        help="the network, for a domain whose tracks are networks: --options' `net`, e.g. cologne8")
+    parser.add_argument("--net", default=None, metavar="NAME", help=NET_HELP)
     parser.add_argument("--policies", default="random,constant,scripted",
                         help="joint policies, comma-separated: random, constant, cycle:H (each agent cycles through "
                              "its actions, H steps each: a fixed-time plan), scripted (GS only) or policy files")
@@ -64,24 +64,12 @@ def configure(parser):
     parser.add_argument("--out", default=None, help="also write the Markdown report here (atomic)")
 
 
-def _options(domain, args) -> dict:
-    """``--options`` with ``--net`` merged in (they must not disagree)."""
-    options = parse_json_object(args.options, "--options") if args.options else {}
-    if args.net is not None:
-        if "net" not in domain.track_options:
-            raise BadInput(f"--net: {domain.env_id} takes no network")
-        if options.get("net", args.net) != args.net:
-            raise BadInput(f"--net {args.net!r} and --options' net {options['net']!r} disagree; give one")
-        options["net"] = args.net
-    return options
-
-
 def run(args) -> int:
     import os
 
 
     domain = get_domain(args.env).require_ials_parallel_env("fidelity")
-    options = _options(domain, args)
+    options = with_network(domain, parse_json_object(args.options, "--options") if args.options else {}, args.net)
     if args.episodes < 2:
         raise BadInput(f"--episodes must be >= 2 (intervals over episodes), got {args.episodes}")
     if not args.tolerance >= 0:

@@ -26,10 +26,11 @@ from ials_zoo.commands import CommandError
 from ials_zoo.commands.collect import add_collect_arguments, check_collect_arguments
 from ials_zoo.core.domains import get_domain
 from ials_zoo.core.extras import dials_of
+from ials_zoo.evaluation import estimate_evaluation_seconds
 from ials_zoo.influence.dataset import InfluenceDataset, collect, collect_all
 from ials_zoo.influence.files import save_predictor, save_predictor_set
 from ials_zoo.influence.train import LR_SCHEDULES, format_report, train_predictor, train_predictors
-from ials_zoo.utils import atomic_write_text, check_output_file
+from ials_zoo.utils import atomic_write_text, check_output_file, format_seconds
 
 
 def configure(parser):
@@ -110,6 +111,15 @@ def run(args) -> int:
     return 0
 
 
+def _print_estimate(args, domain, agents, options) -> None:
+    """How long the GS collection will take, before it starts (training is extra)."""
+    episodes = math.ceil(args.steps / max(domain.steps_of_episode(**options), 1))
+    seconds = estimate_evaluation_seconds(args.env, episodes, **options)
+    print(f"train-aip: {len(agents)} agents of {args.env}: {args.steps:,} GS steps ({episodes:,} episodes) to "
+          f"collect, about {format_seconds(seconds)} on 2 cores; then one stacked training per region shape",
+          flush=True)
+
+
 def _train_set(args, progress: bool) -> int:
     """Every listed agent's AIP from one GS run, into one predictor-set file."""
 
@@ -123,6 +133,7 @@ def _train_set(args, progress: bool) -> int:
     agents = domain.check_agents(None if args.agent == "all" else args.agent, **options)
     d = dials_of(domain)
     arch = args.arch or d.aip_arch
+    _print_estimate(args, domain, agents, options)
     data = collect_all(args.env, agents, steps=args.steps, seed=args.seed, gs_options=options, progress=progress,
                        workers=args.workers)
     mine = arch == d.aip_arch  # the domain's DIALS settings apply to its own architecture
