@@ -236,15 +236,22 @@ class NetworkPolicy(Policy):
 
 
 def estimate_evaluation_seconds(env_id: str, episodes: int, **options) -> float:
-    """About how long ``episodes`` GS episodes under ``options`` take on 2 cores: their
-    agent-steps (:meth:`~ials_zoo.core.domains.Domain.steps_of_episode` times the agents) at
-    the training speed the domain's study measured, which evaluation beats (an upper
-    estimate; what a re-measure or a long command is bounded by before it starts)."""
+    """About how long ``episodes`` GS episodes under ``options`` take on 2 cores: their steps
+    (:meth:`~ials_zoo.core.domains.Domain.steps_of_episode`) at the domain's own GS step time
+    where it states one (``StudySettings.gs_step_seconds``: a real network's cost is its
+    map's), else their agent-steps at the training speed the domain's study measured, which
+    evaluation beats (an upper estimate; what a re-measure or a long command is bounded by
+    before it starts)."""
     from ials_zoo.core.extras import study_of
 
     domain = get_domain(env_id)
-    rate = max(float(study_of(domain).multi_agent_steps_per_second.get("gs", 10_000.0)), 1.0)
-    return float(episodes) * domain.steps_of_episode(**options) * len(domain.agents(**options)) / rate
+    study = study_of(domain)
+    steps = float(episodes) * domain.steps_of_episode(**options)
+    step_seconds = study.gs_step_seconds(**options) if study.gs_step_seconds is not None else None
+    if step_seconds is not None:
+        return steps * float(step_seconds)
+    rate = max(float(study.multi_agent_steps_per_second.get("gs", 10_000.0)), 1.0)
+    return steps * len(domain.agents(**options)) / rate
 
 
 SB3_META_MAX_BYTES = 1 << 20

@@ -378,3 +378,29 @@ def test_the_controller_study_stores_episodes_resumes_and_reports_beside_resco(t
     assert len(rows) == 2 and rows[0].split("|")[4] == rows[1].split("|")[4]  # the env's delay is plain SUMO's
     assert "FIXED: 56.61 / 56.85" in rows[0]
     assert main(argv) == 0 and "2 already stored" in capsys.readouterr().out  # resumed: nothing re-run
+
+
+def test_long_commands_estimate_a_networks_cost_from_its_map(monkeypatch):
+    """A GS episode's estimate follows its map, not its agent count: ingolstadt21 (21 lights)
+    costs over 5x cologne8 (8 lights) per episode; a network given by file is charged by its
+    lanes, an upper estimate; and fidelity estimates the network it was given."""
+    from ials_zoo.cli import main
+    from ials_zoo.commands import fidelity as command
+    from ials_zoo.errors import BadInput
+    from ials_zoo.evaluation import estimate_evaluation_seconds as estimate
+
+    c8, i21 = estimate("sumo_net_v0", 1, net="cologne8"), estimate("sumo_net_v0", 1, net="ingolstadt21")
+    assert i21 > 5 * c8
+    s = make_scenario(net="cologne8")
+    by_file = estimate("sumo_net_v0", 1, net_file=s.net_file, route_files=s.route_files, begin=s.begin, end=s.end)
+    assert c8 <= by_file <= 3 * c8
+    assert estimate("sumo_net_v0", 1, net="cologne8", max_cycles=36) == pytest.approx(c8 / 10)
+    seen = []
+
+    def spy(env_id, episodes, **options):
+        seen.append(options)
+        raise BadInput("stop here")
+
+    monkeypatch.setattr(command, "estimate_evaluation_seconds", spy)
+    assert main(["fidelity", "--env", "sumo_net_v0", "--net", "ingolstadt21", "--episodes", "2"]) == 2
+    assert seen == [{"net": "ingolstadt21"}]

@@ -104,7 +104,7 @@ def run(args) -> int:
                        f"on-policy-autoregressive, got {args.aip_clock_horizon} with {args.predictor!r}")
     if args.out:
         check_output_file(args.out)
-    gs_seconds = estimate_evaluation_seconds(args.env, args.episodes)
+    gs_seconds = estimate_evaluation_seconds(args.env, args.episodes, **options)
     print(f"fidelity {args.env}: {len(policies)} joint polic{'ies' if len(policies) > 1 else 'y'} x {args.episodes:,} "
           f"episodes on the GS and on the IALS: about {format_seconds(2 * len(policies) * gs_seconds)} on 2 cores "
           "(the GS's share at its training speed, twice; AIP training extra)", flush=True)

@@ -45,6 +45,11 @@ class StudySettings:
             run with every agent learning, on the GS (IPPO) and on IALS (DIALS, AIP time
             included), as measured by the study on 2 cores; only for the duration estimate
             a run prints first.
+        gs_step_seconds: ``gs_step_seconds(**options) -> float | None``, the wall-clock of
+            one GS step with every agent acting (no learning) under GS ``options``, where the
+            domain knows it better than ``multi_agent_steps_per_second`` (a GS whose cost
+            depends on its network more than on its agents); for the estimate an evaluation
+            or a GS collection prints first.
     """
 
     budget: int = 500_000
@@ -53,6 +58,7 @@ class StudySettings:
     lifetime_probes: tuple | None = None
     multi_agent_budget: int = 200_000
     multi_agent_steps_per_second: dict = field(default_factory=lambda: {"gs": 10_000.0, "ials": 10_000.0})
+    gs_step_seconds: Callable[..., float | None] | None = None
 
 
 @dataclass(frozen=True)

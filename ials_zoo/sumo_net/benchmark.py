@@ -25,10 +25,33 @@ import numpy as np
 
 from ials_zoo.errors import BadInput
 from ials_zoo.sumo_net.env import SumoNetEnv
-from ials_zoo.sumo_net.names import ENV_ID
+from ials_zoo.sumo_net.names import DEFAULT_NET, ENV_ID, SCENARIO_OPTIONS
 from ials_zoo.sumo_net.scenario import RESCO_MAPS
 
 DEFAULT_MAPS = ("cologne8", "grid4x4", "ingolstadt21")
+
+# wall-clock per simulated second of the GS in its default mode, every light at random, from
+# this benchmark on a quiet 2-core machine (docs/sumo_net.md, "Speed"); another network is
+# charged per lane (internal lanes included) at ingolstadt21's rate, the costliest measured
+SIM_SECOND_SECONDS = {"cologne8": 1 / 116.2 / 10, "grid4x4": 1 / 76.0 / 10, "ingolstadt21": 1 / 10.4 / 10}
+LANE_SIM_SECOND_SECONDS = 1 / 10.4 / 10 / 3746
+
+
+def gs_step_seconds(**options) -> float:
+    """About how long one GS decision takes under ``options`` (every light acting, the default
+    mode), for the estimates long commands print first: a measured map's figure, else
+    :data:`LANE_SIM_SECOND_SECONDS` per lane of the network."""
+    from ials_zoo.sumo_net.network import read_network
+    from ials_zoo.sumo_net.scenario import make_scenario
+
+    chosen = {k: v for k, v in options.items() if k in SCENARIO_OPTIONS and k != "max_cycles"}
+    if not {"net", "sumocfg", "net_file"} & set(chosen):
+        chosen["net"] = DEFAULT_NET
+    scenario = make_scenario(**chosen)
+    per_second = SIM_SECOND_SECONDS.get(chosen.get("net")) if set(chosen) <= {"net"} else None
+    if per_second is None:
+        per_second = LANE_SIM_SECOND_SECONDS * len(read_network(scenario.net_file).lane_edges)
+    return per_second * scenario.decision_seconds
 MODES = {"default (fresh worker per episode)": {}, "in this process": {"backend": "inprocess", "fresh_process": False}}
 
 

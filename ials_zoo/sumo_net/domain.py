@@ -76,7 +76,15 @@ def _legend():
 
 # IPPO on RESCO's maps: 100 episodes of 360 decisions per agent (RESCO's IDQN budget); about
 # 500 agent-decisions/s of training on cologne8 with 2 GS copies on 2 cores (the first runs)
-STUDY = StudySettings(multi_agent_budget=36_000, multi_agent_steps_per_second={"gs": 500.0, "ials": 500.0})
+def gs_step_seconds(**options) -> float:
+    """One GS decision's wall-clock under ``options`` (:func:`ials_zoo.sumo_net.benchmark.gs_step_seconds`)."""
+    from ials_zoo.sumo_net.benchmark import gs_step_seconds as seconds
+
+    return seconds(**options)
+
+
+STUDY = StudySettings(multi_agent_budget=36_000, multi_agent_steps_per_second={"gs": 500.0, "ials": 500.0},
+                      gs_step_seconds=gs_step_seconds)
 
 # the AIPs of every junction (``train-aip --agent all``, each trained alone: the regions have their
 # own sizes): two GS hours of data; at 30 epochs and lr 3e-3 they stayed at twice the data
