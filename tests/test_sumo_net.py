@@ -121,8 +121,16 @@ def test_an_episodes_tripinfo_is_read_when_asked_and_never_left_behind(tmp_path)
         metrics = env.episode_metrics()
         assert os.listdir(env._tmp) == []  # read once, then removed
         assert metrics == env.episode_metrics()
+        env.reset(seed=3)
+        env.step({a: 0 for a in env.agents})
+        env.reset(seed=3)  # the third episode, cut short
+        assert os.listdir(env._tmp) == ["tripinfo_4.xml"]  # the fourth's, SUMO writing it
+        while env.agents:
+            env.step({a: 0 for a in env.agents})
     finally:
         env.close()
+    with pytest.raises(RuntimeError, match="before close"):
+        env.episode_metrics()  # its file went with the env
     s = env.scenario
     reference = episode_metrics(str(tmp_path / "trip.xml"), s.route_files, s.end)
     assert {k: metrics[k] for k in reference} == reference and metrics["queue"] > 0
@@ -395,6 +403,7 @@ def test_long_commands_estimate_a_networks_cost_from_its_map(monkeypatch):
     by_file = estimate("sumo_net_v0", 1, net_file=s.net_file, route_files=s.route_files, begin=s.begin, end=s.end)
     assert c8 <= by_file <= 3 * c8
     assert estimate("sumo_net_v0", 1, net="cologne8", max_cycles=36) == pytest.approx(c8 / 10)
+    assert estimate("sumo_net_v0", 1, net="cologne8", end=s.begin + 360) == pytest.approx(c8 / 10)  # its first 6 min
     seen = []
 
     def spy(env_id, episodes, **options):

@@ -201,6 +201,8 @@ def test_train_aip_of_every_junction_feeds_the_multi_agent_ials(tmp_path, capsys
                  "--agent", "all", "--steps", "60", "--epochs", "2", "--out", str(out), "--no-progress"]) == 0
     said = capsys.readouterr().out
     assert said.index("60 GS steps (2 episodes) to collect, about") < said.index("wrote")  # an estimate first
+    assert main(["train-aip", "--data", str(out), "--net", "cologne3", "--out", str(tmp_path / "x.pt")]) == 2
+    assert "--net names a network to collect on" in capsys.readouterr().err
     aips = load_predictor_set(out, "sumo_net_v0")
     gs = SumoNetEnv(net="cologne3", max_cycles=20)
     assert sorted(aips) == sorted(gs.possible_agents)

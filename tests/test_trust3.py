@@ -434,7 +434,8 @@ def test_exit_status_convention_of_leaderboard_commands(tmp_path, capsys):
     (["--policies", ""], "--policies names no policy"), (["--policies", ",,,"], "--policies names no policy"),
     (["--predictor", "on-policy-autoregressive", "--aip-influence-lags", "100000"], "influence"),
     (["--episodes", "1000000000000"], "--episodes"), (["--net", "cologne8"], "--net: warehouse_v0 takes no network"),
-    (["--env", "sumo_net_v0", "--net", "cologne8", "--options", '{"net": "grid4x4"}'], "disagree")])
+    (["--env", "sumo_net_v0", "--net", "cologne8", "--options", '{"net": "grid4x4"}'], "disagree"),
+    (["--policies", "cycle:0"], "--policies: a cycle policy is cycle:H")])
 def test_fidelity_refuses_bad_values_before_any_episode(argv, match, capsys, monkeypatch):
     from ials_zoo.cli import main
     from ials_zoo.influence import fidelity

@@ -81,6 +81,10 @@ def run(args) -> int:
     if args.episodes > MAX_EPISODES:
         raise BadInput(f"--episodes must be <= {MAX_EPISODES:,}, got {args.episodes:,}")
     for p in policies:
+        try:
+            parse_cycle(p)
+        except BadInput as exc:
+            raise BadInput(f"--policies: {exc}") from None
         if p not in ("random", "constant", "scripted") and parse_cycle(p) is None and not os.path.isfile(p):
             raise BadInput(f"--policies: {p!r} is neither random, constant, cycle:H, scripted nor a policy file")
     watched = None if args.agents is None else domain.check_agents(args.agents, **options)
@@ -107,7 +111,8 @@ def run(args) -> int:
     gs_seconds = estimate_evaluation_seconds(args.env, args.episodes, **options)
     print(f"fidelity {args.env}: {len(policies)} joint polic{'ies' if len(policies) > 1 else 'y'} x {args.episodes:,} "
           f"episodes on the GS and on the IALS: about {format_seconds(2 * len(policies) * gs_seconds)} on 2 cores "
-          "(the GS's share at its training speed, twice; AIP training extra)", flush=True)
+          "(the GS's episodes, and the IALS's charged as the GS's: an upper estimate; AIP data and training extra)",
+          flush=True)
     report = fidelity_report(args.env, policies, episodes=args.episodes, seed=args.seed, watched=watched,
                              predictor=args.predictor, tolerance=args.tolerance, collect_steps=args.collect_steps,
                              aip_lr=args.aip_lr, aip_epochs=args.aip_epochs, aip_seeds=args.aip_seeds,

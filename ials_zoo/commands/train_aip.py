@@ -89,6 +89,8 @@ def run(args) -> int:
     if args.agent is not None and (args.agent == "all" or "," in args.agent):
         return _train_set(args, progress)
     if args.data:
+        if args.net is not None:
+            raise CommandError("--net names a network to collect on; --data holds data already collected (drop one)")
         data = InfluenceDataset.load(args.data, env_id=args.env, agent=args.agent)
     else:
         if not (args.env and args.agent):

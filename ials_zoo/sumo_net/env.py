@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import tempfile
@@ -267,11 +268,12 @@ class SumoNetEnv(ParallelEnv):
         self._episodes += 1
         self._last_seed = seed
         self._drop_unread_tripinfo()  # the last episode's, never asked for
-        self._metrics = None
+        previous, self._metrics = self._tripinfo, None
         self._tripinfo = os.path.join(self._tmp, f"tripinfo_{self._episodes}.xml")
         if self.fresh_process:  # a new process, started during the last episode
             self._sim.restart(spare=True)
         self._store(self._sim.call("reset", seed, self._tripinfo))
+        _remove_if_there(previous)  # an episode cut short: SUMO wrote its file until the reset above
         self.agents = list(self.possible_agents)
         return {a: self.observe(a) for a in self.agents}, self._infos()
 
@@ -340,20 +342,19 @@ class SumoNetEnv(ParallelEnv):
         return self._sim.call("finish")
 
     def _read_tripinfo(self) -> None:
-        """Add the tripinfo's metrics (RESCO's delay, ...) to the episode's, once."""
-        path, self._unread_tripinfo = self._unread_tripinfo, None
-        s = self.scenario
-        try:
-            if self._schedule is None:  # the route files' schedule, read once for every episode
-                self._schedule = scheduled_departures(s.route_files)
-            self._metrics.update(episode_metrics(path, s.route_files, s.end, self._schedule))
-        finally:  # read once: a long run keeps no episode's file
-            os.remove(path)
+        """Add the tripinfo's metrics (RESCO's delay, ...) to the episode's; the file is removed
+        once read (a long run keeps no episode's file), and kept for another try if reading fails."""
+        path, s = self._unread_tripinfo, self.scenario
+        if not os.path.exists(path):
+            raise RuntimeError(f"the episode's tripinfo {path} is gone: call episode_metrics() before close()")
+        if self._schedule is None:  # the route files' schedule, read once for every episode
+            self._schedule = scheduled_departures(s.route_files)
+        self._metrics.update(episode_metrics(path, s.route_files, s.end, self._schedule))
+        self._drop_unread_tripinfo()
 
     def _drop_unread_tripinfo(self) -> None:
         path, self._unread_tripinfo = getattr(self, "_unread_tripinfo", None), None
-        if path is not None and os.path.exists(path):
-            os.remove(path)
+        _remove_if_there(path)
 
     # -- extras
     def state(self) -> np.ndarray:
@@ -406,7 +407,6 @@ class SumoNetEnv(ParallelEnv):
         return text
 
     def close(self):
-        self._unread_tripinfo = None  # removed with the folder below
         sim = getattr(self, "_sim", None)
         if sim is not None:
             sim.close()
@@ -421,6 +421,12 @@ class SumoNetEnv(ParallelEnv):
             self.close()
         except Exception:
             pass
+
+
+def _remove_if_there(path: str | None) -> None:
+    if path is not None:
+        with contextlib.suppress(FileNotFoundError):
+            os.remove(path)
 
 
 def raw_env(**options):
