@@ -35,7 +35,7 @@ def main(out: str, *runs: str) -> None:
         for ax, x in zip(axes, ([p["env_steps"] for p in points], [p["wall_clock_seconds"] / 60 for p in points])):
             ax.plot(x, mean, marker="o", label=label, linestyle="--" if label.startswith("IPPO") else "-")
     axes[0].set(title="GS score vs steps per light", xlabel="steps (decisions) per light",
-                ylabel="mean return over lights (3 episodes)")
+                ylabel="mean return over lights (one evaluation)")
     axes[1].set(title="vs wall-clock (2 cores, other jobs beside)", xlabel="training minutes")
     axes[0].legend(fontsize=7)
     fig.tight_layout()
