@@ -316,7 +316,8 @@ class Worker:
                     continue
                 last = self._check(start, last, timeout, answered=False)
         except (BrokenPipeError, OSError) as exc:
-            self._fail("died", f"{self._what()} closed its pipe ({exc})")
+            # a worker killed between two calls: its end of the pipe is closed before any answer is awaited
+            self._fail("died", f"{self._what()} died (its pipe closed: {exc}; exit code {self.process.poll()})")
         except WorkerError:
             raise
         except BaseException:

@@ -201,6 +201,24 @@ def test_forked_workers_are_the_zygotes_leave_no_zombies_and_die_with_it():
             w.close(kill=True)
 
 
+def test_a_worker_killed_between_calls_is_named_dead_whichever_end_notices():
+    """Killed and gone before the next call, the worker's pipe refuses the call itself (EPIPE):
+    that too says it died, as when the death shows while waiting for an answer."""
+    import random
+
+    from ials_zoo.processes import Worker
+
+    worker = Worker(random.Random, (1,), name="forked worker", preload=("random",))
+    try:
+        worker.started()
+        os.kill(worker.pid, signal.SIGKILL)
+        assert _gone_within({worker.pid}, 10)
+        with pytest.raises(Exception, match="died"):
+            worker.call("random")
+    finally:
+        worker.close(kill=True)
+
+
 def test_an_answer_cut_short_is_never_taken_for_the_next_one(monkeypatch):
     import random
 
