@@ -82,10 +82,10 @@ def run(args) -> int:
         raise BadInput(f"--episodes must be <= {MAX_EPISODES:,}, got {args.episodes:,}")
     for p in policies:
         try:
-            parse_cycle(p)
+            cycle = parse_cycle(p)
         except BadInput as exc:
             raise BadInput(f"--policies: {exc}") from None
-        if p not in ("random", "constant", "scripted") and parse_cycle(p) is None and not os.path.isfile(p):
+        if p not in ("random", "constant", "scripted") and cycle is None and not os.path.isfile(p):
             raise BadInput(f"--policies: {p!r} is neither random, constant, cycle:H, scripted nor a policy file")
     watched = None if args.agents is None else domain.check_agents(args.agents, **options)
     for name in ("collect_steps", "aip_epochs", "aip_seeds", "aip_influence_lags"):

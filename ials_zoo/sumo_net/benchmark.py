@@ -43,15 +43,13 @@ def gs_step_seconds(**options) -> float:
     """About how long one GS decision takes under ``options`` (every light acting, the default
     mode), for the estimates long commands print first: a measured map's figure, else
     :data:`LANE_SIM_SECOND_SECONDS` per lane of the network."""
+    from ials_zoo.sumo_net.env import scenario_of
     from ials_zoo.sumo_net.network import read_network
-    from ials_zoo.sumo_net.scenario import make_scenario
 
     chosen = {k: v for k, v in options.items() if k in SCENARIO_OPTIONS and k != "max_cycles"}
-    if not {"net", "sumocfg", "net_file"} & set(chosen):
-        chosen["net"] = DEFAULT_NET
-    scenario = make_scenario(**chosen)
+    scenario = scenario_of(**chosen)
     named = set(chosen) - {"begin", "end"} <= {"net"}  # a measured map's hour or part of it
-    per_second = SIM_SECOND_SECONDS.get(chosen.get("net")) if named else None
+    per_second = SIM_SECOND_SECONDS.get(chosen.get("net", DEFAULT_NET)) if named else None
     if per_second is None:
         per_second = LANE_SIM_SECOND_SECONDS * len(read_network(scenario.net_file).lane_edges)
     return per_second * scenario.decision_seconds
