@@ -142,6 +142,8 @@ def test_train_errors_name_the_flag_and_help_shows_each_default_once(capsys):
 
     assert main(["train", "ippo", "--env", "warehouse_v0", "--total-timesteps", "0"]) == 2
     assert "ials-zoo train: --total-timesteps must be >= 1, got 0" in capsys.readouterr().err
+    assert main(["train", "dials", "--env", "warehouse_v0", "--checkpoint-every", "-5", "--out-dir", "/nonexistent/x"]) == 2
+    assert "ials-zoo train: --checkpoint-every must be >= 0 (0: at evaluations only), got -5" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["train", "dials", "--help"])
     text = " ".join(capsys.readouterr().out.split())

@@ -19,7 +19,7 @@ OPTIONS = {"robots": [2, 2]}
 AGENTS = ["robot_0", "robot_1", "robot_2", "robot_3"]
 COMMON = dict(env_id=ENV, agents=",".join(AGENTS), env_options=json.dumps(OPTIONS), n_envs=2,
               samples_per_update=128, batch_size=64, n_epochs=2, hidden="16", eval_episodes=1,
-              final_eval_episodes=2, progress=False)
+              final_eval_episodes=2, progress=False, checkpoint_every=0)
 # DIALS: AIPs retrained at 0, 384 and 768 steps per agent, checkpoints every 256: the crash at
 # 512 resumes from 256, replays an IALS episode 28 steps in and redoes the refresh at 384;
 # 1024 = 10.24 GS episodes.
@@ -163,6 +163,34 @@ def test_a_resume_from_a_checkpoint_between_evaluations_is_bitwise_too(tmp_path,
     resumed = ppo_single.main(ppo_single.Args(**kwargs, out_dir=str(tmp_path / "resumed"), resume=True))
     assert_same_run(whole, (resumed, tmp_path / "resumed"))
     assert _progress_rows(whole[1]) == _progress_rows(tmp_path / "resumed")
+
+
+def test_a_multi_agent_run_checkpoints_between_evaluations_by_default_and_resumes_from_there_bitwise(
+        tmp_path, monkeypatch):
+    """IPPO's default cadence: a checkpoint every quarter of ``--eval-every`` too (here every
+    128-step update between the evaluations at 0, 512 and 768). The crash comes at 512, after
+    the checkpoint at 384 between evaluations, and the resume starts there. The reference run
+    checkpoints only at its evaluations (``--checkpoint-every 0``): where checkpoints fall does
+    not change the run."""
+    from ials_zoo.baselines import driver, ippo
+
+    kwargs = dict(IPPO, eval_every=512, checkpoint_every=None)
+    whole = ippo.main(ippo.Args(**dict(kwargs, checkpoint_every=0), out_dir=str(tmp_path / "whole")))
+    real, calls = driver._checkpoint, []
+
+    def checkpoint(*args, **kw):
+        if len(calls) == 4:
+            raise Crash("stopped after checkpoint 4")
+        calls.append(args[2])
+        return real(*args, **kw)
+
+    monkeypatch.setattr(driver, "_checkpoint", checkpoint)
+    with pytest.raises(Crash):
+        ippo.main(ippo.Args(**kwargs, out_dir=str(tmp_path / "resumed")))
+    assert calls == [0, 128, 256, 384]
+    monkeypatch.setattr(driver, "_checkpoint", real)
+    resumed = ippo.main(ippo.Args(**kwargs, out_dir=str(tmp_path / "resumed"), resume=True))
+    assert_same_run((whole, tmp_path / "whole"), (resumed, tmp_path / "resumed"))
 
 
 def test_a_resumed_ppo_shared_run_ends_bitwise_as_the_uninterrupted_one(tmp_path, monkeypatch):

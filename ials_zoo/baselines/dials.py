@@ -69,6 +69,7 @@ from ials_zoo.baselines.multiagent import (
     JointActor,
     MultiAgentRunArgs,
     check_multi_ppo,
+    checkpoint_every_of,
     frame_stack_of,
     merge_shard_stats,
     ppo_config,
@@ -471,7 +472,9 @@ def main(args: Args | None = None) -> dict:
                                         learner=args.learner)}
     plan = RunPlan("dials", args.env_id, agents, options, args.seed, total, per_update, eval_every, args.eval_episodes,
                    args.final_eval_episodes, frame_stack, out, settings_of(args), training, args.resume,
-                   args.overwrite, args.progress, args.submitter, args.notes, command=training_command("dials", args))
+                   args.overwrite, args.progress, args.submitter, args.notes,
+                   checkpoint_every=checkpoint_every_of(args, eval_every, per_update),
+                   command=training_command("dials", args))
     if on_copies(domain):
         from ials_zoo.baselines.dials_copies import IALSCopiesLearner
 

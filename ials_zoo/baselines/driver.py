@@ -394,6 +394,8 @@ def check_run_args(args) -> None:
         v = getattr(args, name)
         if v is not None and v < 1:
             raise BadInput(f"{name} must be >= 1, got {v}")
+    if (getattr(args, "checkpoint_every", None) or 0) < 0:
+        raise BadInput(f"checkpoint_every must be >= 0 (0: at evaluations only), got {args.checkpoint_every}")
 
 
 __all__ = ["JointActors", "JointScoring", "Learner", "RunPlan", "Scoring", "check_run_args", "estimate_text", "run"]

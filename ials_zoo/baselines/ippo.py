@@ -31,6 +31,7 @@ from ials_zoo.baselines.driver import JointActors, RunPlan, check_run_args, run
 from ials_zoo.baselines.multiagent import (
     MultiAgentRunArgs,
     check_multi_ppo,
+    checkpoint_every_of,
     frame_stack_of,
     merge_shard_stats,
     ppo_config,
@@ -156,8 +157,10 @@ def main(args: Args | None = None) -> dict:
     plan = RunPlan("ippo", args.env_id, agents, options, args.seed, total, per_update, eval_every, args.eval_episodes,
                    args.final_eval_episodes, frame_stack, out,
                    settings_of(args, skip=("resume", "overwrite", "progress", "out_dir", "submitter", "notes",
-                                           "gs_processes")),
-                   training, args.resume, args.overwrite, args.progress, args.submitter, args.notes, command=training_command("ippo", args))
+                                           "gs_processes", "checkpoint_every")),
+                   training, args.resume, args.overwrite, args.progress, args.submitter, args.notes,
+                   checkpoint_every=checkpoint_every_of(args, eval_every, per_update),
+                   command=training_command("ippo", args))
     learner = GSCopiesLearner(args.env_id, agents, options, args.n_envs, processes, ppo, frame_stack, args.seed,
                               total // per_update, joint_sizes(domain, agents, options))
     copies = f"{args.n_envs} GS cop{'ies' if args.n_envs > 1 else 'y'}"
