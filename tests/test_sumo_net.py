@@ -195,6 +195,34 @@ def test_observations_and_rewards_follow_rescos_bookkeeping():
     assert busy > 20  # the comparison saw waiting vehicles
 
 
+@pytest.mark.parametrize("observation", ["drq_norm", "drq"])
+def test_every_lights_observation_at_once_is_the_per_light_function_bit_for_bit(observation):
+    """The env builds RESCO's tables for all lights in one pass: the same bits as the observation
+    function applied light by light (the reference), the green's lane marker included."""
+    from ials_zoo.sumo_net.mdp import OBSERVATIONS
+
+    env = sumo_net_v0.parallel_env(net="cologne3", max_cycles=30, observation=observation)
+    light_by_light = OBSERVATIONS[observation]
+    rng = np.random.default_rng(0)
+    obs, _ = env.reset(seed=2)
+    markers = 0
+    try:
+        while True:
+            for a in env.possible_agents:
+                want = light_by_light(env._light_measures(a), int(env._phases[env._index[a]]))
+                assert obs[a].dtype == want.dtype and obs[a].shape == want.shape
+                np.testing.assert_array_equal(obs[a], want)
+                markers += int(want[0::5].sum())
+            state = env.state()
+            np.testing.assert_array_equal(state, np.concatenate([obs[a] for a in env.network.ids]))
+            if not env.agents:
+                break
+            obs, *_ = env.step({a: int(rng.integers(env.action_space(a).n)) for a in env.agents})
+    finally:
+        env.close()
+    assert markers > 30  # the comparison saw the lights' green markers
+
+
 def test_yellows_are_rescos_and_a_change_of_green_ends_in_that_green():
     greens = ["GGrr", "rrGG", "GrGr"]
     yellows, index = yellow_program(greens, 3)

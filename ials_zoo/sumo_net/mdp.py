@@ -56,7 +56,25 @@ def queue(measures: np.ndarray, phase: int) -> float:
     return float(-measures[:, 2].sum())
 
 
+def lanes_tables(measures: np.ndarray, phases: np.ndarray, starts: np.ndarray,
+                 divisors: np.ndarray | None) -> np.ndarray:
+    """Every light's lanes table at once, ``[all lanes, 5]`` float32 (light ``k``'s lanes are
+    rows ``starts[k]:starts[k + 1]``): bit for bit the per-light tables stacked, one numpy pass
+    instead of one per light (a tenth of a small map's Python per decision)."""
+    out = np.empty((len(measures), N_FEATURES), np.float32)
+    out[:, 0] = 0.0
+    counts = np.diff(starts)
+    marked = (phases >= 0) & (phases < counts)
+    out[starts[:-1][marked] + phases[marked], 0] = 1.0
+    out[:, 1:] = measures[:, :4]
+    if divisors is not None:
+        out[:, 1:] /= divisors
+    return out
+
+
 OBSERVATIONS = {"drq_norm": drq_norm, "drq": drq}
+BATCHED_OBSERVATIONS = {drq_norm: _DRQ_DIVISORS, drq: None}
+"""The observations :func:`lanes_tables` computes for every light at once, with their divisors."""
 REWARDS = {"wait_norm": wait_norm, "wait": wait, "queue": queue}
 
 
@@ -72,4 +90,4 @@ def reward_fn(name: str):
     return REWARDS[name]
 
 
-__all__ = ["N_FEATURES", "OBSERVATIONS", "REWARDS", "drq", "drq_norm", "observation_fn", "reward_fn", "wait", "wait_norm"]
+__all__ = ["BATCHED_OBSERVATIONS", "N_FEATURES", "OBSERVATIONS", "lanes_tables", "REWARDS", "drq", "drq_norm", "observation_fn", "reward_fn", "wait", "wait_norm"]
