@@ -15,7 +15,7 @@ OPTIONS = {"robots": [2, 2]}
 AGENTS = ["robot_0", "robot_1", "robot_2", "robot_3"]
 MULTI = dict(env_id=ENV, agents=",".join(AGENTS), env_options=json.dumps(OPTIONS), n_envs=2, samples_per_update=128,
              batch_size=64, n_epochs=2, hidden="16", eval_episodes=1, final_eval_episodes=2, progress=False,
-             total_timesteps=512, eval_every=256)
+             total_timesteps=512, eval_every=256, checkpoint_every=0)  # checkpoints at evaluations only
 RUNS = {
     "ippo": MULTI,
     "dials": dict(MULTI, refresh="384", collect_steps=200, aip_epochs=1, workers=0),
