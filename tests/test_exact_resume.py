@@ -176,6 +176,7 @@ def test_a_multi_agent_run_checkpoints_between_evaluations_by_default_and_resume
 
     kwargs = dict(IPPO, eval_every=512, checkpoint_every=None)
     whole = ippo.main(ippo.Args(**dict(kwargs, checkpoint_every=0), out_dir=str(tmp_path / "whole")))
+    assert "--checkpoint-every" not in whole["training"]["reproduce"]["command"]  # watching, not computing
     real, calls = driver._checkpoint, []
 
     def checkpoint(*args, **kw):

@@ -49,7 +49,7 @@ FILE_SUFFIXES = (".pt", ".pth", ".safetensors", ".npz", ".zip", ".json", ".xml",
 MAX_PROCESSES = 64
 """The most copies, GS processes or workers a re-trained command may ask for."""
 
-RUN_FLAGS = ("out_dir", "resume", "overwrite", "progress", "submitter", "notes", "ray_address")
+RUN_FLAGS = ("out_dir", "resume", "overwrite", "progress", "submitter", "notes", "ray_address", "checkpoint_every")
 """Arguments that say where and how a run is watched, not what it computes: never recorded."""
 
 MACHINE_FLAGS = ("workers", "backend")
