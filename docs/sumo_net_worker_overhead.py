@@ -99,7 +99,9 @@ def legs_by_work(works=(0.0, 0.001, 0.005, 0.02)) -> dict:
     req_r, req_w = os.pipe()
     ans_r, ans_w = os.pipe()
     pid = os.fork()
-    if pid == 0:
+    if pid == 0:  # the child keeps only its own ends: its read sees EOF when this process dies
+        os.close(req_w)
+        os.close(ans_r)
         _bare_pipe_child(req_r, ans_w)
 
     def call(seconds):

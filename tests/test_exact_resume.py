@@ -47,6 +47,23 @@ def _crash_after_checkpoints(monkeypatch, n: int):
     monkeypatch.setattr(driver, "_curve_point", point)
 
 
+def _crash_at_checkpoint(monkeypatch, n: int):
+    """The next run crashes at its ``n + 1``-th checkpoint (evaluations' included); returns the
+    real ``driver._checkpoint`` and the list of steps checkpointed before the crash."""
+    from ials_zoo.baselines import driver
+
+    real, calls = driver._checkpoint, []
+
+    def checkpoint(*args, **kw):
+        if len(calls) == n:
+            raise Crash(f"stopped after checkpoint {n}")
+        calls.append(args[2])
+        return real(*args, **kw)
+
+    monkeypatch.setattr(driver, "_checkpoint", checkpoint)
+    return real, calls
+
+
 def _progress_rows(folder):
     """progress.csv without its wall-clock column (the one thing a resumed run may differ in)."""
     import csv
@@ -147,15 +164,7 @@ def test_a_resume_from_a_checkpoint_between_evaluations_is_bitwise_too(tmp_path,
     kwargs = dict(SINGLE, simulator="gs", eval_every=0)
     whole = ppo_single.main(ppo_single.Args(**kwargs, out_dir=str(tmp_path / "whole"))), tmp_path / "whole"
     assert [p["env_steps"] for p in whole[0]["learning_curves"][0]["points"]] == [0, 1024]
-    real, calls = driver._checkpoint, []
-
-    def checkpoint(*args, **kw):
-        if len(calls) == 2:
-            raise Crash("stopped after checkpoint 2")
-        calls.append(args[2])
-        return real(*args, **kw)
-
-    monkeypatch.setattr(driver, "_checkpoint", checkpoint)
+    real, calls = _crash_at_checkpoint(monkeypatch, 2)
     with pytest.raises(Crash):
         ppo_single.main(ppo_single.Args(**kwargs, out_dir=str(tmp_path / "resumed")))
     assert calls == [0, 256]
@@ -177,15 +186,7 @@ def test_a_multi_agent_run_checkpoints_between_evaluations_by_default_and_resume
     kwargs = dict(IPPO, eval_every=512, checkpoint_every=None)
     whole = ippo.main(ippo.Args(**dict(kwargs, checkpoint_every=0), out_dir=str(tmp_path / "whole")))
     assert "--checkpoint-every" not in whole["training"]["reproduce"]["command"]  # watching, not computing
-    real, calls = driver._checkpoint, []
-
-    def checkpoint(*args, **kw):
-        if len(calls) == 4:
-            raise Crash("stopped after checkpoint 4")
-        calls.append(args[2])
-        return real(*args, **kw)
-
-    monkeypatch.setattr(driver, "_checkpoint", checkpoint)
+    real, calls = _crash_at_checkpoint(monkeypatch, 4)
     with pytest.raises(Crash):
         ippo.main(ippo.Args(**kwargs, out_dir=str(tmp_path / "resumed")))
     assert calls == [0, 128, 256, 384]
