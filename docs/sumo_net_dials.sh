@@ -3,19 +3,22 @@
 # 100 episodes of 360 decisions per light, 2 IALS copies (every light's region in one SUMO simulation
 # each) in 2 worker processes, the AIPs trained on 720 GS decisions of the joint policy at 0, 12,000
 # and 24,000 steps per light; GS evaluations as IPPO's, the protocol's 20-episode final score.
-# variant "untrained": untrained-DIALS (random AIPs, never trained), the control.
+# variant "untrained": untrained-DIALS (random AIPs, never trained), the control; variant "fidelity":
+# the AIPs of `ials-zoo fidelity` (autoregressive, reading their own last draw: --aip-training fidelity).
 # Resumable: a finished run is skipped, an interrupted one continues with --resume.
-# Usage: bash docs/sumo_net_dials.sh "ingolstadt21 cologne8" "0 1 2" [trained|untrained] [runs folder]
+# Usage: bash docs/sumo_net_dials.sh "ingolstadt21 cologne8" "0 1 2" [trained|untrained|fidelity] [runs folder]
 set -euo pipefail
 maps=${1:-"ingolstadt21 cologne8"}
 seeds=${2:-"0 1 2"}
 variant=${3:-trained}
 root=${4:-runs/dials_net}
+case "$variant" in trained|untrained|fidelity) ;; *) echo "variant must be trained, untrained or fidelity, got '$variant'" >&2; exit 2;; esac
 for seed in $seeds; do
   for net in $maps; do
     aips=(--refresh 12000)
     out="$root/${net}_s${seed}"
     if [ "$variant" = untrained ]; then aips=(--aip untrained --refresh never); out="$root/${net}_untrained_s${seed}"; fi
+    if [ "$variant" = fidelity ]; then aips+=(--aip-training fidelity); out="$root/${net}_fidelity_s${seed}"; fi
     if [ -f "$out/result.json" ]; then echo "done: $out"; continue; fi
     resume=(); [ -f "$out/checkpoint.json" ] && resume=(--resume)
     evals=(--eval-every 7200 --eval-episodes 5)
