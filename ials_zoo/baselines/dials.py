@@ -78,7 +78,7 @@ from ials_zoo.baselines.multiagent import (
     whole_updates,
 )
 from ials_zoo.baselines.retrain import training_command
-from ials_zoo.core.domains import get_domain, ials_domain_ids
+from ials_zoo.core.domains import domain_ids, get_domain
 from ials_zoo.core.extras import dials_of, study_of
 from ials_zoo.core.spaces import joint_sizes
 from ials_zoo.dials.backends import BACKENDS, InProcessBackend, check_ray_address, make_backend
@@ -101,9 +101,15 @@ REFRESH_WORDS = ("default", "once", "never")
 AIP_TRAININGS = ("dials", "fidelity")
 
 
+def dials_domain_ids() -> list[str]:
+    """The domains DIALS trains on: every agent's IALS runs as one ParallelEnv (sumo_net_v0's
+    agents have their own spaces, so it is not among :func:`ials_domain_ids`, yet DIALS runs it)."""
+    return [env_id for env_id in domain_ids() if get_domain(env_id).has_ials_parallel_env]
+
+
 def _per_domain(describe) -> str:
-    """``"<env_id> <what>, ..."`` for every known domain (help texts read from the data)."""
-    return ", ".join(f"{env_id} {describe(get_domain(env_id))}" for env_id in ials_domain_ids())
+    """``"<env_id> <what>, ..."`` for every domain DIALS trains on (help texts read from the data)."""
+    return ", ".join(f"{env_id} {describe(get_domain(env_id))}" for env_id in dials_domain_ids())
 
 
 def _fidelity_text(domain) -> str:
@@ -172,7 +178,7 @@ def parse_refresh(text: str, default: int) -> int | None:
 def check_args(args: Args):
     """Clear errors before anything starts; returns (domain, agents, options, refresh, copies)."""
     if args.env_id is None:
-        raise BadInput(f"name the domain to train on: --env, one of {', '.join(ials_domain_ids())}")
+        raise BadInput(f"name the domain to train on: --env, one of {', '.join(dials_domain_ids())}")
     domain = get_domain(args.env_id)
     if on_copies(domain):
         _check_copies_args(args)
