@@ -6,19 +6,22 @@
 # variant "untrained": untrained-DIALS (random AIPs, never trained), the control; variant "fidelity":
 # the AIPs of `ials-zoo fidelity` (autoregressive, reading their own last draw: --aip-training fidelity).
 # Resumable: a finished run is skipped, an interrupted one continues with --resume.
-# Usage: bash docs/sumo_net_dials.sh "ingolstadt21 cologne8" "0 1 2" [trained|untrained|fidelity] [runs folder]
+# A fifth argument retrains the AIPs every N steps per light instead of 12,000 (its runs get "_rN").
+# Usage: bash docs/sumo_net_dials.sh "ingolstadt21 cologne8" "0 1 2" [trained|untrained|fidelity] [runs folder] [N]
 set -euo pipefail
 maps=${1:-"ingolstadt21 cologne8"}
 seeds=${2:-"0 1 2"}
 variant=${3:-trained}
 root=${4:-runs/dials_net}
+refresh=${5:-12000}
 case "$variant" in trained|untrained|fidelity) ;; *) echo "variant must be trained, untrained or fidelity, got '$variant'" >&2; exit 2;; esac
 for seed in $seeds; do
   for net in $maps; do
-    aips=(--refresh 12000)
-    out="$root/${net}_s${seed}"
-    if [ "$variant" = untrained ]; then aips=(--aip untrained --refresh never); out="$root/${net}_untrained_s${seed}"; fi
-    if [ "$variant" = fidelity ]; then aips+=(--aip-training fidelity); out="$root/${net}_fidelity_s${seed}"; fi
+    aips=(--refresh "$refresh")
+    tag=""; if [ "$refresh" != 12000 ]; then tag="_r$refresh"; fi
+    if [ "$variant" = untrained ]; then aips=(--aip untrained --refresh never); tag="_untrained"; fi
+    if [ "$variant" = fidelity ]; then aips+=(--aip-training fidelity); tag="_fidelity$tag"; fi
+    out="$root/${net}${tag}_s${seed}"
     if [ -f "$out/result.json" ]; then echo "done: $out"; continue; fi
     resume=(); [ -f "$out/checkpoint.json" ] && resume=(--resume)
     evals=(--eval-every 7200 --eval-episodes 5)
