@@ -43,9 +43,10 @@ reference). **Determinism**: everything an agent does depends only on the run se
 name, not on its worker: the same seed gives the same run on either backend and with any
 ``--workers`` (bitwise on this CPU and torch build; see :mod:`ials_zoo.learners.batched_ppo`).
 
-**Wall-clock** (``training.wall_clock_seconds``): training, plus the AIPs' data collection and
-training (``training.aip_seconds``, included in the curve as in the paper's plots); GS
-evaluations and checkpoints excluded. Outputs in ``--out-dir`` as for the other baselines
+**Wall-clock**: ``training.wall_clock_seconds`` is the learners' training alone and
+``training.aip_seconds`` the AIPs' data collection and training; the run's wall-clock is their
+sum, which the curve's ``wall_clock_seconds`` counts (as in the paper's plots) and the
+leaderboard shows as "wall-clock (+AIP)"; GS evaluations and checkpoints excluded. Outputs in ``--out-dir`` as for the other baselines
 (:mod:`ials_zoo.baselines.runs`): ``status.json``, ``progress.csv``, ``curve.json``,
 ``checkpoint.pt``/``checkpoint.json`` + ``aips.pt`` (every round: ``--resume`` continues a
 killed run), ``policy.safetensors`` (the joint policy) and ``result.json`` (multi-agent track).
