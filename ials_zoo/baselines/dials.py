@@ -79,7 +79,7 @@ from ials_zoo.baselines.multiagent import (
     whole_updates,
 )
 from ials_zoo.baselines.retrain import training_command
-from ials_zoo.core.domains import domain_ids, get_domain
+from ials_zoo.core.domains import dials_domain_ids, get_domain
 from ials_zoo.core.extras import dials_of, study_of
 from ials_zoo.core.spaces import joint_sizes
 from ials_zoo.dials.backends import BACKENDS, InProcessBackend, check_ray_address, make_backend
@@ -100,12 +100,6 @@ REFRESH_WORDS = ("default", "once", "never")
 # training with which `ials-zoo fidelity`'s on-policy AIPs reproduce the GS over whole
 # trajectories (DIALSSettings.fidelity_*: autoregressive, more data and epochs, maybe a clock)
 AIP_TRAININGS = ("dials", "fidelity")
-
-
-def dials_domain_ids() -> list[str]:
-    """The domains DIALS trains on: every agent's IALS runs as one ParallelEnv (sumo_net_v0's
-    agents have their own spaces, so it is not among :func:`ials_domain_ids`, yet DIALS runs it)."""
-    return [env_id for env_id in domain_ids() if get_domain(env_id).has_ials_parallel_env]
 
 
 def _per_domain(describe) -> str:

@@ -301,6 +301,13 @@ def ials_domain_ids() -> list[str]:
     return [d for d in domain_ids() if get_domain(d).has_ials]
 
 
+def dials_domain_ids() -> list[str]:
+    """The ids of the domains DIALS trains on (:attr:`Domain.has_ials_parallel_env`): those of
+    :func:`ials_domain_ids` and those whose agents have their own spaces but one IALS ParallelEnv
+    (sumo_net_v0)."""
+    return [d for d in domain_ids() if get_domain(d).has_ials_parallel_env]
+
+
 def get_domain(env_id: str) -> Domain:
     """The domain ``env_id``; a ValueError naming the available ones for an unknown id."""
     with _lock:
@@ -372,6 +379,7 @@ __all__ = [
     "Domain",
     "ENTRY_POINT_GROUP",
     "default_domain",
+    "dials_domain_ids",
     "domain_ids",
     "domain_of_agent",
     "get_domain",
