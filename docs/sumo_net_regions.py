@@ -13,7 +13,7 @@ The variants measured on the way (inserting at the GS's speed, a new speed facto
 lanes, roads followed downstream) are in this script's history (commit 9170cfb).
 
 Usage: python docs/sumo_net_regions.py [--net ingolstadt21] [--seconds 3600] [--cap 400]
-       [--short-exit 50] [--worst N] [--noise-floor] [--each]
+       [--short-exit 50] [--reach 100] [--worst N] [--noise-floor] [--each]
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ import tempfile
 
 import numpy as np
 
-from ials_zoo.sumo_net.regions import CHAIN_CAP_METRES, SHORT_EXIT_METRES, regions_of
+from ials_zoo.sumo_net.regions import CHAIN_CAP_METRES, REACH_METRES, SHORT_EXIT_METRES, regions_of
 from ials_zoo.sumo_net.replay import replay_regions
 from ials_zoo.sumo_net.scenario import make_scenario
 
@@ -64,12 +64,14 @@ def main(argv=None) -> None:
     parser.add_argument("--seconds", type=int, default=3600)
     parser.add_argument("--cap", type=float, default=CHAIN_CAP_METRES)
     parser.add_argument("--short-exit", type=float, default=SHORT_EXIT_METRES)
+    parser.add_argument("--reach", type=float, default=REACH_METRES,
+                        help="roads shorter than this from the stop line go on through junctions (m; 0: never)")
     parser.add_argument("--worst", type=int, default=0, help="list the N lanes replayed worst")
     parser.add_argument("--noise-floor", action="store_true")
     parser.add_argument("--each", action="store_true", help="also every region alone: a single learner's cost")
     args = parser.parse_args(argv)
     sc = make_scenario(net=args.net)
-    regions = regions_of(sc.net_file, cap=args.cap, short_exit=args.short_exit)
+    regions = regions_of(sc.net_file, cap=args.cap, short_exit=args.short_exit, reach=args.reach)
     with tempfile.TemporaryDirectory() as tmp:
         out = replay_regions(sc, regions, args.seconds, tmp, measure_cost=True, noise_floor=args.noise_floor,
                              each=args.each)

@@ -12,6 +12,7 @@ from ials_zoo.sumo_net.network import read_network
 from ials_zoo.sumo_net.regions import (
     CHAIN_CAP_METRES,
     EXIT_METRES,
+    REACH_METRES,
     SHORT_EXIT_METRES,
     cut_network,
     network_size,
@@ -37,7 +38,8 @@ def test_every_light_has_a_region_holding_its_links(cologne8):
         r = regions[light.id]
         assert {lights.lane_edges[i] for i, _, _ in light.links} == set(r.incoming)
         assert {lights.lane_edges[o] for _, o, _ in light.links} == set(r.outgoing)
-        assert r.sources == tuple(c[0] for c in r.chains) and [c[-1] for c in r.chains] == list(r.incoming)
+        assert r.sources == tuple(c[0] for c in r.chains) and len(set(r.sources)) == len(r.sources)
+        assert list(dict.fromkeys(c[-1] for c in r.chains)) == list(r.incoming)  # every road ends at the light
         for chain in r.chains:
             edges = [net.getEdge(e) for e in chain]
             assert all(a.getToNode() is b.getFromNode() for a, b in zip(edges, edges[1:]))  # contiguous
@@ -51,6 +53,47 @@ def test_a_chain_stops_at_its_cap(cologne8):
     short = regions_of(cologne8, cap=1.0)
     assert all(len(c) == 1 for r in short.values() for c in r.chains)
     assert any(len(c) > 1 for r in regions_of(cologne8).values() for c in r.chains)
+
+
+def _junction(edge) -> bool:
+    """Whether ``edge`` starts at a node where roads meet (not one joining a road's pieces)."""
+    node = edge.getFromNode()
+    back = [e for e in node.getIncoming() if e.getFromNode() is not edge.getToNode()]
+    return len(back) != 1 or len([e for e in node.getOutgoing() if e.getToNode() is not back[0].getFromNode()]) != 1
+
+
+@pytest.mark.parametrize("reach", [0.0, REACH_METRES])
+def test_roads_go_through_junctions_while_shorter_than_the_reach(reach):
+    """Walking each road from the stop line upstream: it crosses a junction exactly where the
+    part walked is shorter than ``reach`` (and the cap), into every road feeding that junction;
+    it stops at every light. On ingolstadt21, where two of the lights that DIALS loses on have
+    roads a few metres long (docs/sumo_net.md)."""
+    import sumolib
+
+    net_file = make_scenario(net="ingolstadt21").net_file
+    net = sumolib.net.readNet(net_file, withInternal=False)
+    light_nodes = {c[0].getEdge().getToNode().getID() for t in net.getTrafficLights() for c in t.getConnections()}
+    regions = regions_of(net_file, reach=reach)
+    crossed = 0
+    for r in regions.values():
+        inside = {e for c in r.chains for e in c}
+        for chain in r.chains:
+            edges = [net.getEdge(e) for e in chain]
+            for k, (up, down) in enumerate(zip(edges, edges[1:])):
+                walked = sum(e.getLength() for e in edges[k + 1:])
+                assert down.getFromNode().getID() not in light_nodes
+                if _junction(down):
+                    assert walked < reach
+                    crossed += 1
+            first, walked = edges[0], sum(e.getLength() for e in edges)
+            stopped = first.getFromNode().getID() in light_nodes or walked >= CHAIN_CAP_METRES
+            if not stopped and walked < reach:  # a leaf short of the reach: nothing feeds it from outside
+                assert all(e.getID() in inside for e in first.getFromNode().getIncoming()
+                           if e.getFromNode() is not first.getToNode())
+    assert (crossed > 20) if reach else crossed == 0
+    if reach:  # the light with roads of 0-6 m now holds the roads behind them
+        assert regions["cluster_1863241547_1863241548_1976170214"].length > 4 * regions_of(
+            net_file, reach=0)["cluster_1863241547_1863241548_1976170214"].length
 
 
 def test_a_region_begins_at_the_cap_and_ends_a_few_metres_past_the_light(cologne8):
@@ -90,6 +133,8 @@ def test_bad_input_is_named(tmp_path, cologne8):
         regions_of(str(tmp_path / "missing.net.xml"))
     with pytest.raises(BadInput, match="cap"):
         regions_of(cologne8, cap=0)
+    with pytest.raises(BadInput, match="reach"):
+        regions_of(cologne8, reach=-1.0)
 
 
 def test_short_exits_bring_the_roads_after_them():

@@ -56,10 +56,10 @@ BLOCKED_SPEED = 0.01  # m/s: a blocked exit's speed limit (below SUMO's halting 
 
 def _table_path(scenario, light: str, seconds: int, seed: int) -> Path:
     root = os.environ.get("IALS_ZOO_CACHE")
-    from ials_zoo.sumo_net.regions import CHAIN_CAP_METRES, EXIT_METRES  # the regions' shape
+    from ials_zoo.sumo_net.regions import CHAIN_CAP_METRES, EXIT_METRES, REACH_METRES  # the regions' shape
 
     key = json.dumps([scenario.name, os.path.getsize(scenario.net_file), scenario.begin, light, seconds, seed,
-                      CHAIN_CAP_METRES, EXIT_METRES])
+                      CHAIN_CAP_METRES, EXIT_METRES, REACH_METRES])
     h = hashlib.sha256(key.encode()).hexdigest()[:12]
     return (Path(root) if root else Path.home() / ".cache" / "ials_zoo") / "sumo_net" / f"entries_{h}.json"
 

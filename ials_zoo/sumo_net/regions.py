@@ -2,15 +2,20 @@
 
 A light's region (:class:`NetRegion`) is what its local simulator will simulate:
 
-* **incoming chains**: for every edge that feeds one of the light's controlled lanes, that edge
-  and, upstream, the edges that lead into it one by one (through nodes that only join a road's
-  pieces), up to the upstream junction (a node where several roads meet, another light, or the
-  network's fringe) or until the chain covers :data:`CHAIN_CAP_METRES` (RESCO's 200 m
-  detection). The region begins that far upstream of the stop line: on the chain's first edge,
-  at its **entry offset** (:attr:`NetRegion.entry_offsets`; 0 where the upstream junction is
-  nearer). Before that point a vehicle is invisible to the light and is the rest of the network's
-  business; the first version began the chains at twice the detection, and its regions held 59% of
-  ingolstadt21's vehicle-steps (``docs/sumo_net.md``);
+* **incoming roads**: for every edge that feeds one of the light's controlled lanes, that edge
+  and, upstream, the edges that lead into it: through nodes that only join a road's pieces, and
+  through a junction (a node where several roads meet, not a light) into every road feeding it
+  while the way walked from the stop line is shorter than :data:`REACH_METRES`; up to another
+  light, the network's fringe, or until the way covers :data:`CHAIN_CAP_METRES` (RESCO's 200 m
+  detection). Each way from a furthest edge to the light is a *chain*
+  (:attr:`NetRegion.chains`). The region begins that far upstream of the stop line: on each
+  chain's first edge, at its **entry offset** (:attr:`NetRegion.entry_offsets`; 0 where the
+  walk stopped nearer). Before that point a vehicle is invisible to the light and is the rest of
+  the network's business; the first version began the chains at twice the detection, and its
+  regions held 59% of ingolstadt21's vehicle-steps (``docs/sumo_net.md``). The second stopped
+  at every junction: two of ingolstadt21's lights then had roads of 0-10 m, no room for their
+  queues, and DIALS lost most of its delay on them (``docs/sumo_net.md``); the reach gives a
+  light at least that much road to queue on, where the network has it;
 * **outgoing edges**: every edge a controlled link leads to, so that every link of the light's
   program survives a cut (its phases keep their meaning) and spill-back from them is simulated;
   where one is shorter than :data:`SHORT_EXIT_METRES`, the edges after it too (**beyond**):
@@ -21,8 +26,10 @@ A light's region (:class:`NetRegion`) is what its local simulator will simulate:
   ingolstadt21 the outgoing roads held 18% of the regions' vehicle-steps.
 
 The **influence sources** are the chains' first edges: a vehicle crossing its entry offset (coming
-from upstream, or inserted there) is what the rest of the network does to the region. Vehicles inserted on a region's other edges are influence as well (their routes
-start inside). :func:`cut_network` writes a region's edges as a network of their own
+from upstream, or inserted there) is what the rest of the network does to the region. Vehicles
+inserted on a region's other edges are influence as well (their routes start inside). A vehicle
+turning off at a junction inside the region, onto a road outside it, leaves at the end of its
+last edge inside. :func:`cut_network` writes a region's edges as a network of their own
 (``netconvert --keep-edges.explicit``), with the light's program.
 
 Read with ``sumolib`` (SUMO's own reader of its files), once per file.
@@ -42,6 +49,7 @@ from ials_zoo.sumo.command import sumo_binary
 CHAIN_CAP_METRES = 200.0
 SHORT_EXIT_METRES = 50.0
 EXIT_METRES = 25.0
+REACH_METRES = 100.0
 
 
 @dataclass(frozen=True)
@@ -51,9 +59,10 @@ class NetRegion:
     Attributes:
         light: the light's id (the agent).
         incoming: the edges that feed its controlled lanes.
-        chains: per incoming edge, the chain's edges from the furthest upstream to it.
+        chains: every way into the light, its edges from the furthest upstream to an incoming
+            edge, in ``incoming`` order (several per incoming edge where roads meet upstream).
         outgoing: the edges its controlled links lead to.
-        sources: the chains' first edges (where influence enters), in ``incoming`` order.
+        sources: the chains' first edges (where influence enters), in ``chains`` order.
         length: metres of lanes in the region (every lane of every edge).
         beyond: the edges after its short outgoing edges.
         entry_offsets: per source, the lane position (m) where the region begins on it.
@@ -88,37 +97,45 @@ def _reverse_of(edge, other) -> bool:
     return edge.getFromNode() is other.getToNode() and edge.getToNode() is other.getFromNode()
 
 
-def _upstream(edge, lights: set):
-    """The edge that alone leads into ``edge`` through a node that only joins a road's pieces,
-    or None (a junction, a light or the fringe)."""
+def _feeding(edge, lights: set, through_junction: bool) -> list:
+    """The edges that lead into ``edge`` and belong to its region: the one edge before it where
+    its node only joins a road's pieces; every edge into its node where the node is a junction
+    and ``through_junction``; none at a light or the fringe."""
     node = edge.getFromNode()
     if node.getID() in lights or node.getType() == "traffic_light":
-        return None
+        return []
     feeding = [e for e in node.getIncoming() if not _reverse_of(e, edge) and e.getFunction() != "internal"]
     leaving = [e for e in node.getOutgoing() if not _reverse_of(e, feeding[0] if feeding else edge)]
-    if len(feeding) != 1 or len(leaving) != 1:
-        return None
-    return feeding[0]
+    if len(feeding) == 1 and len(leaving) == 1:
+        return feeding
+    return feeding if through_junction else []
 
 
-def _chain(edge, lights: set, cap: float) -> tuple:
-    chain, covered, seen = [edge], edge.getLength(), {edge.getID()}
-    while covered < cap:
-        up = _upstream(chain[0], lights)
-        if up is None or up.getID() in seen:
-            break
-        chain.insert(0, up)
-        seen.add(up.getID())
-        covered += up.getLength()
-    return tuple(e.getID() for e in chain)
+def _tree(edge, lights: set, cap: float, reach: float, seen: set) -> list[tuple]:
+    """The paths (furthest upstream edge first, ``edge`` last) of the roads feeding ``edge``
+    within ``cap`` m of its end, through junctions while a path covers less than ``reach`` m.
+    ``seen``: edges already in the region (left out, and added to)."""
+    paths, stack = [], [(edge,)]
+    while stack:
+        path = stack.pop()
+        covered = sum(e.getLength() for e in path)
+        ups = [] if covered >= cap else [
+            e for e in _feeding(path[0], lights, covered < reach) if e.getID() not in seen]
+        seen.update(e.getID() for e in ups)
+        if not ups:
+            paths.append(tuple(e.getID() for e in path))
+        stack.extend((e, *path) for e in reversed(ups))
+    return paths
 
 
 def regions_of(net_file: str, cap: float = CHAIN_CAP_METRES, short_exit: float = SHORT_EXIT_METRES,
-               exit_metres: float = EXIT_METRES) -> dict[str, NetRegion]:
+               exit_metres: float = EXIT_METRES, reach: float = REACH_METRES) -> dict[str, NetRegion]:
     """Every light's region of the network ``net_file`` (module docstring), by light id;
     ``cap``: how far upstream of the stop line the region begins (m); ``short_exit``: outgoing
     edges shorter than that (m) bring the edges after them (0: none); ``exit_metres``: how far
-    into its last edge a vehicle leaves (m; ``inf``: at the edge's end)."""
+    into its last edge a vehicle leaves (m; ``inf``: at the edge's end); ``reach``: a road
+    shorter than that (m) from the stop line goes on through the junction it starts at, into
+    every road feeding it (0: chains end at every junction)."""
     if not os.path.isfile(net_file):
         raise BadInput(f"network file {net_file!r} does not exist")
     if not cap > 0:
@@ -127,28 +144,31 @@ def regions_of(net_file: str, cap: float = CHAIN_CAP_METRES, short_exit: float =
         raise BadInput(f"the short exits' length must be >= 0 m, got {short_exit!r}")
     if not exit_metres > 0:
         raise BadInput(f"the exits' distance must be > 0 m, got {exit_metres!r}")
+    if not reach >= 0:
+        raise BadInput(f"the regions' reach through junctions must be >= 0 m, got {reach!r}")
     net = _read(str(net_file), os.path.getmtime(net_file))
     lights = {t.getID() for t in net.getTrafficLights()}
     # a light's nodes (a joint light controls several): their edges end chains too
-    light_nodes = {n.getID() for t in net.getTrafficLights() for n in _nodes_of(t)}
-    out = {}
-    for tls in net.getTrafficLights():
-        connections = tls.getConnections()
-        if not connections:
-            continue
-        incoming = tuple(dict.fromkeys(c[0].getEdge().getID() for c in connections))
-        outgoing = tuple(dict.fromkeys(c[1].getEdge().getID() for c in connections))
-        chains = tuple(_chain(net.getEdge(e), lights | light_nodes, cap) for e in incoming)
-        inside = set(outgoing).union(*chains)
-        beyond = tuple(dict.fromkeys(x.getID() for e in outgoing if net.getEdge(e).getLength() < short_exit
-                                     for x in net.getEdge(e).getOutgoing() if x.getID() not in inside))
-        edges = dict.fromkeys([e for c in chains for e in c] + list(outgoing) + list(beyond))
-        length = sum(lane.getLength() for e in edges for lane in net.getEdge(e).getLanes())
-        offsets = tuple(max(0.0, sum(net.getEdge(e).getLength() for e in c) - cap) for c in chains)
-        exits = tuple((e, min(exit_metres, net.getEdge(e).getLength())) for e in dict.fromkeys(outgoing + beyond))
-        out[tls.getID()] = NetRegion(tls.getID(), incoming, chains, outgoing, tuple(c[0] for c in chains), length,
-                                     beyond, offsets, exits)
-    return out
+    stops = lights | {n.getID() for t in net.getTrafficLights() for n in _nodes_of(t)}
+    return {tls.getID(): _region(net, tls, stops, cap, reach, short_exit, exit_metres)
+            for tls in net.getTrafficLights() if tls.getConnections()}
+
+
+def _region(net, tls, stops: set, cap: float, reach: float, short_exit: float, exit_metres: float) -> NetRegion:
+    connections = tls.getConnections()
+    incoming = tuple(dict.fromkeys(c[0].getEdge().getID() for c in connections))
+    outgoing = tuple(dict.fromkeys(c[1].getEdge().getID() for c in connections))
+    seen = set(incoming)  # each incoming edge heads its own roads
+    chains = tuple(p for e in incoming for p in _tree(net.getEdge(e), stops, cap, reach, seen))
+    inside = set(outgoing).union(*chains)
+    beyond = tuple(dict.fromkeys(x.getID() for e in outgoing if net.getEdge(e).getLength() < short_exit
+                                 for x in net.getEdge(e).getOutgoing() if x.getID() not in inside))
+    edges = dict.fromkeys([e for c in chains for e in c] + list(outgoing) + list(beyond))
+    length = sum(lane.getLength() for e in edges for lane in net.getEdge(e).getLanes())
+    offsets = tuple(max(0.0, sum(net.getEdge(e).getLength() for e in c) - cap) for c in chains)
+    exits = tuple((e, min(exit_metres, net.getEdge(e).getLength())) for e in dict.fromkeys(outgoing + beyond))
+    return NetRegion(tls.getID(), incoming, chains, outgoing, tuple(c[0] for c in chains), length,
+                     beyond, offsets, exits)
 
 
 def _nodes_of(tls):
