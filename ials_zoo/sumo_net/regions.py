@@ -2,20 +2,21 @@
 
 A light's region (:class:`NetRegion`) is what its local simulator will simulate:
 
-* **incoming roads**: for every edge that feeds one of the light's controlled lanes, that edge
-  and, upstream, the edges that lead into it: through nodes that only join a road's pieces, and
-  through a junction (a node where several roads meet, not a light) into every road feeding it
-  while the way walked from the stop line is shorter than :data:`REACH_METRES`; up to another
-  light, the network's fringe, or until the way covers :data:`CHAIN_CAP_METRES` (RESCO's 200 m
-  detection). Each way from a furthest edge to the light is a *chain*
-  (:attr:`NetRegion.chains`). The region begins that far upstream of the stop line: on each
-  chain's first edge, at its **entry offset** (:attr:`NetRegion.entry_offsets`; 0 where the
-  walk stopped nearer). Before that point a vehicle is invisible to the light and is the rest of
-  the network's business; the first version began the chains at twice the detection, and its
-  regions held 59% of ingolstadt21's vehicle-steps (``docs/sumo_net.md``). The second stopped
-  at every junction: two of ingolstadt21's lights then had roads of 0-10 m, no room for their
-  queues, and DIALS lost most of its delay on them (``docs/sumo_net.md``); the reach gives a
-  light at least that much road to queue on, where the network has it;
+* **incoming chains**: for every edge that feeds one of the light's controlled lanes, that edge
+  and, upstream, the edges that lead into it one by one (through nodes that only join a road's
+  pieces), up to the upstream junction (a node where several roads meet, another light, or the
+  network's fringe) or until the chain covers :data:`CHAIN_CAP_METRES` (RESCO's 200 m
+  detection). The region begins that far upstream of the stop line: on the chain's first edge,
+  at its **entry offset** (:attr:`NetRegion.entry_offsets`; 0 where the upstream junction is
+  nearer). Before that point a vehicle is invisible to the light and is the rest of the network's
+  business; the first version began the chains at twice the detection, and its regions held 59%
+  of ingolstadt21's vehicle-steps (``docs/sumo_net.md``). With ``reach`` > 0 a road shorter than
+  ``reach`` from the stop line goes on through the junction it starts at (not a light), into
+  every road feeding it: a tree of roads, each way from a furthest edge to the light a chain.
+  The default, :data:`REACH_METRES`, is 0: at 100 m, tried because two of ingolstadt21's lights
+  have chains of 0-10 m and DIALS loses most of its delay on them, ingolstadt21's regions held
+  1.5x the lane-metres, cost 1.4x as much, replayed the GS's lanes less closely, and DIALS lost
+  as much on those lights (``docs/sumo_net.md``);
 * **outgoing edges**: every edge a controlled link leads to, so that every link of the light's
   program survives a cut (its phases keep their meaning) and spill-back from them is simulated;
   where one is shorter than :data:`SHORT_EXIT_METRES`, the edges after it too (**beyond**):
@@ -49,7 +50,7 @@ from ials_zoo.sumo.command import sumo_binary
 CHAIN_CAP_METRES = 200.0
 SHORT_EXIT_METRES = 50.0
 EXIT_METRES = 25.0
-REACH_METRES = 100.0
+REACH_METRES = 0.0  # chains end at the upstream junction (module docstring: 100 m measured, no better)
 
 
 @dataclass(frozen=True)
@@ -135,7 +136,7 @@ def regions_of(net_file: str, cap: float = CHAIN_CAP_METRES, short_exit: float =
     edges shorter than that (m) bring the edges after them (0: none); ``exit_metres``: how far
     into its last edge a vehicle leaves (m; ``inf``: at the edge's end); ``reach``: a road
     shorter than that (m) from the stop line goes on through the junction it starts at, into
-    every road feeding it (0: chains end at every junction)."""
+    every road feeding it (0, the default: chains end at every junction)."""
     if not os.path.isfile(net_file):
         raise BadInput(f"network file {net_file!r} does not exist")
     if not cap > 0:
