@@ -32,7 +32,8 @@ def print_table(net: str, args, regions: dict, out: dict) -> None:
     e, gs = out["error"], np.asarray(out["gs"], float)
     cost = out["local_seconds_per_step"] / out["gs_seconds_per_step"]
     print(f"{net}, {args.seconds} s, cap {args.cap:g} m, short exits {args.short_exit:g} m, {len(regions)} lights, "
-          f"{sum(len(r.edges) for r in regions.values())} region edges, {len(out['lanes'])} controlled lanes, "
+          f"{sum(len(r.edges) for r in regions.values())} region edges ({sum(r.length for r in regions.values()):,.0f} "
+          f"lane-m, {sum(len(r.sources) for r in regions.values())} entry edges), {len(out['lanes'])} controlled lanes, "
           f"{out['inserted']:,} vehicles inserted into the regions")
     print("| | GS | local simulators (every region) |\n|---|---|---|")
     print(f"| µs per step | {out['gs_seconds_per_step'] * 1e6:,.0f} | {out['local_seconds_per_step'] * 1e6:,.0f} "
