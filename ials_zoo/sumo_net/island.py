@@ -204,12 +204,6 @@ class IslandCore(NetCore):
         if not self.watch:
             self.watcher.measure_exits(raw)
         told = self.watcher.influences() if self.watch else [p.copy() for p in self.plan]
-        for now, held in zip(self.watcher.blocked_now, self.blocking):
-            # an exit held blocked is a jam even before a vehicle reaches it: the d-set says so, as
-            # the GS's does of a jam. Measured alone, a block the AIP drew looked free until a
-            # vehicle halted on it, and the AIP, reading "free", ended it: blocks lasted a decision
-            # or two where the GS's last the episode (docs/sumo_net.md, "jams")
-            now |= (held > 0).astype(now.dtype)
         return (*result, (told, self.watcher.dsets(raw)))
 
     def _block_exits(self, raw, exits: list) -> None:
