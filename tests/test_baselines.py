@@ -363,3 +363,34 @@ def test_a_run_says_this_machines_speed_after_its_first_stretch(tmp_path, capsys
     rate, joint, first = (int(g.replace(",", "")) for g in m.groups())
     # the first stretch ends at the first checkpoint: a quarter of --eval-every, at least an update
     assert first == 128 and abs(joint - 2 * rate) <= 2 and "of training left" in lines[0]
+
+
+@pytest.mark.parametrize("env_id, per_map", [("sumo_net_v0", True), ("warehouse_v0", False)])
+def test_the_opening_estimate_scales_with_the_learners_only_where_they_are_the_cost(env_id, per_map, tmp_path):
+    """A real network costs its map's steps whatever the number of learning lights (8 or 21 take
+    about the same time per step, docs/sumo_net.md): its estimate is the study's steps of all
+    agents per second. Elsewhere the cost is per agent, and the estimate grows with them."""
+    import re
+    from types import SimpleNamespace
+
+    from ials_zoo.baselines.driver import RunPlan, estimate_text
+    from ials_zoo.core.domains import get_domain
+    from ials_zoo.core.extras import study_of
+
+    domain, study = get_domain(env_id), study_of(env_id)
+
+    def minutes(agents: int, simulator: str) -> float:
+        plan = RunPlan("ippo", env_id, [f"a{k}" for k in range(agents)], {}, 0, 36_000, 512, 12_000, 3, 20, 1,
+                       tmp_path, {}, {})
+        text = estimate_text(plan, SimpleNamespace(simulator=simulator), domain)
+        value, unit = re.search(r"about ([\d.]+) (min|s|h)", text).groups()
+        return float(value) * {"s": 1 / 60, "min": 1.0, "h": 60.0}[unit]
+
+    # (on a GS with scripted agents the per-agent estimate adds their cost: the IALS alone here)
+    for simulator in ("gs", "ials") if per_map else ("ials",):
+        few, many = minutes(8, simulator), minutes(21, simulator)
+        if per_map:
+            rate = study.joint_steps_per_second[simulator]
+            assert few == many == pytest.approx(36_000 / rate / 60, rel=0.02)
+        else:
+            assert many == pytest.approx(few * 21 / 8, rel=0.05)

@@ -177,6 +177,11 @@ def estimate_text(plan: RunPlan, learner: Learner, domain) -> str:
         return (f"{plan.total:,} {unit}; about {format_seconds(seconds)} of training at the study's speed "
                 f"({plan.steps_per_second:,.0f} {unit}/s on 2 cores; evaluations extra)")
     on_gs = learner.simulator == "gs"
+    if study.joint_steps_per_second is not None:  # the map's cost, whatever the number of learners
+        rate = study.joint_steps_per_second.get("gs" if on_gs else "ials", 100.0)
+        return (f"{plan.total:,} steps per agent; about {format_seconds(plan.total / max(rate, 1.0))} of training "
+                f"at the study's speed ({rate:,.0f} steps of all agents at once per second on 2 cores; "
+                "evaluations extra)")
     rate = study.multi_agent_steps_per_second.get("gs" if on_gs else "ials", 10_000.0)
     seconds = plan.total * len(plan.agents) / max(rate, 1.0)
     if on_gs and len(plan.agents) < len(domain.agents(**plan.options)):

@@ -50,6 +50,11 @@ class StudySettings:
             domain knows it better than ``multi_agent_steps_per_second`` (a GS whose cost
             depends on its network more than on its agents); for the estimate an evaluation
             or a GS collection prints first.
+        joint_steps_per_second: steps per second of training of a multi-agent run counted once
+            for all agents (``"gs"``, ``"ials"``), for a domain whose cost per step is its map's
+            more than its agents' (a real network: 8 lights or 21, about the same steps per
+            second); when given, the opening estimate of a multi-agent run uses it rather than
+            ``multi_agent_steps_per_second``.
     """
 
     budget: int = 500_000
@@ -59,6 +64,7 @@ class StudySettings:
     multi_agent_budget: int = 200_000
     multi_agent_steps_per_second: dict = field(default_factory=lambda: {"gs": 10_000.0, "ials": 10_000.0})
     gs_step_seconds: Callable[..., float | None] | None = None
+    joint_steps_per_second: dict | None = None
 
 
 @dataclass(frozen=True)

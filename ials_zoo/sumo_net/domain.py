@@ -83,8 +83,11 @@ def gs_step_seconds(**options) -> float:
     return seconds(**options)
 
 
+# per step of all lights at once the maps cost about the same (35,840 steps; board and docs/sumo_net.md): IPPO
+# 47-54 steps/s on ingolstadt21 (21 lights), 69 on cologne8 (8), 54 on grid4x4 (16); DIALS's
+# training 131-142 on ingolstadt21 and 126 on cologne8, its AIP rounds extra (docs/sumo_net.md)
 STUDY = StudySettings(multi_agent_budget=36_000, multi_agent_steps_per_second={"gs": 500.0, "ials": 500.0},
-                      gs_step_seconds=gs_step_seconds)
+                      gs_step_seconds=gs_step_seconds, joint_steps_per_second={"gs": 55.0, "ials": 130.0})
 
 # the AIPs of every junction (``train-aip --agent all``, each trained alone: the regions have their
 # own sizes): two GS hours of data; at 30 epochs and lr 3e-3 they stayed at twice the data
