@@ -176,20 +176,24 @@ def estimate_text(plan: RunPlan, learner: Learner, domain) -> str:
         unit = UNITS.get(plan.unit, plan.unit + "s")
         return (f"{plan.total:,} {unit}; about {format_seconds(seconds)} of training at the study's speed "
                 f"({plan.steps_per_second:,.0f} {unit}/s on 2 cores; evaluations extra)")
-    on_gs = learner.simulator == "gs"
+    seconds, speed = _multi_agent_seconds(plan, learner.simulator == "gs", study, domain)
+    return (f"{plan.total:,} steps per agent; about {format_seconds(seconds)} of training at the study's speed "
+            f"({speed} on 2 cores; evaluations extra)")
+
+
+def _multi_agent_seconds(plan: RunPlan, on_gs: bool, study, domain) -> tuple[float, str]:
+    """A multi-agent run's expected training seconds, and the speed they assume (words)."""
+    simulator = "gs" if on_gs else "ials"
     if study.joint_steps_per_second is not None:  # the map's cost, whatever the number of learners
-        rate = study.joint_steps_per_second.get("gs" if on_gs else "ials", 100.0)
-        return (f"{plan.total:,} steps per agent; about {format_seconds(plan.total / max(rate, 1.0))} of training "
-                f"at the study's speed ({rate:,.0f} steps of all agents at once per second on 2 cores; "
-                "evaluations extra)")
-    rate = study.multi_agent_steps_per_second.get("gs" if on_gs else "ials", 10_000.0)
+        rate = study.joint_steps_per_second.get(simulator, 100.0)
+        return plan.total / max(rate, 1.0), f"{rate:,.0f} steps of all agents at once per second"
+    rate = study.multi_agent_steps_per_second.get(simulator, 10_000.0)
     seconds = plan.total * len(plan.agents) / max(rate, 1.0)
     if on_gs and len(plan.agents) < len(domain.agents(**plan.options)):
         # the GS also moves the scripted agents: about what one learner on the GS costs in
         # ppo_single (robot_20 alone, 512k steps: this says 2.0 min, it took 1.6-2.0)
         seconds += plan.total / max(study.ppo_steps_per_second.get("gs", 1000.0), 1.0)
-    return (f"{plan.total:,} steps per agent; about {format_seconds(seconds)} of training at the study's speed "
-            f"({rate:,.0f} agent-steps/s on 2 cores; evaluations extra)")
+    return seconds, f"{rate:,.0f} agent-steps/s"
 
 
 def run(plan: RunPlan, learner: Learner, description: str, domain, scoring: Scoring | None = None) -> dict:

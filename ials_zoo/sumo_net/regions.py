@@ -116,16 +116,15 @@ def _tree(edge, lights: set, cap: float, reach: float, seen: set) -> list[tuple]
     """The paths (furthest upstream edge first, ``edge`` last) of the roads feeding ``edge``
     within ``cap`` m of its end, through junctions while a path covers less than ``reach`` m.
     ``seen``: edges already in the region (left out, and added to)."""
-    paths, stack = [], [(edge,)]
+    paths, stack = [], [((edge,), edge.getLength())]  # (a path, the metres it covers)
     while stack:
-        path = stack.pop()
-        covered = sum(e.getLength() for e in path)
+        path, covered = stack.pop()
         ups = [] if covered >= cap else [
             e for e in _feeding(path[0], lights, covered < reach) if e.getID() not in seen]
         seen.update(e.getID() for e in ups)
         if not ups:
             paths.append(tuple(e.getID() for e in path))
-        stack.extend((e, *path) for e in reversed(ups))
+        stack.extend(((e, *path), covered + e.getLength()) for e in reversed(ups))
     return paths
 
 
