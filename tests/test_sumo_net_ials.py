@@ -131,6 +131,36 @@ def test_an_exit_the_sources_block_holds_its_vehicles_and_the_queue_backs_up():
     assert np.mean(waits[True]) > 5 * np.mean(waits[False]), (np.mean(waits[True]), np.mean(waits[False]))  # 2.75, 0.03
 
 
+def test_a_given_block_reads_blocked_and_one_that_lasts_is_a_gridlock_that_stays():
+    """The d-set reads an exit given blocked as blocked now (as the GS reads a jam's queue),
+    with how long it has lasted; a block given :data:`GRIDLOCK_DECISIONS` decisions in a row
+    stays, whatever the sources say next (SUMO without teleports never clears a gridlock), and
+    a shorter one ends when the sources free it."""
+    from ials_zoo.sumo_net.island import GRIDLOCK_DECISIONS
+
+    ls = get_domain("sumo_net_v0").local_simulator(LIGHT, **LS_OPTIONS)
+    region = ls.regions[0]
+    is_exit = np.array([n.startswith("exit:") for n in region.influence_names])
+    names = region.dset_names["dset"]
+    now = np.array([n.startswith("blocked_") for n in names])
+    held = {n: np.array([x.startswith(f"held{n}_") for x in names]) for n in (1, 10)}
+    try:
+        for blocks in (GRIDLOCK_DECISIONS - 1, GRIDLOCK_DECISIONS):
+            ls.reset(seed=0)
+            for k in range(blocks + 3):
+                u = np.where(is_exit, int(k < blocks), 0)[None].astype(np.int64)
+                _, _, dsets = ls.step(np.array([k % 2]), u)
+                d = dsets["dset"][0]
+                if k == 0:
+                    assert d[now].all() and d[held[1]].all() and not d[held[10]].any()
+                if k == blocks:  # the sources free every exit
+                    gridlock = blocks >= GRIDLOCK_DECISIONS
+                    assert (d[held[1]] == gridlock).all() and (d[held[10]] == gridlock).all(), (blocks, d[held[1]])
+                    assert not gridlock or d[now].all()
+    finally:
+        ls.close()
+
+
 def test_make_ials_of_a_junction_passes_gymnasiums_checker():
     env = ials_zoo.make_ials("sumo_net_v0", LIGHT, predictor="untrained", seed=0, **{**LS_OPTIONS, "max_cycles": 20})
     try:
@@ -301,7 +331,17 @@ def test_the_entry_watcher_counts_each_vehicle_once_where_it_came_in():
     assert watcher.influences()[0][-1] == 0
     raw.t = 2
     watcher.measure_exits(raw)
-    assert watcher.dsets(_NoLanes())[0].tolist() == [1]  # the d-set ends with the exits' blocks now
+    # the d-set ends with the exits' blocks now, then whether each block has lasted 1, 3 and 10 decisions
+    assert watcher.dsets(_NoLanes())[0].tolist() == [1, 0, 0, 0]
+    blocked, free = np.array([0] * 12 + [1]), np.array([0] * 13)
+    lasted = []
+    for u in [blocked, blocked, free, *[blocked] * 10]:
+        watcher.end_decision([u])
+        lasted.append(watcher.dsets(_NoLanes())[0][1:].tolist())
+    assert lasted[:4] == [[1, 0, 0], [1, 0, 0], [0, 0, 0], [1, 0, 0]]  # a free decision ends the block
+    assert lasted[5] == [1, 1, 0] and lasted[11] == [1, 1, 0] and lasted[12] == [1, 1, 1]
+    watcher.reset()
+    assert watcher.dsets(_NoLanes())[0].tolist() == [0, 0, 0, 0]
 
 
 def test_the_bench_reports_every_light_s_ials_and_the_multi_agent_ials_against_the_gs(capsys):

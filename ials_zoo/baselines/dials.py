@@ -278,7 +278,7 @@ def aip_training_of(args, domain) -> AIPTraining:
                            schedule, lags, d.fidelity_aip_clock_horizon)
     return AIPTraining(int(args.collect_steps or d.collect_steps), autoregressive,
                        float(args.aip_lr or d.lr_for(autoregressive)), int(args.aip_epochs or d.aip_epochs),
-                       d.aip_lr_schedule, 1 if autoregressive else 0, 0)
+                       d.aip_lr_schedule, 1 if autoregressive else 0, d.aip_clock_horizon)
 
 
 def default_workers(n_agents: int) -> int:
@@ -371,8 +371,9 @@ class AIPRefreshes:
         args, d, n, how = self.args, dials_of(self.domain), self.refreshes, self.aip_training
         net = policy() if steps > 0 else None
         note(f"AIP round {n}: GS collection + training")
+        clock = f"clock {how.clock_horizon}" if how.clock_horizon else ""
         kind = (f"autoregressive (last {how.influence_lags} draw{'s' if how.influence_lags > 1 else ''}"
-                f"{f', clock {how.clock_horizon}' if how.clock_horizon else ''}) " if how.autoregressive else "")
+                f"{', ' + clock if clock else ''}) " if how.autoregressive else f"({clock}) " if clock else "")
         print(f"dials: AIP round {n} at {steps:,} steps per agent: {how.collect_steps:,} GS steps of "
               f"{'the joint policy' if net else 'uniformly random agents'}, then {len(self.agents)} "
               f"{kind}{d.aip_arch.upper()} AIPs x {how.epochs} epochs ...", flush=True)

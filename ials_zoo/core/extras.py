@@ -103,6 +103,8 @@ class DIALSSettings:
             them coming makes arrivals too smooth, which flatters the light (``docs/fidelity.md``).
         fidelity_collect_steps: GS steps of each joint policy's AIP data in ``ials-zoo fidelity``
             (None: ``collect_steps``).
+        aip_clock_horizon: H > 0: DIALS's own AIPs read the time since the episode's start,
+            ``min(t, H) / H``, as ``fidelity_aip_clock_horizon`` below (0: they do not).
         fidelity_aip_clock_horizon: H > 0: the on-policy AIPs also read the time since the
             episode's start, ``min(t, H) / H`` (0: they do not). Traffic reads 100: its grid
             starts empty, and an AIP without a clock cannot tell the first steps of an empty
@@ -123,6 +125,7 @@ class DIALSSettings:
     aip_autoregressive: bool = False
     aip_autoregressive_lr: float = 1e-2
     aip_lr_schedule: str = "constant"
+    aip_clock_horizon: int = 0
     fidelity_aip_lr: float | None = None
     fidelity_aip_epochs: int | None = None
     fidelity_aip_lr_schedule: str | None = "linear"
@@ -131,9 +134,10 @@ class DIALSSettings:
     fidelity_aip_clock_horizon: int = 0
 
     def __post_init__(self):
-        clock = self.fidelity_aip_clock_horizon
-        if isinstance(clock, bool) or not isinstance(clock, int) or clock < 0:
-            raise BadInput(f"DIALSSettings.fidelity_aip_clock_horizon must be an int >= 0, got {clock!r}")
+        for name in ("aip_clock_horizon", "fidelity_aip_clock_horizon"):
+            clock = getattr(self, name)
+            if isinstance(clock, bool) or not isinstance(clock, int) or clock < 0:
+                raise BadInput(f"DIALSSettings.{name} must be an int >= 0, got {clock!r}")
         lags = self.fidelity_aip_influence_lags
         if isinstance(lags, bool) or not isinstance(lags, int) or lags < 1:
             raise BadInput(f"DIALSSettings.fidelity_aip_influence_lags must be an int >= 1, got {lags!r}")

@@ -94,8 +94,12 @@ STUDY = StudySettings(multi_agent_budget=36_000, multi_agent_steps_per_second={"
 # marginal's cross-entropy (0.30 against 0.16 on cologne8) and flooded their regions, at 150 they
 # reach it (docs/sumo_net.md)
 # two IALS copies, as IPPO's two GS copies: one per worker on 2 cores
+# a clock over the whole episode (360 decisions): on ingolstadt21 under DIALS's policy the jam past the
+# cluster's exit set in at decisions 223-259 of every GS episode; AIPs without a clock drew their blocks
+# from the first decisions on and let them go (docs/sumo_net.md, "jams")
 DIALS = DIALSSettings(aip_arch="mlp", aip_hidden=64, aip_lr=3e-3, aip_epochs=150, aip_batch=256,
-                      aip_lr_schedule="linear", collect_steps=720, copies=2)
+                      aip_lr_schedule="linear", collect_steps=720, copies=2, aip_clock_horizon=360,
+                      fidelity_aip_clock_horizon=360)
 
 TOOLS = {"resco-controllers": ("ials_zoo.sumo_net.study",
                                "fixed time, max pressure, greedy and actuated lights on RESCO's maps, beside RESCO's table")}

@@ -27,7 +27,14 @@ come in:
   blocked throughout), and an AIP drawing every second on its own made blocks flicker.
 * **d-set** (``"dset"``): the region's local occupancy where vehicles come in, without the
   light's state: per lane of every entry edge, :data:`CELLS` cells of :data:`CELL_METRES` m
-  from the entry offset, occupied or not; then per exit, whether it is blocked now.
+  from the entry offset, occupied or not; then per exit, whether it is blocked now; then per
+  exit, how long its block has lasted: whether its source said blocked for at least each of
+  :data:`HELD_DECISIONS` decisions in a row, up to the last (the GS's measured sources, the
+  local simulator's given ones: the same history in both). A jam past an exit that sets in
+  lasts: on ingolstadt21 under DIALS's policy, once the cluster's busiest exit was blocked it
+  stayed blocked to the episode's end in every episode. An AIP reading only the exit now let a
+  block it drew go after a decision or two (``docs/sumo_net.md``, "jams"); reading how long it
+  has lasted, it learns from the GS that a long block stays.
 * **full** d-set: the d-set and, per incoming lane of the light (its observation's rows),
   whether its detection holds a queue and whether it holds approaching vehicles.
 
@@ -51,6 +58,7 @@ EXIT_CLASSES = 2  # an exit free or blocked
 HALTING_SPEED = 0.1  # m/s: SUMO's own threshold of a halting vehicle
 INSIDE = "inside"
 CELLS, CELL_METRES = 4, 25.0
+HELD_DECISIONS = (1, 3, 10)  # a block held this many decisions in a row or more: one d-set bit each
 
 
 @dataclass(frozen=True)
@@ -121,6 +129,7 @@ def _scenario(options: dict):
 def dset_names(layout: RegionLayout) -> dict[str, tuple[str, ...]]:
     cells = tuple(f"occ_{lane}_{k}" for lane in layout.source_lanes for k in range(CELLS))
     cells += tuple(f"blocked_{e}" for e in layout.exit_edges)
+    cells += tuple(f"held{n}_{e}" for e in layout.exit_edges for n in HELD_DECISIONS)
     light = tuple(f"{what}_{lane}" for lane in layout.lanes for what in ("queue", "approach"))
     return {"dset": cells, "full": cells + light}
 
@@ -157,14 +166,22 @@ class EntryWatcher:
         self.counts = [np.zeros((self.decision, len(x.points)), np.int64) for x in self.layouts]
         self.blocked = [np.zeros((self.decision, len(x.exits)), np.int64) for x in self.layouts]
         self.blocked_now = [np.zeros(len(x.exits), np.uint8) for x in self.layouts]
+        self.held = [np.zeros(len(x.exits), np.int64) for x in self.layouts]  # decisions each exit's block lasted
         self.present: list[set] = [set() for _ in self.layouts]
         self.second = 0
 
     def reset(self) -> None:
         self.present = [set() for _ in self.layouts]
-        for b in self.blocked_now:
+        for b in (*self.blocked_now, *self.held):
             b[:] = 0
         self.start_decision()
+
+    def end_decision(self, influences: list) -> None:
+        """Count each exit's block on by the decision's sources (per region, as
+        :meth:`influences` gives them: its exits last): what the d-set's ``held`` bits read."""
+        for held, u, layout in zip(self.held, influences, self.layouts):
+            blocked = np.asarray(u[len(u) - len(layout.exits):]) > 0
+            held[:] = np.where(blocked, held + 1, 0)
 
     def start_decision(self) -> None:
         for c in (*self.counts, *self.blocked):
@@ -214,10 +231,11 @@ class EntryWatcher:
                 .astype(np.int64) for c, b in zip(self.counts, self.blocked)]
 
     def dsets(self, raw) -> list[np.ndarray]:
-        """Per region, the occupancy cells of its entry lanes and its exits' blocks now (uint8)."""
+        """Per region, the occupancy cells of its entry lanes, its exits' blocks now and how long
+        each has lasted (uint8)."""
         ids, position = raw.lane_getLastStepVehicleIDs, raw.vehicle_getLanePosition
         rows = []
-        for layout, blocked in zip(self.layouts, self.blocked_now):
+        for layout, blocked, held in zip(self.layouts, self.blocked_now, self.held):
             bits = np.zeros((len(layout.source_lanes), CELLS), np.uint8)
             offsets = layout.lane_offsets or (0.0,) * len(layout.source_lanes)
             for i, (lane, offset) in enumerate(zip(layout.source_lanes, offsets)):
@@ -225,7 +243,8 @@ class EntryWatcher:
                     k = int((position(x) - offset) // CELL_METRES)
                     if 0 <= k < CELLS:
                         bits[i, k] = 1
-            rows.append(np.concatenate([bits.reshape(-1), blocked]))
+            lasted = (held[:, None] >= np.asarray(HELD_DECISIONS)).astype(np.uint8).reshape(-1)
+            rows.append(np.concatenate([bits.reshape(-1), blocked, lasted]))
         return rows
 
 
@@ -262,8 +281,10 @@ class RegionNetCore(NetCore):
     def _observe(self):
         measures, phases, now = super()._observe()
         raw = self.ls._libsumo
-        return measures, phases, now, (self.watcher.influences(), self.watcher.dsets(raw))
+        influences = self.watcher.influences()
+        self.watcher.end_decision(influences)
+        return measures, phases, now, (influences, self.watcher.dsets(raw))
 
 
-__all__ = ["CELLS", "CELL_METRES", "ENTRY_CLASSES", "EXIT_CLASSES", "EntryWatcher", "INSIDE", "RegionLayout", "RegionNetCore",
+__all__ = ["CELLS", "CELL_METRES", "ENTRY_CLASSES", "EXIT_CLASSES", "EntryWatcher", "HELD_DECISIONS", "INSIDE", "RegionLayout", "RegionNetCore",
            "full_dset", "region_layout", "region_spec"]

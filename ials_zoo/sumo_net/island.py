@@ -15,7 +15,12 @@ factor, inserted at the highest safe speed. A vehicle that cannot be inserted wi
 leave a few metres into the region's outgoing edges (:attr:`~ials_zoo.sumo_net.regions.NetRegion.exits`).
 What happens beyond an exit is an influence source too: for a decision it says the exit is
 blocked, that road's lanes are held at :data:`BLOCKED_SPEED`, so the vehicles reaching it halt and the queue
-spills back into the region as behind a jam in the GS.
+spills back into the region as behind a jam in the GS; the d-set reads such an exit as blocked now, as
+the GS reads the queue of a jam in the exit's first metres. An exit blocked :data:`GRIDLOCK_DECISIONS`
+decisions in a row stays blocked to the episode's end, whatever the AIP draws: the GS runs SUMO without
+teleports, so a gridlock past an exit never clears, and in the GS no block that lasted that long ever
+ended (``docs/sumo_net.md``, "jams"). An AIP reading the block's history learns that from the GS, but
+let a drawn block go one decision in ten even after ten; a gridlock does not.
 """
 
 from __future__ import annotations
@@ -52,6 +57,7 @@ MAX_TABLE_BYTES = 64 << 20
 SUMO_SEEDS = 2**31 - 1
 INSERT_PATIENCE = 2  # seconds a vehicle that could not enter at once may wait (then it is dropped)
 BLOCKED_SPEED = 0.01  # m/s: a blocked exit's speed limit (below SUMO's halting speed, 0.1)
+GRIDLOCK_DECISIONS = 10  # an exit blocked this many decisions in a row stays blocked (module docstring)
 
 
 def _table_path(scenario, light: str, seconds: int, seed: int) -> Path:
@@ -183,7 +189,10 @@ class IslandCore(NetCore):
 
     def step(self, actions, influences=None):
         sizes = self.entry_sources
-        self.plan = [np.asarray(u, np.int64) for u in influences]  # per row: every second's entries, then exits
+        self.plan = [np.array(u, np.int64) for u in influences]  # per row: every second's entries, then exits
+        for plan, held in zip(self.plan, self.watcher.held):
+            exits = plan[len(plan) - len(held):]
+            exits[held >= GRIDLOCK_DECISIONS] = 1  # a gridlock past the exit: it never clears (module docstring)
         self.due = {}  # second -> [(row, entry point, vehicles)]: only what comes in
         for r, (plan, layout, n) in enumerate(zip(self.plan, self.layouts, sizes)):
             entries = plan[:n].reshape(self.decision, len(layout.points))
@@ -203,7 +212,13 @@ class IslandCore(NetCore):
         raw = self.ls._libsumo
         if not self.watch:
             self.watcher.measure_exits(raw)
+        for now, plan in zip(self.watcher.blocked_now, self.plan):
+            # an exit given blocked is a queue from beyond the region that reaches its first metres, as
+            # the GS measures a block, even before a vehicle of the region halts there: in the GS an exit
+            # blocked for a decision was blocked at its end every time (docs/sumo_net.md, "jams")
+            now |= (plan[len(plan) - len(now):] > 0).astype(now.dtype)
         told = self.watcher.influences() if self.watch else [p.copy() for p in self.plan]
+        self.watcher.end_decision(self.plan)  # the blocks the sources gave: the GS's are its measured ones
         return (*result, (told, self.watcher.dsets(raw)))
 
     def _block_exits(self, raw, exits: list) -> None:
