@@ -25,6 +25,8 @@ Usage: python docs/sumo_net_gridlock.py POLICY --lights A,B [--net ingolstadt21]
 from __future__ import annotations
 
 import argparse
+import csv
+from pathlib import Path
 
 import numpy as np
 
@@ -36,6 +38,7 @@ from ials_zoo.leaderboard.validate import load_result
 from ials_zoo.sumo_net.influence import region_spec
 
 ENV_ID = "sumo_net_v0"
+MAX_PROGRESS_BYTES = 16 << 20  # a run's progress.csv is read whole
 
 
 def trajectories(policy_file: str, lights: list[str], episodes: int, options: dict,
@@ -123,13 +126,33 @@ def release_line(policy: str, options: dict) -> str:
 
 
 def result_lines(files: list[str], jam: float) -> list[str]:
-    """Per result file: its evaluation's returns per episode, summarised."""
+    """Per result file: its evaluation's returns per episode, summarised, its training's
+    wall-clock (AIP rounds included) and, from the run's ``progress.csv`` beside it, the median
+    speed of the learning between AIP rounds (steps per light and second)."""
     lines = []
     for f in files:
-        returns = np.asarray(load_result(f)["scores"][0]["returns"], float)
+        result = load_result(f)
+        returns = np.asarray(result["scores"][0]["returns"], float)
+        training = result.get("training", {})
+        seconds = float(training.get("wall_clock_seconds") or 0) + float(training.get("aip_seconds") or 0)
         lines.append(f"{f}: median {np.median(returns):.1f}, mean {returns.mean():.1f}, "
-                     f"{int((returns < jam).sum())} of {returns.size} episodes below {jam:g}")
+                     f"{int((returns < jam).sum())} of {returns.size} episodes below {jam:g}; "
+                     f"wall-clock {seconds:.0f} s ({float(training.get('aip_seconds') or 0):.0f} s AIP rounds)"
+                     + _speed(Path(f).parent / "progress.csv"))
     return lines
+
+
+def _speed(progress: Path) -> str:
+    """The median steps per light and second between consecutive rows of one AIP round."""
+    if not progress.is_file() or progress.stat().st_size > MAX_PROGRESS_BYTES:
+        return ""
+    with open(progress, newline="") as f:
+        rows = list(csv.DictReader(f))
+    rates = [(int(b["steps_per_agent"]) - int(a["steps_per_agent"]))
+             / (float(b["wall_clock_seconds"]) - float(a["wall_clock_seconds"]))
+             for a, b in zip(rows, rows[1:]) if a.get("aip_refreshes") == b.get("aip_refreshes")
+             and float(b["wall_clock_seconds"]) > float(a["wall_clock_seconds"])]
+    return f", learning at {np.median(rates):.0f} steps per light/s between AIP rounds" if rates else ""
 
 
 def main(argv=None) -> None:
