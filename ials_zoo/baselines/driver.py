@@ -184,9 +184,9 @@ def estimate_text(plan: RunPlan, learner: Learner, domain) -> str:
 def _multi_agent_seconds(plan: RunPlan, on_gs: bool, study, domain) -> tuple[float, str]:
     """A multi-agent run's expected training seconds, and the speed they assume (words)."""
     simulator = "gs" if on_gs else "ials"
-    if study.joint_steps_per_second is not None:  # the map's cost, whatever the number of learners
-        rate = study.joint_steps_per_second.get(simulator, 100.0)
-        return plan.total / max(rate, 1.0), f"{rate:,.0f} steps of all agents at once per second"
+    if study.joint_step_seconds is not None:  # the map's cost, whatever the number of learners
+        step = max(float(study.joint_step_seconds(simulator, **plan.options)), 1e-6)
+        return plan.total * step, f"{1 / step:,.0f} steps of all agents at once per second"
     rate = study.multi_agent_steps_per_second.get(simulator, 10_000.0)
     seconds = plan.total * len(plan.agents) / max(rate, 1.0)
     if on_gs and len(plan.agents) < len(domain.agents(**plan.options)):

@@ -50,11 +50,12 @@ class StudySettings:
             domain knows it better than ``multi_agent_steps_per_second`` (a GS whose cost
             depends on its network more than on its agents); for the estimate an evaluation
             or a GS collection prints first.
-        joint_steps_per_second: steps per second of training of a multi-agent run counted once
-            for all agents (``"gs"``, ``"ials"``), for a domain whose cost per step is its map's
-            more than its agents' (a real network: 8 lights or 21, about the same steps per
-            second); when given, the opening estimate of a multi-agent run uses it rather than
-            ``multi_agent_steps_per_second``.
+        joint_step_seconds: ``joint_step_seconds(simulator, **options) -> float``, seconds of
+            training per step of a multi-agent run counted once for all agents (``simulator``
+            ``"gs"`` or ``"ials"``, ``options`` the run's), for a domain whose cost per step is
+            its map's more than its agents' (a real network: 8 lights or 21 of one map take about
+            the same time per step, two maps do not); when given, the opening estimate of a
+            multi-agent run uses it rather than ``multi_agent_steps_per_second``.
     """
 
     budget: int = 500_000
@@ -64,7 +65,7 @@ class StudySettings:
     multi_agent_budget: int = 200_000
     multi_agent_steps_per_second: dict = field(default_factory=lambda: {"gs": 10_000.0, "ials": 10_000.0})
     gs_step_seconds: Callable[..., float | None] | None = None
-    joint_steps_per_second: dict | None = None
+    joint_step_seconds: Callable[..., float] | None = None
 
 
 @dataclass(frozen=True)

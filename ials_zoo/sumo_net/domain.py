@@ -83,11 +83,22 @@ def gs_step_seconds(**options) -> float:
     return seconds(**options)
 
 
-# per step of all lights at once the maps cost about the same (35,840 steps; board and docs/sumo_net.md): IPPO
-# 47-54 steps/s on ingolstadt21 (21 lights), 69 on cologne8 (8), 54 on grid4x4 (16); DIALS's
-# training 131-142 on ingolstadt21 and 126 on cologne8, its AIP rounds extra (docs/sumo_net.md)
+# a training step of all lights at once costs its map's GS step (gs_step_seconds) times a share, plus
+# PPO and the pipes, fitted on quiet cores to two maps (35,840 steps; docs/sumo_net.md): IPPO 659-767 s on
+# ingolstadt21 (21 lights) and 98 s on cologne8 (8); DIALS's learning 132-146 steps/s on ingolstadt21 and
+# 446 on cologne8, its AIP rounds extra. The same rate on every map said 10.9 min for cologne8's 98 s.
+JOINT_STEP_FIT = {"gs": (0.192, 1.1e-3), "ials": (0.056, 2.0e-3)}  # (share of a GS step, seconds)
+
+
+def joint_step_seconds(simulator: str, **options) -> float:
+    """Seconds of training per step of all lights at once on ``simulator`` (``"gs"``: IPPO,
+    ``"ials"``: DIALS without its AIP rounds) under ``options``, from the map's GS cost."""
+    share, extra = JOINT_STEP_FIT[simulator]
+    return share * gs_step_seconds(**options) + extra
+
+
 STUDY = StudySettings(multi_agent_budget=36_000, multi_agent_steps_per_second={"gs": 500.0, "ials": 500.0},
-                      gs_step_seconds=gs_step_seconds, joint_steps_per_second={"gs": 55.0, "ials": 130.0})
+                      gs_step_seconds=gs_step_seconds, joint_step_seconds=joint_step_seconds)
 
 # the AIPs of every junction (``train-aip --agent all``, each trained alone: the regions have their
 # own sizes): two GS hours of data; at 30 epochs and lr 3e-3 they stayed at twice the data
