@@ -85,9 +85,10 @@ def gs_step_seconds(**options) -> float:
 
 # a training step of all lights at once costs its map's GS step (gs_step_seconds) times a share, plus
 # PPO and the pipes, fitted on quiet cores to two maps (35,840 steps; docs/sumo_net.md): IPPO 659-767 s on
-# ingolstadt21 (21 lights) and 98 s on cologne8 (8); DIALS's learning 132-146 steps/s on ingolstadt21 and
-# 446 on cologne8, its AIP rounds extra. The same rate on every map said 10.9 min for cologne8's 98 s.
-JOINT_STEP_FIT = {"gs": (0.192, 1.1e-3), "ials": (0.056, 2.0e-3)}  # (share of a GS step, seconds)
+# ingolstadt21 (21 lights) and 98 s on cologne8 (8); DIALS's learning 294-420 s on ingolstadt21 with the
+# IALS that holds jams (fc84453) and 88 s on cologne8, its AIP rounds extra. The same rate on every map
+# said 10.9 min for cologne8's 98 s.
+JOINT_STEP_FIT = {"gs": (0.192, 1.1e-3), "ials": (0.09, 1.7e-3)}  # (share of a GS step, seconds)
 
 
 def joint_step_seconds(simulator: str, **options) -> float:
