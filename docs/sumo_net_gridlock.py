@@ -115,14 +115,19 @@ def release_line(policy: str, options: dict) -> str:
         names = region_spec(light, **options).influence_names
         for k in (k for k, n in enumerate(names) if n.startswith("exit:")):
             for u in ds.influences[:, :, k]:
-                run = 0
-                for blocked in u:
-                    for n in RUNS:
-                        if run >= n:
-                            after[n] += 1
-                            ended[n] += int(not blocked)
-                    run = run + 1 if blocked else 0
+                lasted = _lasted(u)
+                for n in RUNS:
+                    after[n] += int((lasted >= n).sum())
+                    ended[n] += int(((lasted >= n) & (u == 0)).sum())
     return f"{policy}: " + ", ".join(f"lasted {n}+: {ended[n]} of {after[n]} ended" for n in RUNS)
+
+
+def _lasted(blocked: np.ndarray) -> np.ndarray:
+    """Per decision, how many decisions in a row the exit had been blocked just before it."""
+    lasted, run = np.zeros(blocked.size, np.int64), 0
+    for t, b in enumerate(blocked):
+        lasted[t], run = run, (run + 1 if b else 0)
+    return lasted
 
 
 def result_lines(files: list[str], jam: float) -> list[str]:
