@@ -7,6 +7,7 @@ import os
 import shutil
 import subprocess
 import xml.etree.ElementTree as ET
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -356,6 +357,12 @@ def test_bring_your_own_network(tmp_path):
     ({"net": "cologne1", "max_cycles": 0}, "max_cycles"),
     ({"net": "cologne1", "sumocfg": "x"}, "exactly one network"),
     ({"net": "cologne1", "yellow_seconds": 10}, "yellow_seconds"),
+    # NaN and infinities name their option (not a bare ValueError/OverflowError from int())
+    ({"net": "cologne1", "begin": float("nan")}, "begin must be whole seconds"),
+    ({"net": "cologne1", "end": float("inf")}, "end must be whole seconds"),
+    ({"net": "cologne1", "decision_seconds": float("-inf")}, "decision_seconds must be whole seconds"),
+    ({"net": "cologne1", "yellow_seconds": float("nan")}, "yellow_seconds must be whole seconds"),
+    ({"net": "cologne1", "end": "1e400"}, "end must be whole seconds"),
 ])
 def test_bad_input_is_refused_before_sumo_starts(options, message, monkeypatch):
     from ials_zoo.sumo import lease
@@ -388,6 +395,20 @@ def test_a_network_without_lights_or_a_missing_route_file_is_refused(tmp_path):
         sumo_net_v0.parallel_env(net_file=str(bad), route_files=[str(routes)])
     with pytest.raises(BadInput, match="no scripted controller"):
         sumo_net_v0.parallel_env(net="cologne1", scripted_learners=True)
+
+
+def test_a_truncated_route_file_is_refused_before_any_step(tmp_path, monkeypatch):
+    """A route file cut off mid-element would run an episode on part of the demand and then fail
+    in the metrics: it is refused by name at construction, before SUMO starts."""
+    from ials_zoo.sumo import lease
+
+    whole = make_scenario(net="cologne1")
+    text = Path(whole.route_files[0]).read_text()
+    cut = tmp_path / "cut.rou.xml"
+    cut.write_text(text[: len(text) // 2])
+    monkeypatch.setattr(lease.SimHandle, "__init__", lambda *a, **k: pytest.fail("SUMO was started"))
+    with pytest.raises(BadInput, match="cut.rou.xml is not a whole XML file"):
+        sumo_net_v0.parallel_env(net_file=whole.net_file, route_files=[str(cut)])
 
 
 def test_resco_maps_have_rescos_lights_and_actions():

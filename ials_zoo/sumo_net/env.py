@@ -154,6 +154,9 @@ class SumoNetEnv(ParallelEnv):
                      decision_seconds=decision_seconds, yellow_seconds=yellow_seconds, max_cycles=max_cycles)
         self._scenario_options = {k: v for k, v in given.items() if v is not None}
         self.network = read_network(self.scenario.net_file)
+        # the route files read whole before any step: a broken one is refused here, not after an
+        # episode run on part of its demand (the metrics read the same schedule every episode)
+        self._schedule = scheduled_departures(self.scenario.route_files)
         self.max_distance = _check_distance(max_distance)
         self.possible_agents = _learner_ids(learners, self.network.ids)
         self.agents = []
@@ -183,7 +186,7 @@ class SumoNetEnv(ParallelEnv):
         self.backend = self._sim.mode
         self._seed_rng = np.random.default_rng()
         self._measures, self._phases, self._time = None, None, 0.0
-        self._metrics, self._episodes, self._tripinfo, self._schedule = None, 0, None, None
+        self._metrics, self._episodes, self._tripinfo = None, 0, None
         self._unread_tripinfo = None  # the ended episode's tripinfo until episode_metrics() reads it
         self._view = self._last_frame = None
 
@@ -356,8 +359,6 @@ class SumoNetEnv(ParallelEnv):
         path, s = self._unread_tripinfo, self.scenario
         if not os.path.exists(path):
             raise RuntimeError(f"the episode's tripinfo {path} is gone: call episode_metrics() before close()")
-        if self._schedule is None:  # the route files' schedule, read once for every episode
-            self._schedule = scheduled_departures(s.route_files)
         self._metrics.update(episode_metrics(path, s.route_files, s.end, self._schedule))
         self._drop_unread_tripinfo()
 

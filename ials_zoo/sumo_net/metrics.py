@@ -27,20 +27,25 @@ MAX_TRIPINFO_BYTES = 1 << 30
 MAX_ROUTE_BYTES = 256 << 20
 
 
-def _iter_elements(path: str, max_bytes: int, tag: str | None = None):
+def iter_elements(path: str, max_bytes: int, tag: str | None = None):
+    """The elements of the XML file at ``path`` (no larger than ``max_bytes``) as they end,
+    those named ``tag`` only if given; a broken file is a :class:`BadInput` naming it."""
     size = os.path.getsize(path)
     if size > max_bytes:
         raise BadInput(f"{path}: {size / 2**20:.0f} MiB is more than {max_bytes >> 20} MiB")
-    for _, el in ET.iterparse(path, events=("end",)):
-        if tag is None or el.tag == tag:
-            yield el
+    try:
+        for _, el in ET.iterparse(path, events=("end",)):
+            if tag is None or el.tag == tag:
+                yield el
+    except ET.ParseError as exc:  # a truncated or broken file: named, not a bare ParseError
+        raise BadInput(f"{path} is not a whole XML file ({exc}); SUMO would run on part of it") from None
 
 
 def read_tripinfo(path: str) -> dict[str, np.ndarray]:
     """The tripinfo records as arrays (``id`` a list of str)."""
     keys = ("depart", "departDelay", "timeLoss", "duration", "waitingTime", "arrival")
     rows, ids = [], []
-    for el in _iter_elements(path, MAX_TRIPINFO_BYTES, "tripinfo"):
+    for el in iter_elements(path, MAX_TRIPINFO_BYTES, "tripinfo"):
         rows.append([float(el.get(k, "nan")) for k in keys])
         ids.append(el.get("id"))
         el.clear()
@@ -52,7 +57,7 @@ def scheduled_departures(route_files) -> tuple[dict[str, float], list[tuple[str,
     """``id -> scheduled depart`` of every ``<vehicle>``/``<trip>``, and ``(tag, depart)`` in file order."""
     depart, entries = {}, []
     for path in route_files:
-        for el in _iter_elements(path, MAX_ROUTE_BYTES):
+        for el in iter_elements(path, MAX_ROUTE_BYTES):
             if el.tag in ("vehicle", "trip") and el.get("depart") is not None:
                 try:
                     t = float(el.get("depart"))
@@ -101,4 +106,4 @@ def episode_metrics(tripinfo: str, route_files, end: float, schedule=None) -> di
     }
 
 
-__all__ = ["episode_metrics", "read_tripinfo", "resco_delay", "scheduled_departures"]
+__all__ = ["episode_metrics", "iter_elements", "read_tripinfo", "resco_delay", "scheduled_departures"]

@@ -31,9 +31,9 @@ import numpy as np
 
 from ials_zoo.sumo.command import close_any_simulation, sumo_command
 from ials_zoo.sumo.lease import import_libsumo
+from ials_zoo.sumo_net.metrics import MAX_ROUTE_BYTES, iter_elements
 from ials_zoo.sumo_net.regions import cut_network, netconvert
 
-MAX_ROUTE_BYTES = 256 << 20
 MAX_DISTANCE = 200.0  # RESCO's detection (m), as the env's default
 
 
@@ -41,11 +41,8 @@ def vehicle_types(route_files, out: Path) -> Path:
     """The route files' vehicle types as an additional file (cut networks carry none)."""
     root = ET.Element("additional")
     for f in route_files:
-        if Path(f).stat().st_size > MAX_ROUTE_BYTES:
-            raise ValueError(f"{f}: more than {MAX_ROUTE_BYTES >> 20} MiB")
-        for _, el in ET.iterparse(f, events=("end",)):
-            if el.tag == "vType":
-                root.append(el)
+        for el in iter_elements(f, MAX_ROUTE_BYTES, "vType"):
+            root.append(el)
     ET.ElementTree(root).write(out)
     return out
 

@@ -117,7 +117,7 @@ def _seconds(value, flag: str) -> int:
         f = float(value)
     except (TypeError, ValueError):
         raise BadInput(f"{flag} must be a number of seconds, got {value!r}") from None
-    if f != int(f) or not 0 <= f < 1e9:
+    if not 0 <= f < 1e9 or f != int(f):  # the range first: NaN and inf fail it before int() would raise
         raise BadInput(f"{flag} must be whole seconds in [0, 1e9), got {value!r}")
     return int(f)
 
