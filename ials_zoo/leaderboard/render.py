@@ -198,7 +198,7 @@ def _plot(board: Path, key: tuple, rows: list[dict]) -> str | None:
     for i, ((algo, sim, steps), ds) in enumerate(kinds.items()):
         color = f"C{i % 10}"
         n = sum(len(d["learning_curves"]) for d in ds)
-        label = f"{algo} on {sim}, {steps:,} steps" + (f" ({n} seeds)" if n > 1 else "")
+        label = console_text(f"{algo} on {sim}, {steps:,} steps" + (f" ({n} seeds)" if n > 1 else ""))
         for d in ds:
             for c in d["learning_curves"]:
                 xs = [p["wall_clock_seconds"] / scale for p in c["points"]]
@@ -253,7 +253,8 @@ def _profile_plot(board: Path, key: tuple, rows: list[dict]) -> str | None:
         returns = np.concatenate([np.asarray(s["returns"], float) for s in d["scores"]])
         fraction = (returns[None, :] > taus[:, None]).mean(axis=1)
         trained = d["training"] is not None
-        label = f"{d['algorithm']}" + (f" on {_training_label(d)}, {len(d['scores'])} seeds" if trained else "")
+        label = console_text(f"{d['algorithm']}" + (f" on {_training_label(d)}, {len(d['scores'])} seeds"
+                                                     if trained else ""))
         if d["evaluation"].get("deterministic"):
             label += " (deterministic)"
         ax.plot(taus, fraction, lw=1.5 if trained else 1, ls="-" if trained else "--", color=f"C{i % 10}",
@@ -286,7 +287,7 @@ def markdown_cell(text: str) -> str:
     entry can add rows, links or markup to the page."""
     import html
 
-    flat = " ".join(str(text).split())
+    flat = console_text(" ".join(str(text).split()))  # no control or direction characters either
     return html.escape(flat, quote=False).replace("|", "\\|").replace("[", "\\[").replace("]", "\\]")
 
 

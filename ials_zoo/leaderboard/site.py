@@ -23,7 +23,8 @@ from pathlib import Path
 import ials_zoo
 from ials_zoo.core.domains import get_domain
 from ials_zoo.leaderboard.build import MULTI, SINGLE
-from ials_zoo.leaderboard.render import _iqm, _total_seconds, _training_label, format_duration, group_entries
+from ials_zoo.leaderboard.render import (_iqm, _total_seconds, _training_label, console_text, format_duration,
+                                         group_entries)
 from ials_zoo.leaderboard.store import ARCHIVE_SUBDIR, board_path, load_entries
 from ials_zoo.utils import atomic_write_text
 
@@ -69,7 +70,9 @@ document.querySelectorAll('.legend input').forEach(box=>box.addEventListener('ch
 
 
 def _e(text) -> str:
-    return html.escape(str(text), quote=True)
+    """User text for the page: HTML escaped, and every character that is not printable (NUL, ESC,
+    BEL, U+2028, U+202E that would show a name reversed) written as its escape, as ``show`` does."""
+    return html.escape(console_text(text), quote=True)
 
 
 def _cell(text: str, sort=None, numeric: bool = False) -> str:

@@ -59,6 +59,10 @@ def load_entries(directory=None, subdir: str = RESULTS_SUBDIR) -> tuple[list[tup
     folder = Path(board_path(directory, must_exist=subdir == RESULTS_SUBDIR)) / subdir
     entries, problems = [], []
     for p in sorted(folder.glob("*.json")) if folder.is_dir() else []:
+        if not FILE_NAME.fullmatch(p.name):  # it goes into the pages' links: only names we would give
+            problems.append((p, "its file name holds characters outside [A-Za-z0-9._-]; the board names its files "
+                                "itself (leaderboard submit)"))
+            continue
         try:
             entries.append((p, load_result(p, follow_links=False)))
         except ResultError as exc:
@@ -76,6 +80,10 @@ def identity(data: dict) -> str:
     return hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()
 
 
+FILE_NAME = re.compile(r"[A-Za-z0-9._-]+")
+"""The names of the board's files (``entry_name``): the only ones its pages link to."""
+
+
 def _slug(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9.-]+", "-", str(text)).strip("-")[:40] or "x"
 
@@ -84,7 +92,7 @@ def entry_name(data: dict) -> str:
     """The file name of a result on the board (unique by what was evaluated)."""
     sim = (data["training"] or {}).get("simulator", "none")
     sim = Path(sim).stem if sim.endswith(".pt") else sim
-    who = data["agent"] if data["track"] == "single-agent" else f"{len(data['agents'])}-agents"
+    who = re.sub(r"[^A-Za-z0-9._-]+", "-", data["agent"]) if data["track"] == "single-agent" else f"{len(data['agents'])}-agents"
     return "__".join([data["env_id"], who, _slug(data["algorithm"]), _slug(sim), identity(data)[:12]]) + ".json"
 
 
