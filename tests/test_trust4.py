@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 
 import pytest
-from test_trust3 import _board, trained  # noqa: F401  (trained: a module fixture, two tiny IPPO runs)
+from test_trust3 import ENV, _board, scripted, trained  # noqa: F401  (module fixtures: two tiny IPPO runs, a rule)
 
 from ials_zoo.errors import BadInput
 
@@ -62,3 +62,68 @@ def test_the_board_page_escapes_an_off_board_policy_path_and_an_algorithm_label(
     page = render_site(board).read_text()
     assert "<script>alert" not in page and "<img src=x" not in page
     assert "&lt;img src=x onerror=alert(1)&gt;" in page and "&lt;script&gt;alert(1)&lt;/script&gt;" in page
+
+
+# -- 5. processes: a resume of a run stopped before its first checkpoint -----------------------
+
+
+def test_a_resume_before_the_first_checkpoint_keeps_the_state_and_names_overwrite(tmp_path):
+    """Ctrl-C before the first checkpoint leaves ``interrupted``: a ``--resume`` says there is
+    nothing to resume, names ``--overwrite``, and leaves the status as it was (not ``failed``)."""
+    from ials_zoo.baselines.runs import INTERRUPTED, RunFolder, run_state
+
+    settings = {"seed": 0, "lr": 1e-3}
+    with pytest.raises(KeyboardInterrupt), RunFolder(tmp_path / "run", settings=settings).running():
+        raise KeyboardInterrupt
+    assert run_state(tmp_path / "run") == INTERRUPTED
+    with pytest.raises(BadInput, match="was interrupted before its first checkpoint.*--overwrite"):
+        RunFolder(tmp_path / "run", resume=True, settings=settings)
+    assert run_state(tmp_path / "run") == INTERRUPTED
+    RunFolder(tmp_path / "run", overwrite=True, settings=settings).release()  # and --overwrite starts it anew
+
+
+# -- 6. tests for what let bugs live -----------------------------------------------------------
+
+
+def test_a_checkpoint_of_the_same_run_id_with_other_settings_is_refused():
+    """Only the settings digest differs: the run id alone would let it resume."""
+    from ials_zoo.baselines.runs import check_binding
+
+    binding = {"run_id": "r1", "settings_sha256": "b" * 64, "seed": 0}
+    same = {"run": dict(binding)}
+    check_binding("f", {"run_id": "r1"}, same, binding)  # this run's checkpoint resumes
+    other = {"run": dict(binding, settings_sha256="a" * 64)}
+    with pytest.raises(BadInput, match="written with other settings than this run's"):
+        check_binding("f", {"run_id": "r1"}, other, binding)
+
+
+@pytest.mark.parametrize("opening, closing", [("[", "]"), ('{"a":', "}")])
+def test_the_json_depth_limit_accepts_its_depth_and_refuses_one_more(opening, closing):
+    """At :data:`MAX_JSON_DEPTH` accepted, one deeper refused (not only 100,000 deep); brackets
+    inside strings, escaped quotes among them, are not nesting."""
+    from ials_zoo.utils import MAX_JSON_DEPTH, loads_untrusted_json
+
+    def nested(depth):
+        return opening * depth + "1" + closing * depth
+
+    loads_untrusted_json(nested(MAX_JSON_DEPTH))
+    with pytest.raises(BadInput, match=f"JSON nested {MAX_JSON_DEPTH + 1} deep"):
+        loads_untrusted_json(nested(MAX_JSON_DEPTH + 1))
+    # a string holding an escaped quote and brackets, at the limit: still accepted
+    loads_untrusted_json(opening * MAX_JSON_DEPTH + '"\\"' + "[" * 10 + '"' + closing * MAX_JSON_DEPTH)
+
+
+def test_a_metrics_upper_bound_is_checked(scripted):  # noqa: F811
+    """No shipped domain bounds a metric from above: a domain that does refuses a mean past
+    its bound and accepts one at it."""
+    import dataclasses
+
+    from ials_zoo.core.domains import get_domain
+    from ials_zoo.leaderboard.validate import ResultError, _check_metrics
+
+    mean = scripted["metrics"]["age_at_collection"]["mean"]
+    highest = max([mean] + [s["metrics"]["age_at_collection"]["ci_high"] for s in scripted["scores"]])
+    domain = get_domain(ENV)
+    _check_metrics(scripted, dataclasses.replace(domain, metric_ranges={"age_at_collection": (0, highest)}))
+    with pytest.raises(ResultError, match="is not a value age_at_collection can take"):
+        _check_metrics(scripted, dataclasses.replace(domain, metric_ranges={"age_at_collection": (0, mean / 2)}))

@@ -135,6 +135,10 @@ class RunFolder:
                 raise BadInput(f"nothing to resume in {self.path}: it holds no run")
             if state == FINISHED:
                 raise BadInput(f"{self.path} holds a finished run; nothing to resume")
+            if not ((self.path / "checkpoint.pt").exists() and (self.path / "checkpoint.json").exists()):
+                # refused before the status is touched: the folder still says what happened to it
+                raise BadInput(f"{self.path} holds a run that was {state} before its first checkpoint: there is "
+                               "nothing to resume; start it again with --overwrite")
             old = self._status().get("settings", {})
             if old != self.settings:
                 diff = sorted(k for k in set(old) | set(self.settings) if old.get(k) != self.settings.get(k))
@@ -266,7 +270,8 @@ def load_training_state(folder) -> tuple[dict, dict]:
         state = torch.load(folder / "checkpoint.pt", map_location="cpu", weights_only=True)
         info = read_json_object(folder / "checkpoint.json", CHECKPOINT_INFO_MAX_BYTES, what="checkpoint")
     except FileNotFoundError:
-        raise BadInput(f"{folder} has no checkpoint to resume from (it was killed before the first one)") from None
+        raise BadInput(f"{folder} has no checkpoint to resume from (the run ended before its first one): start it "
+                       "again with --overwrite") from None
     except Exception as exc:
         raise BadInput(f"{folder}: the checkpoint cannot be read ({type(exc).__name__}: {exc})") from None
     return state, info
