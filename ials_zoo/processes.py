@@ -204,9 +204,13 @@ def serve(read_fd: int, write_fd: int, beat_fd: int) -> None:
                     raise RuntimeError("this worker's object was never built (its construction failed)")
                 else:
                     result = getattr(obj, method)(*args)
-                conn_w.send_bytes(_dumps(("ok", result)))
+                reply = _dumps(("ok", result))
             except Exception as exc:
-                conn_w.send_bytes(_dumps(_error(exc)))
+                reply = _dumps(_error(exc))
+            try:
+                conn_w.send_bytes(reply)
+            except OSError:  # a broken pipe: the parent is gone (killed), so there is no one to tell
+                break
     finally:
         close = getattr(obj, "close", None)
         if callable(close):

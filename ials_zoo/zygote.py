@@ -102,6 +102,8 @@ def _child(sock, fds, cwd: str, entry: str) -> None:
             os.chdir(cwd)
         module, _, name = entry.partition(":")
         getattr(importlib.import_module(module), name)(*fds)
+    except (BrokenPipeError, ConnectionResetError):  # its parent was killed: nobody to tell, leave quietly
+        code = 1
     except BaseException:  # the worker's last words go to stderr; its exit code says it failed
         traceback.print_exc()
         code = 1

@@ -127,3 +127,22 @@ def test_a_metrics_upper_bound_is_checked(scripted):  # noqa: F811
     _check_metrics(scripted, dataclasses.replace(domain, metric_ranges={"age_at_collection": (0, highest)}))
     with pytest.raises(ResultError, match="is not a value age_at_collection can take"):
         _check_metrics(scripted, dataclasses.replace(domain, metric_ranges={"age_at_collection": (0, mean / 2)}))
+
+
+def test_workers_orphaned_by_kill_9_leave_quietly():
+    """The parent is killed while its worker computes an answer: the answer meets a broken pipe,
+    and the worker leaves without a traceback on the terminal they share."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    here = Path(__file__).resolve().parent
+    code = ("import os, signal, sys; sys.path.insert(0, %r)\n"
+            "from ials_zoo.processes import Worker\n"
+            "from slow_exit import Slow\n"
+            "w = Worker(Slow, (), preload=('slow_exit:linger_at_exit',)); w.started()\n"
+            "w.send('nap'); os.kill(os.getpid(), signal.SIGKILL)\n") % str(here)
+    # stderr is read to its end: every process that holds it (the zygote, the worker) is gone
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == -9
+    assert "Traceback" not in proc.stderr and "BrokenPipeError" not in proc.stderr, proc.stderr
