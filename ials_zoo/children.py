@@ -28,4 +28,16 @@ def process_state(pid: int) -> str | None:
         return None
 
 
-__all__ = ["fresh_interpreter", "process_state"]
+def process_cpu_ticks(pid: int) -> int | None:
+    """``pid``'s CPU time so far (user + system, in clock ticks) from ``/proc``, or None where
+    that cannot be read: a process that holds Python's lock in compiled code (SUMO loading a
+    network) sends no heartbeat, but its CPU time grows."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+        return int(fields[11]) + int(fields[12])  # utime, stime: fields 14 and 15 of stat(5)
+    except (OSError, IndexError, ValueError):
+        return None
+
+
+__all__ = ["fresh_interpreter", "process_cpu_ticks", "process_state"]

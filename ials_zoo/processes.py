@@ -37,7 +37,7 @@ import time
 import traceback
 
 from ials_zoo import zygote as zygotes
-from ials_zoo.children import fresh_interpreter, process_state
+from ials_zoo.children import fresh_interpreter, process_cpu_ticks, process_state
 from ials_zoo.errors import BadInput
 
 _PR_SET_PDEATHSIG = 1
@@ -260,7 +260,11 @@ class Worker:
     :class:`WorkerBadInput`).
 
     ``call(method, *args)`` is one round trip; :meth:`send` then :meth:`receive` let several
-    workers work at once (:func:`call_all`). ``name`` and ``detail`` make the messages,
+    workers work at once (:func:`call_all`). A call's ``busy_for`` (seconds) allows work in
+    compiled code that holds Python's lock, and so stops the heartbeat (SUMO loading a large
+    network): while the worker's CPU time grows it counts as a heartbeat, up to ``busy_for``
+    seconds; a worker that neither beats nor computes is still named after
+    ``unresponsive_after``. ``name`` and ``detail`` make the messages,
     ``"<name> (pid <pid>, <detail>) died"``. The factory and the arguments travel pickled over
     our own pipe to our own child (never read from a file)."""
 
@@ -271,6 +275,7 @@ class Worker:
         self.name, self.detail = name, detail
         self.unresponsive_after = float(unresponsive_after)
         self._closed = False
+        self._beat, self._ticks = time.monotonic(), None  # the last heartbeat; CPU time at the last look
         r_child, w_parent = os.pipe()  # parent -> child
         r_parent, w_child = os.pipe()  # child -> parent
         beat_r, beat_w = os.pipe()  # child -> parent heartbeats
@@ -328,10 +333,14 @@ class Worker:
             self.close(kill=True)  # a message half-written: the pipe is out of step
             raise
 
-    def _check(self, start: float, last: float, timeout: float | None, answered: bool) -> float:
-        """Raise the WorkerError that applies now; returns the time of the last heartbeat."""
+    def _check(self, start: float, last: float, timeout: float | None, answered: bool,
+               busy_for: float = 0.0) -> float:
+        """Raise the WorkerError that applies now; returns the time of the last heartbeat (or,
+        within ``busy_for`` seconds of the last true one, of the last growth of its CPU time)."""
         now = time.monotonic()
         if self._heard():
+            last = self._beat = now
+        elif busy_for and now - self._beat <= busy_for and self._computed():
             last = now
         if self.process.poll() is not None and not answered:
             self._fail("died", f"{self._what()} died (exit code {self.process.returncode})")
@@ -346,6 +355,13 @@ class Worker:
     def send(self, method: str, *args) -> None:
         self._send(("call", method, args))
 
+    def _computed(self) -> bool:
+        """True when the worker's CPU time grew since the last look."""
+        ticks = process_cpu_ticks(self.pid)
+        grew = ticks is not None and self._ticks is not None and ticks > self._ticks
+        self._ticks = ticks
+        return grew
+
     def _heard(self) -> bool:
         """Drain the heartbeat pipe; True when the worker beat since the last look."""
         heard = False
@@ -358,12 +374,13 @@ class Worker:
                 return heard
             heard = True
 
-    def receive(self, timeout: float | None = None):
+    def receive(self, timeout: float | None = None, busy_for: float = 0.0):
         """The answer to the last :meth:`send` (see the class docstring for the errors)."""
-        start = last = time.monotonic()
+        start = last = self._beat = time.monotonic()
+        self._ticks = process_cpu_ticks(self.pid) if busy_for else None
         try:
             while not self._conn_r.poll(0.1):
-                last = self._check(start, last, timeout, answered=self._conn_r.poll(0))
+                last = self._check(start, last, timeout, answered=self._conn_r.poll(0), busy_for=busy_for)
             status, payload = _loads(self._conn_r.recv_bytes())
         except (EOFError, OSError) as exc:
             self._fail("died", f"{self._what()} died (exit code {self.process.poll()}; {exc})")
@@ -381,9 +398,9 @@ class Worker:
                               remote=(type_name, message, trace))
         return payload
 
-    def call(self, method: str, *args, timeout: float | None = None):
+    def call(self, method: str, *args, timeout: float | None = None, busy_for: float = 0.0):
         self.send(method, *args)
-        return self.receive(timeout)
+        return self.receive(timeout, busy_for)
 
     def _fail(self, kind: str, message: str):
         self.close(kill=True)

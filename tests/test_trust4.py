@@ -4,6 +4,7 @@ show what they hold, processes that leave quietly, and tests for what let bugs l
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 from test_trust3 import ENV, _board, scripted, trained  # noqa: F401  (module fixtures: two tiny IPPO runs, a rule)
@@ -134,15 +135,81 @@ def test_workers_orphaned_by_kill_9_leave_quietly():
     and the worker leaves without a traceback on the terminal they share."""
     import subprocess
     import sys
-    from pathlib import Path
 
     here = Path(__file__).resolve().parent
-    code = ("import os, signal, sys; sys.path.insert(0, %r)\n"
+    code = (f"import os, signal, sys; sys.path.insert(0, {str(here)!r})\n"
             "from ials_zoo.processes import Worker\n"
-            "from slow_exit import Slow\n"
-            "w = Worker(Slow, (), preload=('slow_exit:linger_at_exit',)); w.started()\n"
-            "w.send('nap'); os.kill(os.getpid(), signal.SIGKILL)\n") % str(here)
+            "from worker_fixtures import Slow\n"
+            "w = Worker(Slow, (), preload=('worker_fixtures:linger_at_exit',)); w.started()\n"
+            "w.send('nap'); os.kill(os.getpid(), signal.SIGKILL)\n")
     # stderr is read to its end: every process that holds it (the zygote, the worker) is gone
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert proc.returncode == -9
     assert "Traceback" not in proc.stderr and "BrokenPipeError" not in proc.stderr, proc.stderr
+
+
+
+# -- 3. networks as large as users bring ------------------------------------------------------
+
+
+def test_a_load_that_holds_the_lock_is_given_its_budget_and_a_stall_is_still_named():
+    """SUMO holds Python's lock while it loads a network, so its worker sends no heartbeat: with
+    a load budget, a reset whose CPU time grows is waited for; one that computes nothing is
+    named after ``unresponsive_after`` as before; without a budget the load is given up."""
+    import time
+
+    from ials_zoo.sumo.lease import SimHandle, WorkerUnresponsiveError
+
+    core = "worker_fixtures:GilHoldingCore"
+    sim = SimHandle(core, {}, "worker", unresponsive_after=0.5, load_seconds=20)
+    try:
+        assert sim.call("reset") == "loaded"  # about 1.5 s without a heartbeat
+    finally:
+        sim.close()
+    sim = SimHandle(core, {"stall": True}, "worker", unresponsive_after=0.5, load_seconds=20)
+    try:
+        start = time.monotonic()
+        with pytest.raises(WorkerUnresponsiveError, match="no heartbeat for 0.5 s"):
+            sim.call("reset")  # silent and idle: named within seconds, whatever the budget
+        assert time.monotonic() - start < 2.5
+    finally:
+        sim.close()
+    sim = SimHandle(core, {}, "worker", unresponsive_after=0.5)
+    try:
+        with pytest.raises(WorkerUnresponsiveError):
+            sim.call("reset")
+    finally:
+        sim.close()
+
+
+def test_a_load_budget_grows_with_the_files():
+    from ials_zoo.sumo.command import LOAD_SECONDS_BASE, load_budget
+    from ials_zoo.sumo_net.scenario import make_scenario
+
+    s = make_scenario(net="ingolstadt21")
+    assert load_budget() == LOAD_SECONDS_BASE
+    assert load_budget(s.net_file, *s.route_files) > load_budget(s.net_file) > LOAD_SECONDS_BASE
+
+
+@pytest.mark.parametrize("backend", ["worker", "inprocess"])
+def test_sumos_own_error_about_a_broken_network_reaches_the_user(tmp_path, backend):
+    """libsumo says only ``Process Error``; SUMO's reason goes to file descriptor 2 (in a worker,
+    a terminal). The error carries SUMO's lines."""
+    import re
+
+    from ials_zoo import sumo_net_v0
+    from ials_zoo.sumo.lease import SimulationError
+    from ials_zoo.sumo_net.scenario import make_scenario
+
+    s = make_scenario(net="cologne1")
+    text = Path(s.net_file).read_text()
+    first_edge = re.search(r'<edge id="[^":][^"]*" from="[^"]*" to="[^"]*"', text).group(0)
+    broken = tmp_path / "broken.net.xml"
+    broken.write_text(text.replace(first_edge, re.sub(r' to="[^"]*"', "", first_edge), 1))
+    env = sumo_net_v0.parallel_env(net_file=str(broken), route_files=list(s.route_files), backend=backend,
+                                   fresh_process=False)
+    try:
+        with pytest.raises(SimulationError, match="Attribute 'to' is missing"):
+            env.reset(seed=0)
+    finally:
+        env.close()

@@ -23,8 +23,14 @@ from pathlib import Path
 import ials_zoo
 from ials_zoo.core.domains import get_domain
 from ials_zoo.leaderboard.build import MULTI, SINGLE
-from ials_zoo.leaderboard.render import (_iqm, _total_seconds, _training_label, console_text, format_duration,
-                                         group_entries)
+from ials_zoo.leaderboard.render import (
+    _iqm,
+    _total_seconds,
+    _training_label,
+    console_text,
+    format_duration,
+    group_entries,
+)
 from ials_zoo.leaderboard.store import ARCHIVE_SUBDIR, board_path, load_entries
 from ials_zoo.utils import atomic_write_text
 

@@ -25,7 +25,7 @@ import time
 
 import numpy as np
 
-from ials_zoo.sumo.command import close_any_simulation, sumo_command
+from ials_zoo.sumo.command import close_any_simulation, start_simulation, sumo_command
 from ials_zoo.sumo.lease import import_libsumo
 
 # per incoming lane: vehicles approaching, RESCO's total wait (s), queue, sum of speeds (m/s), max wait
@@ -140,7 +140,7 @@ class NetCore:
         """Start an episode; returns ``(measures [lanes, 5], phases [lights], time)``."""
         close_any_simulation(self)
         start = time.perf_counter()
-        self.ls.start(self._command(seed, tripinfo))
+        start_simulation(self.ls, self._command(seed, tripinfo))
         self.sim_seconds += time.perf_counter() - start  # loading the network is raw SUMO's work too
         self.running, self.tripinfo = True, tripinfo
         for tls in self.controlled:

@@ -13,6 +13,7 @@ from pettingzoo import ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec, parallel_to_aec_wrapper
 
 from ials_zoo.errors import BadInput, BadInputType
+from ials_zoo.sumo.command import load_budget
 from ials_zoo.sumo.lease import SimHandle
 from ials_zoo.sumo_net.core import MEASURES
 from ials_zoo.sumo_net.mdp import BATCHED_OBSERVATIONS, N_FEATURES, lanes_tables, observation_fn, reward_fn
@@ -182,7 +183,8 @@ class SumoNetEnv(ParallelEnv):
         self._region = None
         self._region_rows = {a: k for k, a in enumerate(self.possible_agents)}  # the core's region data rows
         self._tmp = tempfile.mkdtemp(prefix="ials_zoo_sumo_net_")  # the episodes' tripinfo, read and removed
-        self._sim = SimHandle(self.CORE, self._core_config(), backend)
+        s = self.scenario  # a large network loads for a while: its load is budgeted by its size
+        self._sim = SimHandle(self.CORE, self._core_config(), backend, load_seconds=load_budget(s.net_file, *s.route_files))
         self.backend = self._sim.mode
         self._seed_rng = np.random.default_rng()
         self._measures, self._phases, self._time = None, None, 0.0

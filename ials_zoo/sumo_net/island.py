@@ -39,6 +39,7 @@ from gymnasium import spaces
 from ials_zoo.core.local import LocalSimulator, agent_list, check_n_envs
 from ials_zoo.core.streams import agent_key
 from ials_zoo.errors import BadInput, BadInputType
+from ials_zoo.sumo.command import load_budget
 from ials_zoo.sumo.lease import SimHandle
 from ials_zoo.sumo_net.core import NetCore
 from ials_zoo.sumo_net.influence import (
@@ -327,7 +328,9 @@ class SumoNetLocalSimulator(LocalSimulator):
         self._folder = Path(tempfile.mkdtemp(prefix="ials_zoo_island_"))
         try:
             config = self._config(lights, record_seconds, record_seed, float(max_distance))
-            self._sim = SimHandle("ials_zoo.sumo_net.island:IslandCore", config, backend)
+            s = self.scenario
+            self._sim = SimHandle("ials_zoo.sumo_net.island:IslandCore", config, backend,
+                                  load_seconds=load_budget(s.net_file, *s.route_files))
         except BaseException:
             shutil.rmtree(self._folder, ignore_errors=True)
             raise

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ials_zoo.sumo.command import close_any_simulation, sumo_command
+from ials_zoo.sumo.command import close_any_simulation, start_simulation, sumo_command
 from ials_zoo.sumo.lease import import_libsumo
 from ials_zoo.sumo_net.metrics import MAX_ROUTE_BYTES, iter_elements
 from ials_zoo.sumo_net.regions import cut_network, netconvert
@@ -106,7 +106,7 @@ class ReplayCore:
 
     def _run(self, command: list[str], begin: int, seconds: int) -> None:
         close_any_simulation(self)
-        self.ls.start(command + ["--begin", str(begin), "--end", str(begin + seconds), "--time-to-teleport", "-1"])
+        start_simulation(self.ls, command + ["--begin", str(begin), "--end", str(begin + seconds), "--time-to-teleport", "-1"])
         self.running = True
 
     def plain(self, net_file, route_files, begin: int, seconds: int, seed: int = 0) -> float:

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from ials_zoo.errors import BadInput
-from ials_zoo.sumo.command import close_any_simulation, sumo_command
+from ials_zoo.sumo.command import close_any_simulation, start_simulation, sumo_command
 from ials_zoo.sumo.lease import import_libsumo
 from ials_zoo.traffic.network import CELL_LENGTH, N_CELLS, SPEED_LIMIT
 
@@ -199,7 +199,7 @@ class GridCore:
         net, routes, tls_add = self.files
         # every vehicle carries SUMO's tripinfo device (time loss, waiting time) for the
         # episode's metrics; it only records (episodes are bitwise the same with or without it)
-        ls.start(sumo_command(seed, net=net, routes=routes, additionals=[tls_add], extra=_GRID_OPTIONS + ("--device.tripinfo.probability", "1")))
+        start_simulation(ls, sumo_command(seed, net=net, routes=routes, additionals=[tls_add], extra=_GRID_OPTIONS + ("--device.tripinfo.probability", "1")))
         self.running = True
         self._halting = self._steps = 0
         for _ in range(int(warmup_steps)):
@@ -350,7 +350,7 @@ class LocalCore:
             # a car that cannot be inserted at once is dropped: in the GS it would simply
             # not have entered the lane at this step
             net, routes = self.files
-            ls.start(sumo_command(seed, net=net, routes=routes, extra=_GRID_OPTIONS + ("--max-depart-delay", "0")))
+            start_simulation(ls, sumo_command(seed, net=net, routes=routes, extra=_GRID_OPTIONS + ("--max-depart-delay", "0")))
             self.running = True
             self.counters = [0] * self.n
         if self.reader is None:
