@@ -51,6 +51,7 @@ from ials_zoo.core.domains import domain_ids, get_domain
 from ials_zoo.core.spaces import sizes_of_env, stack_observations
 from ials_zoo.errors import BadInput, BadInputType
 from ials_zoo.policy import (
+    MAX_FRAME_STACK,
     PolicyNetwork,
     is_policy_file,
     load_policy_file,
@@ -255,7 +256,6 @@ def estimate_evaluation_seconds(env_id: str, episodes: int, **options) -> float:
 
 
 SB3_META_MAX_BYTES = 1 << 20
-MAX_FRAME_STACK = 64
 
 
 def read_sb3_meta(path: Path, agent: str | None = None) -> dict:

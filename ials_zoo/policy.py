@@ -52,6 +52,8 @@ HEADER_KEY = "ials_zoo.policy"
 SUFFIX = ".safetensors"
 ACTIVATIONS = ("tanh", "relu")
 MAX_FILE_BYTES = 256 * 2**20
+MAX_FRAME_STACK = 64
+"""The most frames a policy stacks (a training run and a policy's metadata alike)."""
 MAX_ZIP_MEMBER_BYTES = 256 * 2**20
 
 

@@ -213,3 +213,90 @@ def test_sumos_own_error_about_a_broken_network_reaches_the_user(tmp_path, backe
             env.reset(seed=0)
     finally:
         env.close()
+
+
+# -- 2. every cost of a re-train bounded before it starts ------------------------------------
+
+W = "ials-zoo train {} --env-id warehouse_v0 --env-options '{{\"robots\": [2, 2]}}' "
+
+
+@pytest.mark.parametrize("command,match", [
+    (W.format("ippo") + "--hidden 100000,100000", "--hidden '100000,100000': at most"),
+    (W.format("ippo") + "--frame-stack 1000000", "--frame-stack must be in \\[1, 64\\]"),
+    (W.format("ppo_single") + "--batch-size 1", "--batch-size must be >= 2"),
+    (W.format("ppo_single") + "--net-arch 100000,100000", "--net-arch '100000,100000': at most"),
+    (W.format("ppo_shared") + "--batch-size 1", "--batch-size must be >= 2"),
+    (W.format("ippo") + "--notes 'unbalanced", "cannot be read as a command line"),
+])
+def test_values_that_would_crash_a_re_train_are_refused_by_name(command, match):
+    from ials_zoo.baselines.retrain import parse_command
+    from ials_zoo.leaderboard.validate import ResultError
+
+    with pytest.raises(ResultError, match=match):
+        parse_command(command, 0)
+
+
+def test_train_refuses_a_batch_of_one_by_name_and_leaves_no_run_folder(tmp_path, capsys):
+    from ials_zoo.cli import main
+
+    out = tmp_path / "run"
+    argv = ["train", "ppo_single", "--env-id", "warehouse_v0", "--env-options", '{"robots": [2, 2]}',
+            "--batch-size", "1", "--out-dir", str(out)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "--batch-size must be >= 2" in err and "Traceback" not in err
+    assert not out.exists()
+
+
+def _entry_with_command(trained, command):  # noqa: F811
+    data = json.loads((trained / "s0" / "result.json").read_text())
+    data["training"]["reproduce"]["command"] = command
+    return data
+
+
+@pytest.mark.parametrize("change,match", [
+    (lambda c: c.replace("train ippo", "train dials"), "trains baseline 'dials', but the entry is of 'ippo'"),
+    (lambda c: c.replace("warehouse_v0", "traffic_grid_v0").replace(" --env-options '{\"robots\": [2, 2]}'", "")
+     .replace(" --agents robot_0,robot_1,robot_2,robot_3", ""), "trains --env-id 'traffic_grid_v0'"),
+    (lambda c: c.replace('[2, 2]', '[3, 3]'), "trains --env-options"),
+    (lambda c: c + " --agents robot_0,robot_1", "trains --agents '2 agents'"),
+])
+def test_a_recorded_command_that_trains_something_else_is_refused_before_training(trained, change, match):  # noqa: F811
+    """A re-train would run the command for minutes and only then find another baseline's,
+    domain's or agents' policy: refused before it starts."""
+    from ials_zoo.baselines.retrain import _check_matches_entry, parse_command
+    from ials_zoo.leaderboard.validate import ResultError
+
+    data = json.loads((trained / "s0" / "result.json").read_text())
+    command = data["training"]["reproduce"]["command"]
+    module, args = parse_command(command, 0)
+    _check_matches_entry(data, "ippo", args)  # the entry's own command matches it
+    changed = change(command)
+    module, args = parse_command(changed, 0)
+    with pytest.raises(ResultError, match=match):
+        _check_matches_entry(data, module.__name__.rsplit(".", 1)[1], args)
+
+
+@pytest.mark.parametrize("extra,named", [
+    ("--n-epochs 1000000000", "--n-epochs"),
+    ("--eval-every 1 --eval-episodes 1000000", "--eval-every/--eval-episodes"),
+    ("--final-eval-episodes 1000000000", "--final-eval-episodes"),
+])
+def test_a_re_train_is_estimated_whole_and_refused_by_the_setting_that_costs(trained, extra, named, monkeypatch):  # noqa: F811
+    from ials_zoo.baselines import ippo
+    from ials_zoo.baselines.retrain import retrain
+    from ials_zoo.leaderboard.validate import ResultError
+
+    monkeypatch.setattr(ippo, "main", lambda *a: pytest.fail("it trained"))
+    data = json.loads((trained / "s0" / "result.json").read_text())
+    data["training"]["reproduce"]["command"] += " " + extra
+    path = trained / "s0" / "edited.json"
+    path.write_text(json.dumps(data))
+    with pytest.raises(ResultError, match=f"most of it from {named}.*over the limit of 4.0 h"):
+        retrain(path)
+    data["training"]["reproduce"]["command"] = data["training"]["reproduce"]["command"].replace(
+        extra, '--env-options \'{"robots": [2, 2], "max_cycles": 1000000000000}\'')
+    data["evaluation"]["options"]["max_cycles"] = 10**12  # an entry of such episodes (valid)
+    path.write_text(json.dumps(data))
+    with pytest.raises(ResultError, match="one episode of 1,000,000,000,000 steps"):
+        retrain(path)

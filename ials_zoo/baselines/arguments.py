@@ -9,6 +9,7 @@ import dataclasses
 import typing
 
 from ials_zoo.errors import BadInput, is_run_failure
+from ials_zoo.policy import MAX_FILE_BYTES, MAX_FRAME_STACK
 from ials_zoo.utils import parse_json_object
 
 # --------------------------------------------------------------------------------------------
@@ -135,12 +136,41 @@ def parse_env_options(text: str | None) -> dict:
     return parse_json_object(text, "env_options")
 
 
-def hidden_sizes(net_arch: str) -> list[int]:
-    """Hidden layer sizes from ``"256,128"``; a clear error for anything else."""
+MAX_LAYERS, MAX_LAYER_WIDTH = 16, 65_536
+
+
+def hidden_sizes(net_arch: str, name: str = "net_arch") -> list[int]:
+    """Hidden layer sizes from ``"256,128"``; a clear error (naming the argument ``name``) for
+    anything else, and for a network whose policy file could not be stored or loaded (the
+    hidden layers' float32 weights of an actor and a critic past
+    :data:`~ials_zoo.policy.MAX_FILE_BYTES`)."""
     try:
         sizes = [int(x) for x in str(net_arch).split(",") if x.strip()]
     except ValueError:
         sizes = []
     if not sizes or min(sizes) < 1:
-        raise BadInput(f"net_arch {net_arch!r}: expected comma-separated positive ints, e.g. 256,128")
+        raise BadInput(f"{name} {net_arch!r}: expected comma-separated positive ints, e.g. 256,128")
+    weights = 2 * 4 * sum(a * b for a, b in zip(sizes, sizes[1:]))  # actor and critic, float32
+    if len(sizes) > MAX_LAYERS or max(sizes) > MAX_LAYER_WIDTH or weights > MAX_FILE_BYTES:
+        raise BadInput(f"{name} {str(net_arch)[:100]!r}: at most {MAX_LAYERS} layers of at most {MAX_LAYER_WIDTH:,} "
+                       f"units, whose weights fit a policy file ({MAX_FILE_BYTES >> 20} MiB)")
     return sizes
+
+
+def check_frame_stack(frame_stack) -> None:
+    """``frame_stack``: None (the domain's) or a whole number in [1, MAX_FRAME_STACK]."""
+    if frame_stack is not None and not 1 <= frame_stack <= MAX_FRAME_STACK:
+        raise BadInput(f"frame_stack must be in [1, {MAX_FRAME_STACK}] (a policy stacks at most "
+                       f"{MAX_FRAME_STACK} frames), got {frame_stack}")
+
+
+def flag_named(message: str, args_class) -> str:
+    """A baseline's error as the command line says it: a message that opens with an argument's
+    name (``total_timesteps must be >= 1``) opens with its flag (``--total-timesteps``)."""
+    import re
+
+    first = re.match(r"[a-z_]+", message)
+    names = {f.name for f in dataclasses.fields(args_class)}
+    if first and first.group(0) in names and message[first.end():first.end() + 1] in (" ", ":", ""):
+        return "--" + first.group(0).replace("_", "-") + message[first.end():]
+    return message

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ials_zoo.baselines.arguments import AblatedPPOSettings, arg, check_ppo_settings, hidden_sizes
+from ials_zoo.baselines.arguments import AblatedPPOSettings, arg, check_frame_stack, check_ppo_settings, hidden_sizes
 from ials_zoo.baselines.runs import DETERMINISTIC_RESULT
 from ials_zoo.core.extras import dials_of
 from ials_zoo.core.spaces import stack_observations
@@ -91,12 +91,11 @@ def check_multi_ppo(args, domain) -> list[int]:
     for name in ("samples_per_update", "batch_size"):
         if getattr(args, name) < 1:
             raise BadInput(f"{name} must be >= 1, got {getattr(args, name)}")
-    if args.frame_stack is not None and args.frame_stack < 1:
-        raise BadInput(f"frame_stack must be >= 1, got {args.frame_stack}")
+    check_frame_stack(args.frame_stack)
     if args.recurrent_hidden < 0:
         raise BadInput(f"recurrent_hidden must be >= 0, got {args.recurrent_hidden}")
     check_ppo_settings(args)
-    return hidden_sizes(args.hidden)
+    return hidden_sizes(args.hidden, "hidden")
 
 
 def fill_update_size(args, domain) -> None:

@@ -156,15 +156,19 @@ def _agent_list(text: str | None, env_id: str, default, **options) -> list[str]:
     return get_domain(env_id).check_agents(None if text == "all" else text, **options)
 
 
+def check_args(args: Args) -> None:
+    """Clear errors for bad arguments before anything is built."""
+    if args.env_id is None:
+        raise BadInput(f"name the domain to train on: --env, one of {', '.join(ials_domain_ids())}")
+    check_ppo_args(args, positive=("total_timesteps", "n_copies"))
+
+
 def main(args: Args | None = None) -> list[dict]:
     """Train, evaluate and save; returns one result dict per evaluated agent."""
     import torch
 
     args = args or Args()
-
-    if args.env_id is None:
-        raise BadInput(f"name the domain to train on: --env, one of {', '.join(ials_domain_ids())}")
-    check_ppo_args(args, positive=("total_timesteps", "n_copies"))
+    check_args(args)
     torch.set_num_threads(1)
     dom = get_domain(args.env_id).require_ials("train ppo_shared")
     options = parse_env_options(args.env_options)

@@ -64,6 +64,7 @@ from ials_zoo.baselines.aip_record import predictor_record
 from ials_zoo.baselines.arguments import (
     AblatedPPOSettings,
     arg,
+    check_frame_stack,
     check_ppo_settings,
     hidden_sizes,
     parse_env_options,
@@ -151,8 +152,12 @@ def check_ppo_args(args, positive=()) -> None:
     check_ppo_settings(args)
     if args.eval_every < 0:
         raise BadInput(f"eval_every must be >= 0, got {args.eval_every}")
-    if args.frame_stack is not None and args.frame_stack < 1:
-        raise BadInput(f"frame_stack must be >= 1, got {args.frame_stack}")
+    check_frame_stack(args.frame_stack)
+    # SB3's PPO normalises advantages over a minibatch: one sample gives NaN (it asserts > 1)
+    if args.batch_size is not None and args.batch_size < 2:
+        raise BadInput(f"batch_size must be >= 2 (PPO normalises advantages over a minibatch), got {args.batch_size}")
+    if args.n_steps is not None and args.n_steps * args.n_envs < 2:
+        raise BadInput(f"n_steps x n_envs must be >= 2 (one update's samples), got {args.n_steps} x {args.n_envs}")
     check_seed(args.seed, "seed")
     hidden_sizes(args.net_arch)
     parse_env_options(args.env_options)

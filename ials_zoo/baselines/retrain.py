@@ -27,9 +27,11 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import copy
 import dataclasses
 import io
 import json
+import math
 import shlex
 import subprocess
 import tempfile
@@ -108,7 +110,10 @@ def reproduce_record(command: str) -> dict:
 
 def command_without_seed(command: str) -> list[str]:
     """The recorded command's words without its ``--seed N`` (the same for every seed)."""
-    words = shlex.split(command)
+    try:
+        words = shlex.split(command)
+    except ValueError as exc:  # an unbalanced quote: a command no shell would run either
+        raise ResultError("training.reproduce.command", f"cannot be read as a command line ({exc})") from None
     out, skip = [], False
     for w in words:
         if skip:
@@ -149,7 +154,49 @@ def parse_command(command: str, seed: int):
     if forbidden:
         raise ResultError("training.reproduce.command", f"sets {forbidden}, which a recorded command never does")
     _check_resources(ns, words[2])
-    return module, dataclass_from_namespace(module.Args, ns)
+    args = dataclass_from_namespace(module.Args, ns)
+    _check_values(module, args)
+    return module, args
+
+
+def _check_values(module, args) -> None:
+    """The baseline's own checks of its arguments, on a copy (they fill in defaults): a value
+    that would crash the re-train (a batch of 1, a network no policy file holds, 10**6 stacked
+    frames) is refused by its flag before anything trains."""
+    from ials_zoo.baselines.arguments import flag_named
+
+    try:
+        module.check_args(copy.deepcopy(args))
+    except BadInput as exc:
+        raise ResultError("training.reproduce.command", flag_named(str(exc), module.Args)) from None
+
+
+def _check_matches_entry(data: dict, baseline: str, args) -> None:
+    """The recorded command trains what the entry is: its baseline, domain, GS options and
+    agents; otherwise a re-train would run first and fail only after."""
+    from ials_zoo.core.domains import get_domain
+    from ials_zoo.utils import parse_json_object
+
+    where = "training.reproduce.command"
+    options = parse_json_object(args.env_options, "--env-options")
+    differ = [(what, mine, theirs) for what, mine, theirs in (
+        ("baseline", baseline, data["algorithm"]), ("--env-id", args.env_id, data["env_id"]),
+        ("--env-options", options, data["evaluation"]["options"]))
+        if mine != theirs]
+    domain = get_domain(data["env_id"])
+    if not differ and data["track"] == "single-agent" and hasattr(args, "agent"):
+        agent = args.agent or domain.default_agents[0]
+        if agent != data["agent"]:
+            differ.append(("--agent", agent, data["agent"]))
+    if not differ and data["track"] == "multi-agent" and hasattr(args, "agents"):
+        agents = domain.check_agents(None if args.agents == "all" else args.agents, **options)
+        if list(agents) != list(data.get("trained_agents") or data["agents"]):
+            differ.append(("--agents", f"{len(agents)} agents", f"{len(data.get('trained_agents') or data['agents'])} "
+                           "agents (or others)"))
+    if differ:
+        what, mine, theirs = differ[0]
+        raise ResultError(where, f"trains {what} {mine!r}, but the entry is of {theirs!r}: it would not re-make the "
+                          "entry's policies")
 
 
 def _check_resources(ns, baseline: str) -> None:
@@ -280,26 +327,68 @@ def _submitted_policy(data: dict, i: int, path: Path, board) -> Path:
     return found
 
 
+UPDATE_FLOPS_PER_SECOND = 2e9
+"""A generous speed of one core on a small MLP's forward and backward pass: what an estimate of
+a run's PPO epochs divides by (so that it errs short, never refusing an honest run)."""
+
+
+def run_parts(data: dict, args) -> list[tuple[str, float]]:
+    """``(setting, seconds)``: about what each part of a re-trained run costs on 2 cores, named by
+    the setting that drives it: the steps of every agent (at the slowest speed the domain's
+    study measured), the PPO epochs over them, the learning-curve evaluations and the final
+    evaluations (sampled and deterministic; their episodes' length included)."""
+    from ials_zoo.baselines.arguments import hidden_sizes
+    from ials_zoo.core.domains import get_domain
+    from ials_zoo.core.extras import study_of
+    from ials_zoo.evaluation import estimate_evaluation_seconds
+    from ials_zoo.utils import parse_json_object
+
+    domain = get_domain(data["env_id"])
+    study = study_of(domain)
+    options = parse_json_object(args.env_options, "--env-options")
+    agents = len(data.get("trained_agents") or data["agents"])
+    multi = hasattr(args, "hidden")
+    total = float(args.total_timesteps or (study.multi_agent_budget if multi else study.budget))
+    rate = max(min(list(study.multi_agent_steps_per_second.values()) + list(study.ppo_steps_per_second.values())), 1.0)
+    sizes = hidden_sizes(args.hidden if multi else args.net_arch)
+    weights = 2 * (sum(a * b for a, b in zip(sizes, sizes[1:])) + sizes[0] + sizes[-1])  # actor and critic, at least
+    eval_every = float(args.eval_every or (max(1.0, total // 10) if multi else total))
+    evaluations = math.ceil(total / eval_every) + 1
+    return [
+        ("--total-timesteps", total * agents / rate),
+        ("--n-epochs", args.n_epochs * total * agents * 6 * weights / UPDATE_FLOPS_PER_SECOND),
+        (f"--eval-every/--eval-episodes ({evaluations:,} evaluations of {args.eval_episodes:,} episodes)",
+         evaluations * estimate_evaluation_seconds(data["env_id"], args.eval_episodes, **options)),
+        ("--final-eval-episodes", estimate_evaluation_seconds(data["env_id"], 2 * args.final_eval_episodes, **options)),
+    ]
+
+
 def _check_cost(data: dict, jobs: list, max_seconds: float) -> None:
     """Refuse, before any training, a re-train estimated to take over ``max_seconds``: the
     entry's own training wall-clock per seed (AIP included), three times over, or what its
-    command's steps take at the domain's study speed, whichever is longer."""
+    command's settings make of it (:func:`run_parts`), whichever is longer; the refusal names
+    the setting that costs most (an episode longer than the whole limit: its length)."""
     from ials_zoo.core.domains import get_domain
-    from ials_zoo.core.extras import study_of
-    from ials_zoo.utils import format_seconds
+    from ials_zoo.evaluation import estimate_evaluation_seconds
+    from ials_zoo.utils import format_seconds, parse_json_object
 
     t = data["training"]
     claimed = 3.0 * (float(t["wall_clock_seconds"]) + float(t["aip_seconds"]))
-    # and from the command itself (a result can claim any wall-clock): its steps of every agent
-    # at the slowest training speed the domain's study measured
-    study = study_of(get_domain(data["env_id"]))
-    rate = max(min(list(study.multi_agent_steps_per_second.values()) + list(study.ppo_steps_per_second.values())), 1.0)
-    steps = max(float(getattr(args, "total_timesteps", 0) or 0) for _, _, args, _ in jobs)
-    seconds = len(jobs) * max(claimed, steps * len(data["agents"]) / rate)
+    limit = f"over the limit of {format_seconds(max_seconds)} (--max-remeasure-hours allows more)"
+    worst, seconds = "its recorded wall-clock", claimed
+    for _, _, args, _ in jobs:
+        options = parse_json_object(args.env_options, "--env-options")
+        if estimate_evaluation_seconds(data["env_id"], 1, **options) > max_seconds:
+            steps = get_domain(data["env_id"]).steps_of_episode(**options)
+            raise ResultError("training.reproduce.command", f"--env-options {options}: one episode of {steps:,} steps "
+                              f"would take longer than the whole re-train may, {limit}")
+        parts = run_parts(data, args)
+        if sum(p for _, p in parts) > seconds:
+            worst, seconds = max(parts, key=lambda p: p[1])[0], sum(p for _, p in parts)
+    seconds *= len(jobs)
     if seconds > max_seconds:
-        raise ResultError("training", f"re-training {len(jobs)} seed(s) would take about {format_seconds(seconds)} "
-                          f"(from its command's steps or its recorded wall-clock), over the limit of "
-                          f"{format_seconds(max_seconds)} (--max-remeasure-hours allows more)")
+        raise ResultError("training", f"re-training {len(jobs)} seed(s) would take about {format_seconds(seconds)}, "
+                          f"most of it from {worst}, {limit}")
 
 
 def retrain(path, seeds: int = 1, directory=None, progress: bool = False,
@@ -327,6 +416,7 @@ def retrain(path, seeds: int = 1, directory=None, progress: bool = False,
         if s["seed"] is None:
             raise ResultError(f"scores.{i}.seed", "a seed of null cannot be re-trained")
         module, args = parse_command(record["command"], int(s["seed"]))  # every seed checked before any runs
+        _check_matches_entry(data, module.__name__.rsplit(".", 1)[1], args)
         jobs.append((s["seed"], module, args, _submitted_policy(data, i, path, board)))
     _check_cost(data, jobs, max_seconds)
     reports = []
@@ -351,5 +441,5 @@ def record_retrained(path, reports: list[dict]) -> None:
     atomic_write_text(path, json.dumps(data, indent=2, allow_nan=False) + "\n")
 
 
-__all__ = ["VOLATILE_HEADER", "command_without_seed", "package_commit", "parse_command", "platform_text",
+__all__ = ["VOLATILE_HEADER", "command_without_seed", "package_commit", "parse_command", "platform_text", "run_parts",
            "policy_difference", "record_retrained", "reproduce_record", "retrain", "training_command"]

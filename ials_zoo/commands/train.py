@@ -12,7 +12,7 @@ from __future__ import annotations
 import importlib
 
 from ials_zoo.baselines import BASELINES
-from ials_zoo.baselines.arguments import add_dataclass_args, dataclass_from_namespace
+from ials_zoo.baselines.arguments import add_dataclass_args, dataclass_from_namespace, flag_named
 from ials_zoo.errors import BadInput
 
 
@@ -34,15 +34,3 @@ def run(args) -> int:
         raise type(exc)(flag_named(str(exc), module.Args)) from None
     return 0
 
-
-def flag_named(message: str, args_class) -> str:
-    """A baseline's error as the command line says it: a message that opens with an argument's
-    name (``total_timesteps must be >= 1``) opens with its flag (``--total-timesteps``)."""
-    import dataclasses
-    import re
-
-    first = re.match(r"[a-z_]+", message)
-    names = {f.name for f in dataclasses.fields(args_class)}
-    if first and first.group(0) in names and message[first.end():first.end() + 1] in (" ", ":", ""):
-        return "--" + first.group(0).replace("_", "-") + message[first.end():]
-    return message
