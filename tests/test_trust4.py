@@ -300,3 +300,119 @@ def test_a_re_train_is_estimated_whole_and_refused_by_the_setting_that_costs(tra
     path.write_text(json.dumps(data))
     with pytest.raises(ResultError, match="one episode of 1,000,000,000,000 steps"):
         retrain(path)
+
+
+# -- 1. wall-clocks that can be compared --------------------------------------------------------
+
+
+def test_the_reference_workload_leaves_the_runs_random_state_and_threads_alone():
+    import torch
+
+    from ials_zoo import reference_speed
+
+    torch.manual_seed(7)
+    expected = torch.rand(4)
+    torch.manual_seed(7)
+    threads = torch.get_num_threads()
+    seconds = reference_speed.measure()
+    assert 0 < seconds < 30
+    assert torch.equal(torch.rand(4), expected) and torch.get_num_threads() == threads
+
+
+def test_a_run_records_its_machines_speed_at_its_start_and_every_checkpoint(trained):  # noqa: F811
+    from ials_zoo import reference_speed
+
+    result = json.loads((trained / "s0" / "result.json").read_text())
+    t, curve = result["training"], result["learning_curves"][0]["points"]
+    ref = t["reference"]
+    assert len(ref["seconds"]) == 1 + len(curve)  # the start, then a checkpoint at every evaluation
+    total = t["wall_clock_seconds"] + t["aip_seconds"]
+    assert ref["reference_seconds"] == pytest.approx(
+        total * reference_speed.REFERENCE_WORKLOAD_SECONDS / sorted(ref["seconds"])[len(ref["seconds"]) // 2], rel=1e-3)
+    assert ref["machine"] == reference_speed.machine() and ref["under_load"] == reference_speed.under_load(ref)
+
+
+def test_a_resumed_run_keeps_the_timings_of_before_its_kill(tmp_path, monkeypatch):
+    from test_trust3 import RUNS, _killed_after_first_checkpoint
+
+    from ials_zoo import reference_speed
+    from ials_zoo.baselines import ippo
+
+    calls = iter([0.05, 0.06, 0.08, 0.09, 0.10, 0.11])
+    monkeypatch.setattr(reference_speed, "measure", lambda *a: next(calls))
+    out = tmp_path / "run"
+    _killed_after_first_checkpoint(monkeypatch, ippo, out, 0)  # measured at the start and at step 0
+    monkeypatch.setattr(reference_speed, "measure", lambda *a: next(calls))
+    assert json.loads((out / "checkpoint.json").read_text())["reference"]["seconds"] == [0.05, 0.06]
+    ippo.main(ippo.Args(**RUNS["ippo"], seed=0, out_dir=str(out), resume=True))
+    ref = json.loads((out / "result.json").read_text())["training"]["reference"]
+    assert ref["seconds"][:3] == [0.05, 0.06, 0.08] and len(ref["seconds"]) == 5  # + steps 256 and 512
+    assert ref["under_load"]  # 0.05 to 0.10: more than 20%
+
+
+def _with_reference(entry: dict, seconds: list, machine: str = "CPU A, 2 cores") -> dict:
+    from ials_zoo import reference_speed
+
+    t = entry["training"]
+    record = {"workload": reference_speed.WORKLOAD, "machine": machine, "seconds": seconds}
+    record["reference_seconds"] = reference_speed.reference_seconds(t["wall_clock_seconds"] + t["aip_seconds"], seconds)
+    record["under_load"] = reference_speed.under_load(record)
+    return dict(entry, training=dict(t, reference=record))
+
+
+def test_the_board_shows_reference_seconds_and_marks_runs_timed_under_load(tmp_path, trained):  # noqa: F811
+    from ials_zoo import leaderboard as lb
+    from ials_zoo.leaderboard.site import render_site
+
+    board = _board(tmp_path)
+    entry = json.loads((trained / "s0" / "result.json").read_text())
+    loaded = _with_reference(entry, [0.05, 0.05, 0.09])
+    (board / "results" / "loaded.json").write_text(json.dumps(loaded))
+    lb.load_result(board / "results" / "loaded.json")
+    for text in (lb.show(board), lb.render(board).read_text(), render_site(board).read_text()):
+        assert "on the reference machine" in text and "timed under load" in text
+    quiet = _with_reference(entry, [0.05, 0.051])
+    (board / "results" / "loaded.json").write_text(json.dumps(quiet))
+    assert "timed under load" not in lb.show(board)
+
+
+def test_a_reference_record_that_contradicts_its_timings_is_refused(trained):  # noqa: F811
+    from ials_zoo import leaderboard as lb
+
+    entry = _with_reference(json.loads((trained / "s0" / "result.json").read_text()), [0.05, 0.09])
+    lb.validate_result(entry)
+    entry["training"]["reference"]["under_load"] = False
+    with pytest.raises(lb.ResultError, match="training.reference.under_load"):
+        lb.validate_result(entry)
+    entry["training"]["reference"].update(under_load=True, reference_seconds=1.0)
+    with pytest.raises(lb.ResultError, match="training.reference.reference_seconds"):
+        lb.validate_result(entry)
+
+
+def test_compare_wall_clock_uses_reference_seconds_and_names_machines_and_load(trained):  # noqa: F811
+    from ials_zoo.leaderboard import compare_wall_clock
+
+    entry = json.loads((trained / "s0" / "result.json").read_text())
+    t = entry["training"]
+    t["wall_clock_seconds"], t["aip_seconds"] = 100.0, 0.0
+    fast = _with_reference(entry, [0.05, 0.05], "CPU A, 2 cores")  # 100 s on a machine as fast as the reference
+    t["wall_clock_seconds"] = 200.0
+    slow = _with_reference(entry, [0.1, 0.1], "CPU B, 16 cores")  # 200 s on a machine half as fast
+    text = compare_wall_clock(slow, fast)
+    ratio = (200 / 0.1) / (100 / 0.05)
+    assert f"first / second = {ratio:.2f} in reference seconds (2.00 in seconds)" in text
+    assert "different machines" in text and "under load" not in text
+    loaded = _with_reference(entry, [0.05, 0.1])
+    assert "timed under load: first" in compare_wall_clock(loaded, fast)
+    bare = dict(entry, training={k: v for k, v in t.items() if k != "reference"})
+    assert "in seconds only" in compare_wall_clock(bare, fast)
+
+
+def test_verify_retrain_reports_both_wall_clocks_in_reference_seconds(trained, capsys):  # noqa: F811
+    from ials_zoo.cli import main
+
+    assert main(["leaderboard", "verify", "--retrain", str(trained / "s0" / "result.json")]) == 0
+    out = capsys.readouterr().out
+    assert "re-made bit for bit" in out
+    line = next(x for x in out.splitlines() if "wall-clock claimed" in x)
+    assert line.count("on the reference machine") == 2 and "x in reference seconds" in line

@@ -10,7 +10,9 @@ every learner:
 
 - the run folder (:class:`~ials_zoo.baselines.runs.RunFolder`: claim, resume, overwrite,
   status) and the opening line;
-- the training clock (GS evaluations and checkpoints excluded; AIP time charged);
+- the training clock (GS evaluations and checkpoints excluded; AIP time charged), and the
+  machine's speed on a reference workload at the start and at every checkpoint
+  (:mod:`ials_zoo.reference_speed`: the wall-clock in reference seconds, ``training.reference``);
 - the cadence: a GS evaluation of the policy every ``eval_every`` steps per agent, each one a
   learning-curve point and a checkpoint (and a checkpoint alone every ``checkpoint_every``);
   a ``progress.csv`` row per stretch of training; the learner's own stops (an AIP refresh) in
@@ -43,6 +45,7 @@ from ials_zoo.core.extras import study_of
 from ials_zoo.errors import BadInput
 from ials_zoo.evaluation import evaluate_joint
 from ials_zoo.leaderboard import now_iso
+from ials_zoo.reference_speed import ReferenceLog
 from ials_zoo.utils import format_seconds
 
 
@@ -75,6 +78,7 @@ class RunPlan:
     unit: str = "step/agent"  # the progress bar's
     binding: dict = field(default_factory=dict)  # the run folder's (RunFolder.binding), in every checkpoint
     command: str = ""  # the `ials-zoo train` command of these settings (retrain.training_command)
+    reference: ReferenceLog = field(default_factory=ReferenceLog)  # the machine's speed, kept in checkpoints
 
 
 UNITS = {"step/agent": "steps per agent", "transition": "agent transitions"}
@@ -219,14 +223,17 @@ def run(plan: RunPlan, learner: Learner, description: str, domain, scoring: Scor
         try:
             try:
                 # inside: a load or start that fails half-way still closes what it started
+                state = info = None
                 if folder.resuming:
                     state, info = _load_checkpoint(out, plan.binding)
-                    learner.load(state, info)
+                    plan.reference = ReferenceLog(info.get("reference"))
+                plan.reference.sample()  # the machine's speed now, off the clock (it starts below)
+                learner.load(state, info)
+                if folder.resuming:
                     steps, curve = int(info["steps"]), info["curve"]
                     log.truncate(steps)
                     clock = Clock(offset=float(info["clock"]))
                 else:
-                    learner.load(None, None)
                     clock = Clock(offset=learner.charged_seconds)
                 learner.start(steps)
 
@@ -235,7 +242,8 @@ def run(plan: RunPlan, learner: Learner, description: str, domain, scoring: Scor
 
                 steps = _train(plan, learner, scoring, policy_net, log, clock, steps, curve)
                 charged = learner.charged_seconds
-                training.update(env_steps=steps, wall_clock_seconds=clock.seconds - charged, aip_seconds=charged)
+                training.update(env_steps=steps, wall_clock_seconds=clock.seconds - charged, aip_seconds=charged,
+                                reference=plan.reference.record(clock.seconds))
                 path = policy_file(out, policy_net())
             finally:
                 learner.close()
@@ -334,10 +342,12 @@ def _curve_point(plan: RunPlan, learner, scoring: Scoring, policy, steps: int, c
 
 
 def _checkpoint(plan: RunPlan, learner, steps: int, curve: list, clock: Clock) -> None:
+    plan.reference.sample()  # off the clock: every checkpoint is taken in a pause
     tensors, info = learner.checkpoint(plan.out)
     # the steps in both files: a run killed between the two writes leaves them apart
     save_training_state(plan.out, dict(tensors, driver_steps=steps, run_id=plan.binding.get("run_id")),
-                        dict(info, steps=steps, curve=curve, clock=clock.seconds, run=plan.binding))
+                        dict(info, steps=steps, curve=curve, clock=clock.seconds, run=plan.binding,
+                             reference=plan.reference.record()))
 
 
 def _load_checkpoint(out: Path, binding: dict) -> tuple[dict, dict]:

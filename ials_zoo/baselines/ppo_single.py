@@ -156,8 +156,9 @@ def check_ppo_args(args, positive=()) -> None:
     # SB3's PPO normalises advantages over a minibatch: one sample gives NaN (it asserts > 1)
     if args.batch_size is not None and args.batch_size < 2:
         raise BadInput(f"batch_size must be >= 2 (PPO normalises advantages over a minibatch), got {args.batch_size}")
-    if args.n_steps is not None and args.n_steps * args.n_envs < 2:
-        raise BadInput(f"n_steps x n_envs must be >= 2 (one update's samples), got {args.n_steps} x {args.n_envs}")
+    envs = getattr(args, "n_envs", None) or getattr(args, "n_copies", 1)  # ppo_shared: copies of every learner
+    if args.n_steps is not None and args.n_steps * envs < 2:
+        raise BadInput(f"n_steps must give an update of at least 2 samples, got {args.n_steps} x {envs} environments")
     check_seed(args.seed, "seed")
     hidden_sizes(args.net_arch)
     parse_env_options(args.env_options)

@@ -40,10 +40,11 @@ from pathlib import Path
 import numpy as np
 
 import ials_zoo
+from ials_zoo import reference_speed
 from ials_zoo.errors import BadInput
 from ials_zoo.leaderboard.build import hardware_info, now_iso
 from ials_zoo.leaderboard.validate import ResultError, load_result, validate_result
-from ials_zoo.utils import atomic_write_text
+from ials_zoo.utils import atomic_write_text, format_seconds
 
 FILE_SUFFIXES = (".pt", ".pth", ".safetensors", ".npz", ".zip", ".json", ".xml", ".sumocfg", ".csv", ".txt")
 """Values that name a file: a recorded command with one is refused (it would read that file)."""
@@ -58,6 +59,7 @@ MACHINE_FLAGS = ("workers", "backend")
 """How many processes a run used: the numbers do not depend on it (tests/test_exact_resume.py)."""
 
 VOLATILE_HEADER = ("created", "training.wall_clock_seconds", "training.aip_seconds", "training.reproduce",
+                   "training.reference",
                    "training.aip.collection_seconds", "training.aip.training_seconds", "package_version")
 """Header fields that record when and where a policy was trained, not what it is."""
 
@@ -424,10 +426,37 @@ def retrain(path, seeds: int = 1, directory=None, progress: bool = False,
         with tempfile.TemporaryDirectory(prefix="ials-zoo-retrain-") as tmp:
             args.out_dir, args.progress = str(Path(tmp) / "run"), progress
             module.main(args)
-            difference = policy_difference(Path(args.out_dir) / "policy.safetensors", submitted)
+            remade = Path(args.out_dir) / "policy.safetensors"
+            difference = policy_difference(remade, submitted)
+            clocks = {"claimed": wall_clock_of(_header(submitted)), "retrained": wall_clock_of(_header(remade))}
         reports.append({"seed": seed, "ok": difference is None, "difference": difference,
-                        "platform": platform_text(), "entry_platform": record["platform"]})
+                        "platform": platform_text(), "entry_platform": record["platform"], "wall_clock": clocks})
     return reports
+
+
+def wall_clock_of(header: dict) -> dict:
+    """A policy header's training wall-clock (training and AIPs, seconds) and, where the run
+    measured its machine, the same in seconds of the reference machine (else None)."""
+    t = header.get("training") if isinstance(header.get("training"), dict) else {}
+    seconds = float(t.get("wall_clock_seconds") or 0.0) + float(t.get("aip_seconds") or 0.0)
+    ref = reference_speed.of(t)
+    return {"seconds": seconds, "reference_seconds": None if ref is None else float(ref["reference_seconds"]),
+            "under_load": bool(ref and ref["under_load"])}
+
+
+def wall_clock_text(clocks: dict) -> str:
+    """A re-train report's line on wall-clocks: the claim's beside the re-trained run's."""
+    def one(c):
+        ref = "" if c["reference_seconds"] is None else f" [{format_seconds(c['reference_seconds'])} on the reference machine]"
+        return format_seconds(c["seconds"]) + ref + (" (timed under load)" if c["under_load"] else "")
+
+    claimed, retrained = clocks["claimed"], clocks["retrained"]
+    text = f"wall-clock claimed {one(claimed)}, re-trained {one(retrained)}"
+    if claimed["reference_seconds"] and retrained["reference_seconds"] is not None:
+        text += f": {retrained['reference_seconds'] / claimed['reference_seconds']:.2f}x in reference seconds"
+    elif claimed["reference_seconds"] is None:
+        text += " (the claim has no reference measurement: its seconds are its machine's)"
+    return text
 
 
 def record_retrained(path, reports: list[dict]) -> None:
@@ -441,5 +470,5 @@ def record_retrained(path, reports: list[dict]) -> None:
     atomic_write_text(path, json.dumps(data, indent=2, allow_nan=False) + "\n")
 
 
-__all__ = ["VOLATILE_HEADER", "command_without_seed", "package_commit", "parse_command", "platform_text", "run_parts",
+__all__ = ["VOLATILE_HEADER", "wall_clock_of", "wall_clock_text", "command_without_seed", "package_commit", "parse_command", "platform_text", "run_parts",
            "policy_difference", "record_retrained", "reproduce_record", "retrain", "training_command"]

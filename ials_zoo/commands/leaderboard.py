@@ -86,9 +86,13 @@ def configure(parser):
     p.add_argument("files", nargs="+")
     p.add_argument("--out", required=True, help="merged result JSON (atomic)")
     p.add_argument("--notes", default=None)
-    p = sub.add_parser("compare", help="IQM of two entries and the probability that the first improves on the second")
+    p = sub.add_parser("compare", help="IQM of two entries and the probability that the first improves on the "
+                                       "second, or (--wall-clock) their wall-clocks on the reference machine")
     p.add_argument("first")
     p.add_argument("second")
+    p.add_argument("--wall-clock", action="store_true",
+                   help="compare the training wall-clocks in seconds of the reference machine, naming runs timed on "
+                        "different machines or under load")
     p = sub.add_parser("export", help="write the board's trained entries in another tool's format")
     p.add_argument("--format", required=True, choices=["marl-eval"], help="marl-eval: InstaDeep's marl-eval JSON")
     p.add_argument("--out", default=None, help="the file to write (atomic; default: standard output)")
@@ -110,14 +114,14 @@ def _existing_inputs(args) -> None:
 
 
 def _retrain(args) -> int:
-    from ials_zoo.baselines.retrain import record_retrained, retrain
+    from ials_zoo.baselines.retrain import record_retrained, retrain, wall_clock_text
 
     if args.policy:
         raise BadInput("--policy goes with a re-score, not --retrain (the entry's own policy files are compared)")
     reports = retrain(args.file, args.seeds, args.dir, progress=True, max_seconds=args.max_remeasure_hours * 3600)
     for r in reports:
         status = "OK (the policy file re-made bit for bit)" if r["ok"] else f"FAILED: first difference: {r['difference']}"
-        print(f"seed {r['seed']}: re-trained: {status}")
+        print(f"seed {r['seed']}: re-trained: {status}\n  {wall_clock_text(r['wall_clock'])}")
     if not all(r["ok"] for r in reports) and reports[0]["platform"] != reports[0]["entry_platform"]:
         print(f"  (trained on: {reports[0]['entry_platform']}\n   re-trained on: {reports[0]['platform']})")
     ok = all(r["ok"] for r in reports)
@@ -148,7 +152,8 @@ def run(args) -> int:
         elif args.action == "show":
             print(lb.show(args.dir, sort=args.sort))
         elif args.action == "compare":
-            print(lb.compare_entries(lb.load_result(args.first), lb.load_result(args.second)))
+            compare = lb.compare_wall_clock if args.wall_clock else lb.compare_entries
+            print(compare(lb.load_result(args.first), lb.load_result(args.second)))
         elif args.action == "export":
             import json
 

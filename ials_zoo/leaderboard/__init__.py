@@ -25,7 +25,7 @@ from ials_zoo.leaderboard.build import (
     reference_result,
     split_env_id,
 )
-from ials_zoo.leaderboard.export import compare_entries, export_board
+from ials_zoo.leaderboard.export import compare_entries, compare_wall_clock, export_board
 from ials_zoo.leaderboard.merge import merge_results
 from ials_zoo.leaderboard.render import render, show
 from ials_zoo.leaderboard.store import (
@@ -52,6 +52,7 @@ from ials_zoo.leaderboard.verify import verify
 __all__ = [
     "ARCHIVE_SUBDIR",
     "compare_entries",
+    "compare_wall_clock",
     "export_board",
     "MAX_RESULT_BYTES",
     "MULTI",

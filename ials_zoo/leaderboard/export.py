@@ -21,8 +21,10 @@ are exported; references (scripted, random) have no training run and are left ou
 
 from __future__ import annotations
 
+from ials_zoo import reference_speed
 from ials_zoo.core.domains import get_domain
 from ials_zoo.errors import BadInput
+from ials_zoo.leaderboard.render import console_text, format_duration
 from ials_zoo.leaderboard.store import load_entries
 from ials_zoo.stats import iqm_interval, probability_of_improvement
 
@@ -90,6 +92,41 @@ def compare_entries(first: dict, second: dict) -> str:
                      f"IQM {iqm:.3f} [{lo:.3f}, {hi:.3f}]")
     p, lo, hi = probability_of_improvement(*seeds)
     lines.append(f"P(first > second) = {p:.3f} [{lo:.3f}, {hi:.3f}] (95% bootstrap over seeds)")
+    return "\n".join(lines)
+
+
+def compare_wall_clock(first: dict, second: dict) -> str:
+    """Two trained entries' wall-clocks, in seconds and in seconds of the reference machine
+    (:mod:`ials_zoo.reference_speed`), and their ratio in the figure that can be compared: the
+    reference seconds where both measured their machine, else the seconds, said so. It names
+    runs timed on different machines and runs timed under load."""
+    lines, refs, totals = [], [], []
+    for name, d in (("first", first), ("second", second)):
+        t = d["training"]
+        if t is None:
+            raise BadInput(f"the {name} entry is a reference entry ({d['algorithm']}): it has no training wall-clock")
+        total = float(t["wall_clock_seconds"]) + float(t["aip_seconds"])
+        ref = reference_speed.of(t)
+        totals.append(total)
+        refs.append(ref)
+        where = ("no reference measurement (trained before runs measured their machine)" if ref is None else
+                 f"{format_duration(ref['reference_seconds'])} on the reference machine; timed on "
+                 f"{ref['machine']}" + (", under load (its speed moved by more than 20%)" if ref["under_load"] else ""))
+        lines.append(console_text(f"{name}: {algorithm_label(d)} on {d['env_id']}, {len(d['scores'])} seed(s): "
+                                  f"{format_duration(total)} of wall-clock (training + AIPs); {where}"))
+    if all(refs):
+        ratio = refs[0]["reference_seconds"] / max(refs[1]["reference_seconds"], 1e-9)
+        lines.append(f"first / second = {ratio:.2f} in reference seconds ({totals[0] / max(totals[1], 1e-9):.2f} "
+                     "in seconds)")
+        if refs[0]["machine"] != refs[1]["machine"]:
+            lines.append("timed on different machines: compare the reference seconds, not the seconds")
+    else:
+        lines.append(f"first / second = {totals[0] / max(totals[1], 1e-9):.2f} in seconds only: not both runs "
+                     "measured their machine, so machines and loads may differ 2-4x")
+    loaded = [n for n, r in zip(("first", "second"), refs) if r is not None and r["under_load"]]
+    if loaded:
+        lines.append(f"timed under load: {' and '.join(loaded)}; its seconds are not a quiet machine's (the "
+                     "reference seconds correct for a steady load, not for one that came and went)")
     return "\n".join(lines)
 
 

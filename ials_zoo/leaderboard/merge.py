@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from ials_zoo import reference_speed
 from ials_zoo.errors import BadInput
 from ials_zoo.leaderboard.build import MULTI, now_iso, overall_metrics, overall_score, per_agent_scores
 from ials_zoo.leaderboard.validate import ResultError, validate_result
@@ -15,7 +16,8 @@ def merge_results(results: Sequence[dict], submitter: str | None = None, notes: 
     with a score per seed and the overall score over seeds.
 
     ``training.env_steps`` must agree; ``wall_clock_seconds`` and ``aip_seconds`` become the
-    means over seeds (documented in SCHEMA.md)."""
+    means over seeds, and ``reference`` the seeds' together (:func:`ials_zoo.reference_speed.merged`;
+    documented in SCHEMA.md)."""
     if len(results) < 2:
         raise BadInput("merge needs at least two results")
     for i, r in enumerate(results):
@@ -47,6 +49,10 @@ def merge_results(results: Sequence[dict], submitter: str | None = None, notes: 
     training = dict(first["training"], seeds=seeds,
                     wall_clock_seconds=sum(r["training"]["wall_clock_seconds"] for r in results) / n,
                     aip_seconds=sum(r["training"]["aip_seconds"] for r in results) / n)
+    training.pop("reference", None)
+    reference = reference_speed.merged([r["training"].get("reference") for r in results])
+    if reference is not None:
+        training["reference"] = reference
     merged = dict(first, training=training, scores=scores, score=overall_score(scores),
                   learning_curves=[c for r in results for c in r["learning_curves"]],
                   created=now_iso(),

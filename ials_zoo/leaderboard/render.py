@@ -7,6 +7,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+from ials_zoo import reference_speed
 from ials_zoo.core.domains import get_domain
 from ials_zoo.errors import BadInput
 from ials_zoo.leaderboard.build import MULTI, OFFICIAL, SINGLE
@@ -17,7 +18,8 @@ from ials_zoo.utils import atomic_path, atomic_write_text, format_seconds, read_
 WRITEUP = "writeup.md"
 MAX_WRITEUP_BYTES = 1 << 20
 HEADER = ["policy / algorithm", "trained on", "GS score", "95% CI", "IQM [95% CI]", "seeds", "episodes",
-          "env steps", "wall-clock (+AIP)", "date"]
+          "env steps", "wall-clock (+AIP) [on the reference machine]", "date"]
+UNDER_LOAD = "timed under load"
 
 
 def _training_label(data: dict) -> str:
@@ -31,6 +33,20 @@ def _total_seconds(data: dict) -> float | None:
 
 def format_duration(seconds: float) -> str:
     return format_seconds(seconds, hour_decimals=2)
+
+
+def wall_clock_text(data: dict) -> str:
+    """An entry's wall-clock (training and AIPs), then the same in seconds of the reference
+    machine where the run measured its machine's speed (:mod:`ials_zoo.reference_speed`), and
+    a mark where that speed moved by more than 20% during the run."""
+    total = _total_seconds(data)
+    if total is None:
+        return "-"
+    ref = reference_speed.of(data["training"])
+    if ref is None:
+        return format_duration(total)
+    return (f"{format_duration(total)} [{format_duration(ref['reference_seconds'])}]"
+            + (f" ({UNDER_LOAD})" if ref["under_load"] else ""))
 
 
 def _iqm(d: dict) -> str:
@@ -50,7 +66,6 @@ def console_text(text) -> str:
 
 def _row(d: dict) -> list[str]:
     s, t = d["score"], d["training"]
-    total = _total_seconds(d)
     label = d["algorithm"] + (" (deterministic)" if d["evaluation"].get("deterministic") else "")
     if d.get("provenance") == "external":
         label += " [external: training claims unverified]"
@@ -59,7 +74,7 @@ def _row(d: dict) -> list[str]:
     return [console_text(label), console_text(_training_label(d)), f"{s['mean']:.2f}",
             f"[{s['ci_low']:.2f}, {s['ci_high']:.2f}]", _iqm(d), str(len(d["scores"])) if t else "-",
             str(d["evaluation"]["episodes"]), f"{t['env_steps']:,}" if t else "-",
-            format_duration(total) if total is not None else "-", console_text(d["created"][:10])]
+            wall_clock_text(d), console_text(d["created"][:10])]
 
 
 def ranking_metric(env_id: str) -> str | None:

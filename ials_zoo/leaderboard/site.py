@@ -28,8 +28,8 @@ from ials_zoo.leaderboard.render import (
     _total_seconds,
     _training_label,
     console_text,
-    format_duration,
     group_entries,
+    wall_clock_text,
 )
 from ials_zoo.leaderboard.store import ARCHIVE_SUBDIR, board_path, load_entries
 from ials_zoo.utils import atomic_write_text
@@ -118,7 +118,7 @@ def _table(rows: list[dict], folder: str, link_base: str) -> str:
     names = [m for m in metrics if any(m in (d.get("metrics") or {}) for d in rows)]
     head = ['<th data-better="higher">policy / algorithm</th>', "<th>trained on</th>",
             '<th data-better="higher">GS score</th>', "<th>95% CI</th>", '<th data-better="higher">IQM [95% CI]</th>',
-            "<th>seeds</th>", "<th>episodes</th>", "<th>env steps</th>", '<th data-better="lower">wall-clock (+AIP)</th>']
+            "<th>seeds</th>", "<th>episodes</th>", "<th>env steps</th>", '<th data-better="lower">wall-clock (+AIP) [on the reference machine]</th>']
     head += [f'<th data-better="{metrics[m]}">{_e(m)} ({metrics[m]} is better)</th>' for m in names]
     head += ["<th>date</th>", "<th>files and checks</th>"]
     body = []
@@ -130,7 +130,7 @@ def _table(rows: list[dict], folder: str, link_base: str) -> str:
                  _cell(_e(_iqm(d))), _cell(str(len(d["scores"])) if t else "-", len(d["scores"]) if t else "", True),
                  _cell(str(d["evaluation"]["episodes"]), d["evaluation"]["episodes"], True),
                  _cell(f"{t['env_steps']:,}" if t else "-", t["env_steps"] if t else "", True),
-                 _cell(format_duration(total) if total is not None else "-", "" if total is None else total, True)]
+                 _cell(_e(wall_clock_text(d)), "" if total is None else total, True)]
         for m in names:
             v = (d.get("metrics") or {}).get(m)
             cells.append(_cell("-" if v is None else f"{v['mean']:.2f} [{v['ci_low']:.2f}, {v['ci_high']:.2f}]",

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ials_zoo import reference_speed
 from ials_zoo.core.domains import domain_ids, get_domain
 from ials_zoo.errors import BadInput
 from ials_zoo.leaderboard.build import (
@@ -245,10 +246,28 @@ def _check_training(data: dict, kind: str) -> None:
         seeds = [s["seed"] for s in data["scores"]]
         if seeds != training["seeds"]:
             raise ResultError("scores", f"per-seed scores {seeds} do not match training.seeds {training['seeds']}")
+        _check_reference(training)
     for i, curve in enumerate(data["learning_curves"]):
         steps = [p["env_steps"] for p in curve["points"]]
         if steps != sorted(steps):
             raise ResultError(f"learning_curves.{i}.points", "env_steps must not decrease")
+
+
+def _check_reference(training: dict) -> None:
+    """A one-seed run's ``training.reference`` agrees with its own timings: under load exactly
+    when they moved by more than 20%, and its reference seconds its wall-clock scaled by them
+    (a merged entry's are its seeds', :func:`ials_zoo.reference_speed.merged`)."""
+    ref = training.get("reference")
+    if ref is None or len(training["seeds"]) != 1:
+        return
+    if ref["under_load"] != reference_speed.under_load(ref):
+        raise ResultError("training.reference.under_load", f"{ref['under_load']} does not say what its timings say "
+                          f"({reference_speed.under_load(ref)}: under load when they move by more than 20%)")
+    total = float(training["wall_clock_seconds"]) + float(training["aip_seconds"])
+    if "reference_seconds" in ref and ref["seconds"] and not math.isclose(
+            ref["reference_seconds"], reference_speed.reference_seconds(total, ref["seconds"]), rel_tol=1e-3, abs_tol=1e-2):
+        raise ResultError("training.reference.reference_seconds", f"{ref['reference_seconds']} is not the wall-clock "
+                          f"({total:.3f} s) scaled by its timings ({reference_speed.reference_seconds(total, ref['seconds'])})")
 
 
 def _check_metrics(data: dict, domain) -> None:
