@@ -189,6 +189,15 @@ again and passes only if the policy file comes out bit for bit the same: such en
 **re-trained**. Without that check, an entry's training claims are what its policy files' headers
 say (`header-agrees`), or unverified (`external`).
 
+**Wall-clocks.** The seconds a run trained (AIP collection and training included) depend on
+the machine and on what else ran on it, 2-4x. Every run now times a fixed reference workload
+at its start and at every checkpoint (`ials_zoo/reference_speed.py`); the figure in brackets is
+its wall-clock in seconds of the reference machine, which can be compared across entries, and
+"timed under load" marks a run whose workload times moved by more than 20% while it trained.
+An entry without brackets was trained before runs measured their machine: its seconds compare
+only with runs of the same machine and load. `ials-zoo leaderboard compare --wall-clock A B`
+compares two entries this way.
+
 Regenerate this page with `ials-zoo leaderboard render` (do not edit it by hand; its write-up
 section is copied from [writeup.md](writeup.md)).
 """
