@@ -33,8 +33,12 @@ def _quiet_interrupts_while_starting() -> None:
     """Ctrl-C while the ``ials-zoo`` command is still importing (about 0.6 s, longer on a busy
     machine) ends it with status 130 and one line, not a traceback. Only for the command line
     (the ``ials-zoo`` script, ``python -m ials_zoo.cli``): a program that imports the package,
-    and ``python -m`` of any other module, keep Python's own Ctrl-C. ``ials_zoo.cli.main`` gives Python's handler back first
-    thing."""
+    and ``python -m`` of any other module, keep Python's own Ctrl-C.
+
+    The handler only notes the Ctrl-C (a second one ends the process at once): an exception
+    raised inside an import that runs compiled code (torch's) aborts the process instead of
+    unwinding it. ``ials_zoo.cli.main`` ends the command once its start-up is done, then gives
+    Python's handler back."""
     import os
     import signal
     import sys
@@ -48,9 +52,12 @@ def _quiet_interrupts_while_starting() -> None:
         return  # someone else's handler: theirs
 
     def interrupted(signum, frame):
-        sys.stderr.write("ials-zoo: interrupted\n")
-        raise SystemExit(130)
+        if interrupted.pending:  # a second Ctrl-C: the user means it now
+            os.write(2, b"ials-zoo: interrupted\n")
+            os._exit(130)
+        interrupted.pending = True
 
+    interrupted.pending = False
     interrupted.ials_zoo_startup = True
     signal.signal(signal.SIGINT, interrupted)
 

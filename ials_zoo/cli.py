@@ -83,6 +83,10 @@ def _deepest(parser, argv: list[str]):
     return parser
 
 
+class _Interrupted:
+    pending = True
+
+
 def threading_main() -> bool:
     import threading
 
@@ -101,23 +105,62 @@ def _sigterm_interrupts() -> None:
         signal.signal(signal.SIGTERM, interrupt)
 
 
+def _noted_interrupts():
+    """The start-up's Ctrl-C handler, which only notes an interrupt (the package's, installed as
+    it started importing: ``ials_zoo._quiet_interrupts_while_starting``; else one put in now
+    where Python's own is in place): a KeyboardInterrupt raised inside compiled code (torch's
+    imports) aborts the process. None where it is not ours to handle (another thread, another
+    program's handler)."""
+    import signal
+
+    if not threading_main():
+        return None
+    handler = signal.getsignal(signal.SIGINT)
+    if getattr(handler, "ials_zoo_startup", False):
+        return handler
+    if handler is not signal.default_int_handler:
+        return None
+
+    def noted(signum, frame):
+        if noted.pending:  # a second Ctrl-C: the user means it now
+            os.write(2, b"ials-zoo: interrupted\n")
+            os._exit(130)
+        noted.pending = True
+
+    noted.pending, noted.ials_zoo_startup = False, True
+    signal.signal(signal.SIGINT, noted)
+    return noted
+
+
 def _python_interrupts() -> None:
-    """Give Ctrl-C back to Python (a KeyboardInterrupt, handled below) from the quiet exit of
-    the start-up (``ials_zoo._quiet_interrupts_while_starting``)."""
+    """Give Ctrl-C back to Python (a KeyboardInterrupt, handled below) once the start-up, with
+    its imports, is done."""
     import signal
 
     if threading_main() and getattr(signal.getsignal(signal.SIGINT), "ials_zoo_startup", False):
         signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
+def _start(argv: list[str]):
+    """``(parser, args, extra, module)``: the parser, with the command's own options, and the
+    command's module, imported (module None without a command)."""
+    command = next((a for a in argv if not a.startswith("-")), None)
+    parser = build_parser(load=command)
+    args, extra = parser.parse_known_args(argv)
+    module = importlib.import_module(_available()[args.command][0]) if args.command and not extra else None
+    return parser, args, extra, module
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
-    command = next((a for a in argv if not a.startswith("-")), None)
+    noted = _noted_interrupts()
     try:
+        parser, args, extra, module = _start(argv)
+    except KeyboardInterrupt:  # raised by Python code where no handler of ours was in place
+        noted = _Interrupted
+    finally:
         _python_interrupts()
-        parser = build_parser(load=command)
-        args, extra = parser.parse_known_args(argv)
-    except KeyboardInterrupt:  # Ctrl-C while starting up: no traceback
+    if noted is not None and noted.pending:  # Ctrl-C while starting up: no traceback
         print("ials-zoo: interrupted", file=sys.stderr)
         return 130
     if extra:
@@ -125,7 +168,6 @@ def main(argv: list[str] | None = None) -> int:
     if args.command is None:
         parser.print_help()
         return 2
-    module = importlib.import_module(_available()[args.command][0])
     _sigterm_interrupts()
     try:
         return int(module.run(args) or 0)

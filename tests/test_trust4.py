@@ -416,3 +416,23 @@ def test_verify_retrain_reports_both_wall_clocks_in_reference_seconds(trained, c
     assert "re-made bit for bit" in out
     line = next(x for x in out.splitlines() if "wall-clock claimed" in x)
     assert line.count("on the reference machine") == 2 and "x in reference seconds" in line
+
+
+# -- 6. Ctrl-C while starting: the imports finish, then the command ends ----------------------
+
+
+def test_ctrl_c_during_a_commands_imports_lets_them_finish_then_ends_with_130(monkeypatch, capsys):
+    """A KeyboardInterrupt raised inside an import that runs compiled code aborts the process
+    (exit -6, what made the start-up test flaky): the start-up only notes the Ctrl-C, lets the
+    import finish and then ends the command, one line, exit 130."""
+    import signal
+    import sys
+
+    from ials_zoo import cli
+
+    sys.modules.pop("interrupting_command", None)
+    monkeypatch.setitem(cli.SUBCOMMANDS, "interrupting", ("interrupting_command", "x"))
+    assert cli.main(["interrupting"]) == 130
+    assert sys.modules["interrupting_command"].IMPORTED  # not cut short
+    assert capsys.readouterr().err.strip() == "ials-zoo: interrupted"
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # Python's Ctrl-C is back
