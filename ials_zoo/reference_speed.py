@@ -100,19 +100,21 @@ def measure(repeats: int = REPEATS) -> float:
     return statistics.median(times)
 
 
-def machine() -> str:
-    """The processor's name and core count, as a comparison names the machine."""
-    name = ""
+def processor_name() -> str:
+    """The processor's model name (Linux's ``/proc/cpuinfo``), else what ``platform`` says."""
     try:
         with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as f:
             for line in f:
                 if line.startswith("model name"):
-                    name = line.split(":", 1)[1].strip()
-                    break
+                    return line.split(":", 1)[1].strip()
     except OSError:
         pass
-    name = name or platform.processor() or platform.machine() or "unknown processor"
-    return f"{name[:200]}, {os.cpu_count() or 0} cores"
+    return platform.processor() or platform.machine() or "unknown processor"
+
+
+def machine() -> str:
+    """The processor's name and core count, as a comparison names the machine."""
+    return f"{processor_name()[:200]}, {os.cpu_count() or 0} cores"
 
 
 class ReferenceLog:
@@ -174,4 +176,5 @@ def of(training: dict | None) -> dict | None:
 
 
 __all__ = ["LOAD_TOLERANCE", "REFERENCE_WORKLOAD_SECONDS", "WORKLOAD", "ReferenceLog", "machine", "measure", "merged", "of",
+           "processor_name",
            "reference_seconds", "under_load"]

@@ -24,6 +24,7 @@ from collections.abc import Sequence
 import numpy as np
 
 import ials_zoo
+from ials_zoo import reference_speed
 from ials_zoo.core.domains import get_domain
 from ials_zoo.errors import BadInput
 from ials_zoo.evaluation import PROTOCOL_EPISODES, REFERENCE_POLICIES, eval_seeds, evaluate, evaluate_joint, load_policy
@@ -36,15 +37,7 @@ OFFICIAL, VARIANT = "official", "variant"
 
 def hardware_info() -> dict:
     """Where a result was measured (for the ``hardware`` field)."""
-    processor = platform.processor() or ""
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    processor = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
+    processor = reference_speed.processor_name()
     versions = {}
     for name in ("torch", "numpy", "scipy"):
         try:
