@@ -64,13 +64,14 @@ import numpy as np
 import torch
 
 from ials_zoo.baselines.aip_record import portable_path
-from ials_zoo.baselines.arguments import arg, parse_env_options, run_cli
+from ials_zoo.baselines.arguments import arg, run_cli
 from ials_zoo.baselines.driver import JointActors, RunPlan, check_run_args, run
 from ials_zoo.baselines.multiagent import (
     JointActor,
     MultiAgentRunArgs,
     check_multi_ppo,
     checkpoint_every_of,
+    env_options_of,
     frame_stack_of,
     merge_shard_stats,
     ppo_config,
@@ -179,7 +180,7 @@ def check_args(args: Args):
         _check_copies_args(args)
     else:
         domain.require_ials("train dials")
-    options = parse_env_options(args.env_options)
+    options = env_options_of(args, domain)
     agents = domain.check_agents(None if args.agents == "all" else args.agents, **options)
     check_seed(args.seed, "seed")
     check_multi_ppo(args, domain)

@@ -26,12 +26,13 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ials_zoo.baselines.arguments import arg, parse_env_options, run_cli
+from ials_zoo.baselines.arguments import arg, run_cli
 from ials_zoo.baselines.driver import JointActors, RunPlan, check_run_args, run
 from ials_zoo.baselines.multiagent import (
     MultiAgentRunArgs,
     check_multi_ppo,
     checkpoint_every_of,
+    env_options_of,
     frame_stack_of,
     merge_shard_stats,
     ppo_config,
@@ -67,11 +68,9 @@ def check_args(args: Args):
         raise BadInput(f"ippo trains on the GS (--simulator gs); every agent on its own IALS is `ials-zoo train "
                          f"dials`, not --simulator {args.simulator!r}")
     domain = get_domain(args.env_id)
-    options = parse_env_options(args.env_options)
-    unknown = sorted(set(options) - set(domain.gs_options))
-    if unknown:  # a result records only options the board can re-measure (no file paths)
-        raise BadInput(f"--env-options: {unknown} cannot be part of a scored run of {args.env_id}; its options: "
-                       f"{', '.join(domain.gs_options) or 'none'}")
+    # the GS's options, a network of the user's own among them (the board keeps its own maps:
+    # such a result is refused by submit, not by training)
+    options = env_options_of(args, domain, only_gs=True)
     agents = domain.check_agents(None if args.agents == "all" else args.agents, **options)
     check_seed(args.seed, "seed")
     check_multi_ppo(args, domain)

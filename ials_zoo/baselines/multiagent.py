@@ -13,8 +13,16 @@ from pathlib import Path
 
 import numpy as np
 
-from ials_zoo.baselines.arguments import AblatedPPOSettings, arg, check_frame_stack, check_ppo_settings, hidden_sizes
+from ials_zoo.baselines.arguments import (
+    AblatedPPOSettings,
+    arg,
+    check_frame_stack,
+    check_ppo_settings,
+    hidden_sizes,
+    parse_env_options,
+)
 from ials_zoo.baselines.runs import DETERMINISTIC_RESULT
+from ials_zoo.core.domains import get_domain
 from ials_zoo.core.extras import dials_of
 from ials_zoo.core.spaces import stack_observations
 from ials_zoo.errors import BadInput
@@ -96,6 +104,23 @@ def check_multi_ppo(args, domain) -> list[int]:
         raise BadInput(f"recurrent_hidden must be >= 0, got {args.recurrent_hidden}")
     check_ppo_settings(args)
     return hidden_sizes(args.hidden, "hidden")
+
+
+def env_options_of(args, domain, only_gs: bool = False) -> dict:
+    """``--env-options`` of a run: where they name the user's own files (a network of their
+    own: :attr:`~ials_zoo.core.domains.Domain.file_options`), their paths made absolute and
+    written back into ``args``, so that the run records them whole and its policy and command
+    work from any folder. ``only_gs``: options the GS does not take are refused by name."""
+    options = parse_env_options(args.env_options)
+    allowed = set(domain.gs_options) | set(domain.file_options)
+    unknown = sorted(set(options) - allowed)
+    if only_gs and unknown:
+        raise BadInput(f"--env-options: {unknown} are not options of {domain.env_id}'s GS; its options: "
+                       f"{', '.join(list(domain.gs_options) + list(domain.file_options)) or 'none'}")
+    absolute = domain.with_absolute_files(options)
+    if absolute != options:
+        args.env_options = json.dumps(absolute)
+    return absolute
 
 
 def fill_update_size(args, domain) -> None:
@@ -253,7 +278,8 @@ def final_results(out: Path, env_id: str, policy_path: Path, algorithm: str, tra
         result = make_result([ev], algorithm=algorithm, training=training, training_seeds=[seed],
                              learning_curves=[{"seed": seed, "points": curve}], trained_agents=agents,
                              submitter=submitter, notes=notes)
-        write_result(Path(out) / name, result)
+        # a run on the user's own network keeps its result (the board refuses it on submit)
+        write_result(Path(out) / name, result, local=bool(set(options) & set(get_domain(env_id).file_options)))
         results.append(result)
     return results[0], results[1]
 

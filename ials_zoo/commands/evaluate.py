@@ -88,7 +88,8 @@ def run(args) -> int:
         m = result["metrics"][rank]
         print(f"  {rank} (ranks the board, {get_domain(result['env_id']).metrics[rank]} is better): {m['mean']:.3f}, "
               f"95% CI [{m['ci_low']:.3f}, {m['ci_high']:.3f}]")
-    if args.out:
-        write_result(args.out, result)
+    if args.out:  # a network of the user's own makes a result that stays local (submit refuses it)
+        write_result(args.out, result, local=bool(set(result["evaluation"]["options"])
+                                                  & set(get_domain(result["env_id"]).file_options)))
         print(f"wrote {args.out}")
     return 0

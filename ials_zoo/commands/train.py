@@ -31,6 +31,9 @@ def run(args) -> int:
     try:
         module.main(dataclass_from_namespace(module.Args, args))
     except BadInput as exc:
-        raise type(exc)(flag_named(str(exc), module.Args)) from None
+        named = flag_named(str(exc), module.Args)
+        if named == str(exc):
+            raise
+        raise BadInput(named) from None  # one line, the flag named (any BadInput: a ResultError takes a field too)
     return 0
 

@@ -72,6 +72,10 @@ class Domain:
         gs_options: every GS option that changes what an episode is (the evaluation
             protocol's ``options`` may hold these and nothing else; rendering and backends
             are not options of a result).
+        file_options: GS options that name a user's own files (a network of their own, say):
+            training and evaluation take them, with their paths made absolute
+            (:meth:`with_absolute_files`), and a board entry never does (the board keeps the
+            domain's own scenarios, and a result never makes it read a file).
         one_simulation_per_process: each GS/LS holds a process-wide resource (libsumo: one
             simulation per process), so vectorised training puts each in its own process.
         null_influence: the "nothing comes in" class of the influence sources (F-IALS
@@ -119,6 +123,7 @@ class Domain:
     frame_stack: int = 1
     agent_options: tuple[str, ...] = ()
     gs_options: tuple[str, ...] = ()
+    file_options: tuple[str, ...] = ()
     one_simulation_per_process: bool = False
     null_influence: int = 0
     untrained_probs: tuple | None = None
@@ -154,6 +159,18 @@ class Domain:
             raise BadInput(f"{self.env_id}: score_metric {self.score_metric!r} is not one of its metrics")
         if not set(self.track_options) <= set(self.gs_options):
             raise BadInput(f"{self.env_id}: track_options must be GS options, got {list(self.track_options)}")
+
+    def with_absolute_files(self, options: dict) -> dict:
+        """``options`` with the paths its :attr:`file_options` name (a path, or a list of them)
+        made absolute, so that a run, its recorded command and its policy work from any folder."""
+        out = dict(options)
+        for key in set(self.file_options) & set(out):
+            value = out[key]
+            if isinstance(value, str):
+                out[key] = os.path.abspath(value)
+            elif isinstance(value, (list, tuple)):
+                out[key] = [os.path.abspath(v) if isinstance(v, str) else v for v in value]
+        return out
 
     def metric_range(self, name: str) -> tuple[float, float]:
         """The values metric ``name`` can take (:attr:`metric_ranges`; default ``[0, inf)``)."""

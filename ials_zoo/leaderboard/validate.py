@@ -102,9 +102,11 @@ def _schema_check(data: dict) -> None:
         raise ResultError(field, f"schema violation: {err.message}")
 
 
-def validate_result(data) -> dict:
+def validate_result(data, local: bool = False) -> dict:
     """Check ``data`` (module docstring); return it, or raise :class:`ResultError` naming the
-    offending field."""
+    offending field. ``local``: a result of a run on the user's own files (a network of their
+    own: the domain's ``file_options``), which the run writes and keeps; anything that reads a
+    result as an entry (submit, verify, the board) leaves ``local`` off and refuses such files."""
     if not isinstance(data, dict):
         raise ResultError("(top level)", f"a result must be a JSON object, got {type(data).__name__}")
     if data.get("schema_version") != SCHEMA_VERSION:
@@ -113,7 +115,7 @@ def validate_result(data) -> dict:
     check_finite(data)
     _schema_check(data)
 
-    domain = _check_domain(data)
+    domain = _check_domain(data, local)
     _check_track_and_protocol(data)
     kind = data["policy"]["kind"]
     if kind in ("random", "scripted"):
@@ -136,8 +138,9 @@ def validate_result(data) -> dict:
     return data
 
 
-def _check_domain(data: dict):
-    """The domain, its version, its GS options and its agents exist; return the domain."""
+def _check_domain(data: dict, local: bool = False):
+    """The domain, its version, its GS options and its agents exist; return the domain. Options
+    that name the user's own files are a local result's only (:func:`validate_result`)."""
     env_id = data["env_id"]
     if env_id not in domain_ids():
         raise ResultError("env_id", f"unknown domain {env_id!r}; known: {', '.join(domain_ids())}")
@@ -148,7 +151,11 @@ def _check_domain(data: dict):
         raise ResultError("domain_version", f"{data['domain_version']} does not match env_id {env_id!r}")
     ev = data["evaluation"]
     domain = get_domain(env_id)
-    unknown = [k for k in ev["options"] if k not in domain.gs_options]
+    files = [k for k in ev["options"] if k in domain.file_options]
+    if files and not local:
+        raise ResultError("evaluation.options", f"{files} name files of a network of your own: the result stays with "
+                          f"its run (the board keeps {env_id}'s own scenarios, and never reads a file a result names)")
+    unknown = [k for k in ev["options"] if k not in domain.gs_options and k not in files]
     if unknown:
         raise ResultError("evaluation.options", f"{unknown} {'is not a GS option' if len(unknown) == 1 else 'are not GS options'} "
                           f"of {env_id} (its options: {', '.join(domain.gs_options) or 'none'})")
@@ -324,9 +331,10 @@ def load_result(path: str | os.PathLike, follow_links: bool = True) -> dict:
     return validate_result(parse_result_text(text, repr(str(path))))
 
 
-def write_result(path: str | os.PathLike, data: dict) -> Path:
-    """Validate and write a result atomically (any path; not a leaderboard submission)."""
-    validate_result(data)
+def write_result(path: str | os.PathLike, data: dict, local: bool = False) -> Path:
+    """Validate (``local``: :func:`validate_result`'s) and write a result atomically (any path;
+    not a leaderboard submission)."""
+    validate_result(data, local)
     atomic_write_text(path, json.dumps(data, indent=2, allow_nan=False) + "\n")
     return Path(path)
 

@@ -144,6 +144,7 @@ DOMAIN = Domain(
     episode_steps=episode_steps,
     agent_options=SCENARIO_OPTIONS,
     gs_options=BOARD_OPTIONS,
+    file_options=("sumocfg", "net_file", "route_files"),  # a network of the user's: trained on, never on the board
     one_simulation_per_process=True,
     metrics={"delay": "lower", "delay_all": "lower", "trip_time": "lower", "waiting_time": "lower",
              "throughput": "higher", "queue": "lower"},
