@@ -35,7 +35,8 @@ def _quiet_interrupts_while_starting() -> None:
     (the ``ials-zoo`` script, ``python -m ials_zoo.cli``): a program that imports the package,
     and ``python -m`` of any other module, keep Python's own Ctrl-C.
 
-    The handler only notes the Ctrl-C (a second one ends the process at once): an exception
+    The handler only notes the Ctrl-C (a second one, the signal's default action, ends the
+    process at once): an exception
     raised inside an import that runs compiled code (torch's) aborts the process instead of
     unwinding it. ``ials_zoo.cli.main`` ends the command once its start-up is done, then gives
     Python's handler back."""
@@ -52,10 +53,8 @@ def _quiet_interrupts_while_starting() -> None:
         return  # someone else's handler: theirs
 
     def interrupted(signum, frame):
-        if interrupted.pending:  # a second Ctrl-C: the user means it now
-            os.write(2, b"ials-zoo: interrupted\n")
-            os._exit(130)
         interrupted.pending = True
+        signal.signal(signal.SIGINT, signal.SIG_DFL)  # a second Ctrl-C: the user means it now
 
     interrupted.pending = False
     interrupted.ials_zoo_startup = True

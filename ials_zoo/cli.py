@@ -83,10 +83,6 @@ def _deepest(parser, argv: list[str]):
     return parser
 
 
-class _Interrupted:
-    pending = True
-
-
 def threading_main() -> bool:
     import threading
 
@@ -109,8 +105,9 @@ def _noted_interrupts():
     """The start-up's Ctrl-C handler, which only notes an interrupt (the package's, installed as
     it started importing: ``ials_zoo._quiet_interrupts_while_starting``; else one put in now
     where Python's own is in place): a KeyboardInterrupt raised inside compiled code (torch's
-    imports) aborts the process. None where it is not ours to handle (another thread, another
-    program's handler)."""
+    imports) aborts the process. A noted Ctrl-C leaves the signal's default action in place, so
+    a second one ends the process at once. None where it is not ours to handle (another thread,
+    another program's handler)."""
     import signal
 
     if not threading_main():
@@ -122,22 +119,24 @@ def _noted_interrupts():
         return None
 
     def noted(signum, frame):
-        if noted.pending:  # a second Ctrl-C: the user means it now
-            os.write(2, b"ials-zoo: interrupted\n")
-            os._exit(130)
         noted.pending = True
+        signal.signal(signal.SIGINT, signal.SIG_DFL)  # a second Ctrl-C: the user means it now
 
     noted.pending, noted.ials_zoo_startup = False, True
     signal.signal(signal.SIGINT, noted)
     return noted
 
 
-def _python_interrupts() -> None:
-    """Give Ctrl-C back to Python (a KeyboardInterrupt, handled below) once the start-up, with
-    its imports, is done."""
+def _python_interrupts(noted) -> None:
+    """Give Ctrl-C back to Python (a KeyboardInterrupt, handled by :func:`_run`) once the
+    start-up, with its imports, is done: in place of the noting handler, or of the default
+    action it left after a Ctrl-C."""
     import signal
 
-    if threading_main() and getattr(signal.getsignal(signal.SIGINT), "ials_zoo_startup", False):
+    if not threading_main() or noted is None:
+        return
+    handler = signal.getsignal(signal.SIGINT)
+    if handler is noted or (handler is signal.SIG_DFL and noted.pending):
         signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
@@ -151,29 +150,45 @@ def _start(argv: list[str]):
     return parser, args, extra, module
 
 
+def _interrupted(command: str | None = None) -> int:
+    print(f"ials-zoo{' ' + command if command else ''}: interrupted", file=sys.stderr)
+    return 130
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     noted = _noted_interrupts()
     try:
-        parser, args, extra, module = _start(argv)
-    except KeyboardInterrupt:  # raised by Python code where no handler of ours was in place
-        noted = _Interrupted
+        try:
+            parser, args, extra, module = _start(argv)
+        except KeyboardInterrupt:  # raised by Python code where no handler of ours was in place
+            return _interrupted()
+        except SystemExit:  # --help, or a parser error: a Ctrl-C meanwhile still says so
+            if noted is not None and noted.pending:
+                return _interrupted()
+            raise
+        if noted is not None and noted.pending:  # Ctrl-C while starting up: the imports finished, no traceback
+            return _interrupted()
+        if extra:
+            _deepest(parser, argv).error(f"unrecognized arguments: {' '.join(extra)}")
+        if args.command is None:
+            parser.print_help()
+            return 2
+        return _run(module, args, noted)
     finally:
-        _python_interrupts()
-    if noted is not None and noted.pending:  # Ctrl-C while starting up: no traceback
-        print("ials-zoo: interrupted", file=sys.stderr)
-        return 130
-    if extra:
-        _deepest(parser, argv).error(f"unrecognized arguments: {' '.join(extra)}")
-    if args.command is None:
-        parser.print_help()
-        return 2
+        _python_interrupts(noted)
+
+
+def _run(module, args, noted) -> int:
+    """The command's ``run``, its errors as the module docstring says."""
     _sigterm_interrupts()
     try:
+        _python_interrupts(noted)  # from here a Ctrl-C is a KeyboardInterrupt, handled below
+        if noted is not None and noted.pending:  # one that came since the start-up's check
+            return _interrupted(args.command)
         return int(module.run(args) or 0)
     except KeyboardInterrupt:
-        print(f"ials-zoo {args.command}: interrupted", file=sys.stderr)
-        return 130
+        return _interrupted(args.command)
     except (BadInput, FileNotFoundError, PermissionError, IsADirectoryError) as exc:
         # bad input names itself (ials_zoo.errors); any other ValueError/TypeError is a bug: traceback
         if os.environ.get("IALS_ZOO_DEBUG"):

@@ -356,9 +356,10 @@ class Worker:
         self._send(("call", method, args))
 
     def _computed(self) -> bool:
-        """True when the worker's CPU time grew since the last look."""
+        """True when the worker's CPU time grew since the last look, or cannot be read (no
+        ``/proc``: then the busy time is allowed whole; it is bounded all the same)."""
         ticks = process_cpu_ticks(self.pid)
-        grew = ticks is not None and self._ticks is not None and ticks > self._ticks
+        grew = ticks is None or self._ticks is None or ticks > self._ticks
         self._ticks = ticks
         return grew
 

@@ -32,7 +32,7 @@ machine, an Intel Xeon of 2026, quiet: 0.0578-0.0637 s over 9 measurements)."""
 LOAD_TOLERANCE = 0.20
 """Slowest / fastest workload time above 1 + this: the run was timed under load."""
 REPEATS = 3  # one measurement: the median of three workloads (about 0.3 s on a 2026 core)
-MAX_SAMPLES = 200  # a record's timings; a longer run keeps its first, its last and a spread
+MAX_SAMPLES = 200  # a record's timings; a longer run keeps its first and its latest 199
 
 
 def _interpreter(n: int = 100_000) -> int:
@@ -118,16 +118,20 @@ def machine() -> str:
 
 
 class ReferenceLog:
-    """A run's reference timings: one at its start, one at every checkpoint (off its clock)."""
+    """A run's reference timings: one at its start, one at every checkpoint (off its clock),
+    and the machines they were taken on (a run resumed on another machine names both)."""
 
     def __init__(self, record: dict | None = None):
         record = record if isinstance(record, dict) else {}
         self.samples = [float(s) for s in record.get("seconds", []) if isinstance(s, (int, float))]
+        self.machines = [m for m in str(record.get("machine") or "").split("; ") if m]
         if record.get("workload", WORKLOAD) != WORKLOAD:  # a resume across versions starts anew
-            self.samples = []
+            self.samples, self.machines = [], []
 
     def sample(self) -> float:
         seconds = measure()
+        if machine() not in self.machines:
+            self.machines.append(machine())
         self.samples.append(round(seconds, 6))
         if len(self.samples) > MAX_SAMPLES:
             del self.samples[1]  # keep the first (the start) and the latest
@@ -136,7 +140,8 @@ class ReferenceLog:
     def record(self, wall_clock_seconds: float | None = None) -> dict:
         """``training.reference``: the workload, the machine, its timings and, given the run's
         wall-clock (training and AIPs), the same in reference seconds."""
-        out = {"workload": WORKLOAD, "machine": machine(), "seconds": list(self.samples)}
+        out = {"workload": WORKLOAD, "machine": "; ".join(self.machines or [machine()])[:1000],
+               "seconds": list(self.samples)}
         if wall_clock_seconds is not None and self.samples:
             out["reference_seconds"] = reference_seconds(wall_clock_seconds, self.samples)
         out["under_load"] = under_load(out)
@@ -160,6 +165,8 @@ def merged(records: list) -> dict | None:
     machines named once each, the mean of their reference seconds, under load if any seed was;
     None unless every seed has one."""
     if not records or not all(of({"reference": r}) for r in records):
+        return None
+    if len({r.get("workload") for r in records}) != 1:  # timings of two workloads do not compare
         return None
     machines = list(dict.fromkeys(r["machine"] for r in records))
     seconds = [s for r in records for s in r["seconds"]]

@@ -227,6 +227,7 @@ W = "ials-zoo train {} --env-id warehouse_v0 --env-options '{{\"robots\": [2, 2]
     (W.format("ppo_single") + "--net-arch 100000,100000", "--net-arch '100000,100000': at most"),
     (W.format("ppo_shared") + "--batch-size 1", "--batch-size must be >= 2"),
     (W.format("ippo") + "--notes 'unbalanced", "cannot be read as a command line"),
+    (W.format("ippo") + "--recurrent-hidden 100000", "--recurrent-hidden must be >= 0 and a GRU"),
 ])
 def test_values_that_would_crash_a_re_train_are_refused_by_name(command, match):
     from ials_zoo.baselines.retrain import parse_command
@@ -436,3 +437,63 @@ def test_ctrl_c_during_a_commands_imports_lets_them_finish_then_ends_with_130(mo
     assert sys.modules["interrupting_command"].IMPORTED  # not cut short
     assert capsys.readouterr().err.strip() == "ials-zoo: interrupted"
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # Python's Ctrl-C is back
+
+
+def test_dials_aip_rounds_count_in_a_re_trains_estimate(trained):  # noqa: F811
+    """An AIP refresh every step of 10**8 collected steps would train for years: refused before."""
+    from ials_zoo.baselines.retrain import _check_cost, parse_command
+    from ials_zoo.leaderboard.validate import ResultError
+
+    data = json.loads((trained / "s0" / "result.json").read_text())
+    command = W.format("dials") + "--agents robot_0,robot_1,robot_2,robot_3 --total-timesteps 256 --refresh "
+    _, args = parse_command(command + "once", 0)
+    _check_cost(data, [(0, None, args, None)], 4 * 3600)  # one round of the domain's collection: fine
+    _, args = parse_command(command + "1 --collect-steps 100000000", 0)
+    with pytest.raises(ResultError, match="most of it from --refresh/--collect-steps \\(257 AIP rounds"):
+        _check_cost(data, [(0, None, args, None)], 4 * 3600)
+
+
+def test_a_submitted_headers_clock_that_is_no_number_never_crashes_a_finished_re_train():
+    from ials_zoo.baselines.retrain import wall_clock_of, wall_clock_text
+
+    bad = {"training": {"wall_clock_seconds": "soon", "aip_seconds": [1], "reference": {"reference_seconds": 3}}}
+    claimed = wall_clock_of(bad)
+    assert claimed == {"seconds": 0.0, "reference_seconds": 3.0, "under_load": False}
+    good = {"training": {"wall_clock_seconds": 10.0, "aip_seconds": 2.0}}
+    assert "claim has no reference" in wall_clock_text({"claimed": wall_clock_of(good), "retrained": claimed})
+
+
+def test_reference_seconds_without_timings_or_unlike_the_headers_are_refused(trained):  # noqa: F811
+    from ials_zoo import leaderboard as lb
+    from ials_zoo.evaluation import load_model
+    from ials_zoo.leaderboard.store import training_provenance
+
+    entry = json.loads((trained / "s0" / "result.json").read_text())
+    entry["training"]["reference"].update(seconds=[])
+    with pytest.raises(lb.ResultError, match="training.reference.seconds"):
+        lb.validate_result(entry)
+    entry = json.loads((trained / "s0" / "result.json").read_text())
+    net = load_model(trained / "s0" / "policy.safetensors").net
+    training_provenance(entry, [net])  # the header's record is the result's
+    entry["training"]["reference"]["reference_seconds"] /= 10  # faster than it ran
+    with pytest.raises(lb.ResultError, match="training.reference"):
+        training_provenance(entry, [net])
+
+
+def test_seeds_timed_with_two_workload_versions_merge_without_a_reference():
+    from ials_zoo import reference_speed
+
+    one = {"workload": "ref-1", "machine": "A", "seconds": [0.05], "reference_seconds": 10.0, "under_load": False}
+    assert reference_speed.merged([one, dict(one)])["reference_seconds"] == 10.0
+    assert reference_speed.merged([one, dict(one, workload="ref-0")]) is None
+
+
+def test_ctrl_c_during_start_up_then_help_still_says_interrupted(monkeypatch, capsys):
+    import sys
+
+    from ials_zoo import cli
+
+    sys.modules.pop("interrupting_command", None)
+    monkeypatch.setitem(cli.SUBCOMMANDS, "interrupting", ("interrupting_command", "x"))
+    assert cli.main(["interrupting", "--help"]) == 130
+    assert capsys.readouterr().err.strip().endswith("ials-zoo: interrupted")

@@ -157,6 +157,13 @@ def hidden_sizes(net_arch: str, name: str = "net_arch") -> list[int]:
     return sizes
 
 
+def check_recurrent_hidden(units: int) -> None:
+    """``recurrent_hidden``: 0 (no GRU) or a GRU whose three gates' float32 weights fit a policy file."""
+    if units < 0 or 3 * 4 * units * units > MAX_FILE_BYTES:
+        raise BadInput(f"recurrent_hidden must be >= 0 and a GRU whose weights fit a policy file "
+                       f"({MAX_FILE_BYTES >> 20} MiB: at most {int((MAX_FILE_BYTES / 12) ** 0.5):,} units), got {units}")
+
+
 def check_frame_stack(frame_stack) -> None:
     """``frame_stack``: None (the domain's) or a whole number in [1, MAX_FRAME_STACK]."""
     if frame_stack is not None and not 1 <= frame_stack <= MAX_FRAME_STACK:

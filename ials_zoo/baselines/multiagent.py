@@ -18,6 +18,7 @@ from ials_zoo.baselines.arguments import (
     arg,
     check_frame_stack,
     check_ppo_settings,
+    check_recurrent_hidden,
     hidden_sizes,
     parse_env_options,
 )
@@ -100,8 +101,7 @@ def check_multi_ppo(args, domain) -> list[int]:
         if getattr(args, name) < 1:
             raise BadInput(f"{name} must be >= 1, got {getattr(args, name)}")
     check_frame_stack(args.frame_stack)
-    if args.recurrent_hidden < 0:
-        raise BadInput(f"recurrent_hidden must be >= 0, got {args.recurrent_hidden}")
+    check_recurrent_hidden(args.recurrent_hidden)
     check_ppo_settings(args)
     return hidden_sizes(args.hidden, "hidden")
 

@@ -354,15 +354,37 @@ def run_parts(data: dict, args) -> list[tuple[str, float]]:
     rate = max(min(list(study.multi_agent_steps_per_second.values()) + list(study.ppo_steps_per_second.values())), 1.0)
     sizes = hidden_sizes(args.hidden if multi else args.net_arch)
     weights = 2 * (sum(a * b for a, b in zip(sizes, sizes[1:])) + sizes[0] + sizes[-1])  # actor and critic, at least
+    gru = int(getattr(args, "recurrent_hidden", 0) or 0)
+    weights += 3 * gru * (gru + sizes[0])
     eval_every = float(args.eval_every or (max(1.0, total // 10) if multi else total))
     evaluations = math.ceil(total / eval_every) + 1
     return [
         ("--total-timesteps", total * agents / rate),
-        ("--n-epochs", args.n_epochs * total * agents * 6 * weights / UPDATE_FLOPS_PER_SECOND),
+        ("--n-epochs" + (" and --recurrent-hidden" if gru else ""),
+         args.n_epochs * total * agents * 6 * weights / UPDATE_FLOPS_PER_SECOND),
         (f"--eval-every/--eval-episodes ({evaluations:,} evaluations of {args.eval_episodes:,} episodes)",
          evaluations * estimate_evaluation_seconds(data["env_id"], args.eval_episodes, **options)),
         ("--final-eval-episodes", estimate_evaluation_seconds(data["env_id"], 2 * args.final_eval_episodes, **options)),
+        *_aip_parts(domain, args, total, agents, rate),
     ]
+
+
+def _aip_parts(domain, args, total: float, agents: int, rate: float) -> list[tuple[str, float]]:
+    """DIALS's AIP rounds: each collects ``collect_steps`` GS steps of every agent and trains
+    every agent's AIP ``aip_epochs`` times over them (an MLP of the domain's width, at least)."""
+    from ials_zoo.baselines.dials import parse_refresh
+    from ials_zoo.core.extras import dials_of
+
+    if not hasattr(args, "refresh"):
+        return []
+    settings = dials_of(domain)
+    refresh = parse_refresh(args.refresh, settings.refresh)
+    rounds = 0 if refresh is None else 1 + (int(total // refresh) if refresh else 0)
+    steps = float(args.collect_steps or settings.collect_steps)
+    epochs = float(args.aip_epochs or settings.aip_epochs)
+    width = float(settings.aip_hidden)
+    return [(f"--refresh/--collect-steps ({rounds:,} AIP rounds of {steps:,.0f} steps)", rounds * steps * agents / rate),
+            ("--aip-epochs", rounds * epochs * steps * agents * 6 * width * width / UPDATE_FLOPS_PER_SECOND)]
 
 
 def _check_cost(data: dict, jobs: list, max_seconds: float) -> None:
@@ -437,11 +459,16 @@ def retrain(path, seeds: int = 1, directory=None, progress: bool = False,
 def wall_clock_of(header: dict) -> dict:
     """A policy header's training wall-clock (training and AIPs, seconds) and, where the run
     measured its machine, the same in seconds of the reference machine (else None)."""
+    # a submitted header is its author's text: read with care, never to crash a finished re-train
     t = header.get("training") if isinstance(header.get("training"), dict) else {}
-    seconds = float(t.get("wall_clock_seconds") or 0.0) + float(t.get("aip_seconds") or 0.0)
+
+    def number(value) -> float:
+        return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else 0.0
+
     ref = reference_speed.of(t)
-    return {"seconds": seconds, "reference_seconds": None if ref is None else float(ref["reference_seconds"]),
-            "under_load": bool(ref and ref["under_load"])}
+    return {"seconds": number(t.get("wall_clock_seconds")) + number(t.get("aip_seconds")),
+            "reference_seconds": None if ref is None else number(ref["reference_seconds"]),
+            "under_load": bool(ref) and ref.get("under_load") is True}
 
 
 def wall_clock_text(clocks: dict) -> str:

@@ -104,7 +104,8 @@ def compare_wall_clock(first: dict, second: dict) -> str:
     for name, d in (("first", first), ("second", second)):
         t = d["training"]
         if t is None:
-            raise BadInput(f"the {name} entry is a reference entry ({d['algorithm']}): it has no training wall-clock")
+            raise BadInput(console_text(f"the {name} entry is a reference entry ({d['algorithm']}): it has no training "
+                                        "wall-clock"))
         total = float(t["wall_clock_seconds"]) + float(t["aip_seconds"])
         ref = reference_speed.of(t)
         totals.append(total)

@@ -265,13 +265,17 @@ def _check_reference(training: dict) -> None:
     when they moved by more than 20%, and its reference seconds its wall-clock scaled by them
     (a merged entry's are its seeds', :func:`ials_zoo.reference_speed.merged`)."""
     ref = training.get("reference")
-    if ref is None or len(training["seeds"]) != 1:
+    if ref is None:
+        return
+    if "reference_seconds" in ref and not ref["seconds"]:
+        raise ResultError("training.reference.seconds", "reference seconds need the timings they come from")
+    if len(training["seeds"]) != 1:
         return
     if ref["under_load"] != reference_speed.under_load(ref):
         raise ResultError("training.reference.under_load", f"{ref['under_load']} does not say what its timings say "
                           f"({reference_speed.under_load(ref)}: under load when they move by more than 20%)")
     total = float(training["wall_clock_seconds"]) + float(training["aip_seconds"])
-    if "reference_seconds" in ref and ref["seconds"] and not math.isclose(
+    if "reference_seconds" in ref and not math.isclose(
             ref["reference_seconds"], reference_speed.reference_seconds(total, ref["seconds"]), rel_tol=1e-3, abs_tol=1e-2):
         raise ResultError("training.reference.reference_seconds", f"{ref['reference_seconds']} is not the wall-clock "
                           f"({total:.3f} s) scaled by its timings ({reference_speed.reference_seconds(total, ref['seconds'])})")

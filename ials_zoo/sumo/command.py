@@ -83,10 +83,12 @@ def start_simulation(ls, command: list[str]) -> None:
     with tempfile.TemporaryFile() as caught:
         sys.stderr.flush()
         saved = os.dup(2)
-        os.dup2(caught.fileno(), 2)
-        try:
+        try:  # Ctrl-C at any point in here still gives fd 2 back
+            os.dup2(caught.fileno(), 2)
             ls.start(command)
-        except Exception as exc:  # libsumo's TraCIException / FatalTraCIError
+        except Exception as exc:
+            if not type(exc).__module__.startswith("libsumo"):
+                raise  # not SUMO's: a bug of ours, as it is
             failed = exc
         finally:
             os.dup2(saved, 2)
@@ -94,7 +96,7 @@ def start_simulation(ls, command: list[str]) -> None:
         caught.seek(0)
         text = caught.read(MAX_ERROR_BYTES).decode("utf-8", "replace")
     if failed is not None:
-        errors = [line for line in text.splitlines() if line.startswith("Error")] or text.splitlines()
+        errors = [line for line in text.splitlines() if line.startswith("Error")]
         said = "; ".join(errors[:3]) + (f" (and {len(errors) - 3} more)" if len(errors) > 3 else "")
         raise SimulationError(f"SUMO could not start: {said or failed}") from failed
     if text:

@@ -186,21 +186,23 @@ class SimHandle:
         backend: ``"auto"``, ``"inprocess"`` or ``"worker"``.
         timeout: seconds one worker call may take at most.
         unresponsive_after: seconds without a heartbeat after which a worker is given up.
-        load_seconds: how long a ``reset`` may load the network (:func:`load_budget`): SUMO
-            holds Python's lock while it loads, so the worker sends no heartbeat; while its CPU
-            time grows it is loading, and is given up only past this budget (and ``timeout``
-            grows by it). A worker that neither beats nor computes is named as before.
+        load_seconds: how long a call of ``loads`` may load a network
+            (:func:`~ials_zoo.sumo.command.load_budget`): SUMO holds Python's lock while it
+            loads, so the worker sends no heartbeat; while its CPU time grows it is loading, and
+            is given up only past this budget (and ``timeout`` grows by it). A worker that
+            neither beats nor computes is named as before.
+        loads: the core's methods that start SUMO (load the network).
     """
 
     def __init__(self, core: str, config: dict, backend: str = "auto", timeout: float = 120.0,
-                 unresponsive_after: float = 5.0, load_seconds: float = 0.0):
+                 unresponsive_after: float = 5.0, load_seconds: float = 0.0, loads: tuple[str, ...] = ("reset",)):
         if backend not in BACKENDS:
             raise BadInput(f"unknown backend {backend!r}; expected one of {BACKENDS}")
         self.core_name = check_core_path(core)
         self.config = config
         self.timeout = float(timeout)
         self.unresponsive_after = float(unresponsive_after)
-        self.load_seconds = max(float(load_seconds), 0.0)
+        self.load_seconds, self.loads = max(float(load_seconds), 0.0), tuple(loads)
         self._core = None
         self._worker: Worker | None = None
         self._spare: Worker | None = None  # a worker started ahead of the next restart(spare=True)
@@ -255,12 +257,13 @@ class SimHandle:
             if exc.kind == "died":
                 raise WorkerDiedError(f"the SUMO worker process (pid {pid}) died ({exc}); the episode is lost, "
                                       "call reset() to start a new worker") from None
+            limit = self.timeout + self.load_seconds if self.load_seconds else self.timeout
             why = {"stopped": "is stopped and sends no heartbeat (SIGSTOP or a debugger)",
                    "unresponsive": "sent no heartbeat for "
                                    f"{self.unresponsive_after:.1f} s (stopped or hung"
                                    + (f"; a network's load may take {self.load_seconds:.0f} s while its CPU "
                                       "time grows" if self.load_seconds else "") + ")"}.get(
-                exc.kind, f"did not answer within {self.timeout:.0f} s")
+                exc.kind, f"did not answer within {limit:.0f} s")
             raise WorkerUnresponsiveError(f"the SUMO worker (pid {pid}) {why}; it was killed. The episode is "
                                           "lost: call reset() to start a new worker") from None
 
@@ -306,7 +309,7 @@ class SimHandle:
                     "no live SUMO worker (it died or was never started); call reset() first"
                 )
             self._spawn()
-        loading = self.load_seconds if method == "reset" else 0.0  # a reset loads the network
+        loading = self.load_seconds if method in self.loads else 0.0
         try:
             return self._ask(self._worker.call, "call", method, args, timeout=self.timeout + loading,
                              busy_for=loading)

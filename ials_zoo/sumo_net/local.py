@@ -25,18 +25,20 @@ from pathlib import Path
 
 import numpy as np
 
+from ials_zoo.sumo.command import load_budget
 from ials_zoo.sumo.lease import SimHandle
 from ials_zoo.sumo_net.core import NetCore
 from ials_zoo.sumo_net.env import SumoNetEnv, scenario_of
 from ials_zoo.sumo_net.names import SCENARIO_OPTIONS
 from ials_zoo.sumo_net.regions import regions_of
-from ials_zoo.sumo_net.replay import cut_regions, vehicle_types
+from ials_zoo.sumo_net.replay import ReplayCore, cut_regions, vehicle_types
 
 
 def record_influence(scenario, regions: dict, seconds: int, seed: int = 0) -> list:
     """Every region's entries at every step of ``seconds`` of the GS (own programs, SUMO seed
     ``seed``), as :meth:`~ials_zoo.sumo_net.replay.ReplayCore.record` gives them."""
-    sim = SimHandle("ials_zoo.sumo_net.replay:ReplayCore", {}, "auto", timeout=3600.0)
+    sim = SimHandle("ials_zoo.sumo_net.replay:ReplayCore", {}, "auto", timeout=3600.0, loads=ReplayCore.LOADS,
+                    load_seconds=load_budget(scenario.net_file, *scenario.route_files))
     try:
         edges = {light: r.edges for light, r in regions.items()}
         offsets = {light: {e: o for e, o in zip(r.sources, r.entry_offsets) if o > 0} for light, r in regions.items()}

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ials_zoo.sumo.command import close_any_simulation, start_simulation, sumo_command
+from ials_zoo.sumo.command import close_any_simulation, load_budget, start_simulation, sumo_command
 from ials_zoo.sumo.lease import import_libsumo
 from ials_zoo.sumo_net.metrics import MAX_ROUTE_BYTES, iter_elements
 from ials_zoo.sumo_net.regions import cut_network, netconvert
@@ -94,6 +94,8 @@ def _inside(route, index: int, edges: set) -> tuple:
 
 class ReplayCore:
     """Runs :meth:`record` (the GS) and :meth:`replay` (the local simulators), one at a time."""
+
+    LOADS = ("record", "plain", "replay")  # the methods that start SUMO (SimHandle's loads)
 
     def __init__(self):
         self.ls = import_libsumo()
@@ -241,7 +243,8 @@ def replay_regions(scenario, regions: dict, seconds: int, folder, seed: int = 0,
     every = scenario.decision_seconds
     merged = cut_regions(scenario.net_file, regions, Path(folder))
     vtypes = vehicle_types(scenario.route_files, Path(folder) / "vtypes.add.xml")
-    sim = SimHandle("ials_zoo.sumo_net.replay:ReplayCore", {}, "auto", timeout=3600.0)
+    sim = SimHandle("ials_zoo.sumo_net.replay:ReplayCore", {}, "auto", timeout=3600.0, loads=ReplayCore.LOADS,
+                    load_seconds=load_budget(scenario.net_file, *scenario.route_files))
     out = {"lanes": gs_lanes}
     try:
         if measure_cost:
