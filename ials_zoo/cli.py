@@ -17,6 +17,7 @@ import importlib.util
 import os
 import sys
 
+from ials_zoo._version import __version__
 from ials_zoo.core.domains import domain_ids
 from ials_zoo.core.extras import tools_of
 from ials_zoo.errors import BadInput, is_run_failure
@@ -63,6 +64,7 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser(load: str | None = None) -> argparse.ArgumentParser:
     parser = _Parser(prog="ials-zoo", description=__doc__.split("\n\n")[0].replace("\n", " "))
+    parser.add_argument("--version", action="version", version=f"ials-zoo {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     parser.commands = {}
     for name, (module, help_text) in _available().items():

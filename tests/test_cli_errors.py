@@ -66,7 +66,6 @@ CASES = [
     (["train", "dials", "--env", "warehouse_v0", "--refresh", "0", "--out-dir", "{d}/r"], "--refresh"),
     (["train", "dials", "--env", "warehouse_v0", "--agents", "robot_99", "--out-dir", "{d}/r"], "robot_99"),
     (["train", "ippo", "--env", "nowhere_v0", "--out-dir", "{d}/r"], "nowhere_v0"),
-    (["train", "dials", "--out-dir", "{d}/r"], "--env, one of sumo_net_v0, traffic_grid_v0, warehouse_v0"),
     (["reproduce", "--experiments", "dials", "--dials-variants", "bogus", "--dry-run"], "bogus"),
 ]
 

@@ -45,7 +45,7 @@ def test_a_baseline_trains_on_a_users_own_network_and_the_board_refuses_it(own_n
     result = json.loads((out / "result.json").read_text())
     options = result["evaluation"]["options"]
     assert options == {"sumocfg": str(own_network / "my.sumocfg")} and result["evaluation"]["protocol"] == "variant"
-    assert len(result["agents"]) == 9 and "delay" in result["metrics"]
+    assert len(result["agents"]) == 5 and "delay" in result["metrics"]
     assert str(own_network / "my.sumocfg") in result["training"]["reproduce"]["command"]
     monkeypatch.chdir(tmp_path)  # from another folder, the policy and its options still work
     capsys.readouterr()
@@ -66,7 +66,7 @@ def test_net_file_and_route_files_become_absolute_and_other_options_are_refused_
     args = ippo.Args(env_id="sumo_net_v0", env_options='{"net_file": "g.net.xml", "route_files": ["r.rou.xml"]}')
     _, agents, options, _ = ippo.check_args(args)
     assert options == {"net_file": str(own_network / "g.net.xml"), "route_files": [str(own_network / "r.rou.xml")]}
-    assert json.loads(args.env_options) == options and len(agents) == 9  # recorded whole
+    assert json.loads(args.env_options) == options and len(agents) == 5  # recorded whole
     with pytest.raises(BadInput, match=r"\['region_data'\] are not options of sumo_net_v0's GS"):
         ippo.check_args(ippo.Args(env_id="sumo_net_v0", env_options='{"net": "cologne1", "region_data": true}'))
 

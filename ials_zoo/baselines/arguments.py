@@ -20,15 +20,19 @@ def add_dataclass_args(parser: argparse.ArgumentParser, cls) -> argparse.Argumen
     """Add one ``--field-name`` option per field of the dataclass ``cls``.
 
     The help text of a field is its ``metadata["help"]`` (or what that callable returns, for
-    defaults read from the domains when the parser is built); booleans get ``--x/--no-x``."""
+    defaults read from the domains when the parser is built); booleans get ``--x/--no-x``. A
+    field with ``required=True`` (the domain) is required on the command line and listed first,
+    before the settings a base class brings."""
     hints = typing.get_type_hints(cls)
-    for f in dataclasses.fields(cls):
+    fields = sorted(dataclasses.fields(cls), key=lambda f: not f.metadata.get("required", False))
+    for f in fields:
         name = "--" + f.name.replace("_", "-")
         aliases = list(f.metadata.get("aliases", ()))
         default = f.default if f.default is not dataclasses.MISSING else None
         help_text = f.metadata.get("help", "")
         help_text = help_text() if callable(help_text) else help_text
-        if "default" not in help_text and "required" not in help_text:  # a help that says it already
+        required = bool(f.metadata.get("required", False))
+        if "default" not in help_text and not required:  # a help that says it already
             help_text = f"{help_text} (default: {default!r})"
         typ = hints[f.name]
         origin = typing.get_origin(typ)
@@ -40,7 +44,7 @@ def add_dataclass_args(parser: argparse.ArgumentParser, cls) -> argparse.Argumen
                                 action=argparse.BooleanOptionalAction, help=help_text)
         else:
             parser.add_argument(*aliases, name, dest=f.name, type=typ, default=default,
-                                metavar=f.name.upper(), help=help_text)
+                                metavar=f.name.upper(), help=help_text, required=required)
     return parser
 
 

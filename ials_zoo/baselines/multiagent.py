@@ -74,7 +74,7 @@ class MultiAgentRunArgs(MultiPPOSettings):
     """The arguments every multi-agent baseline (:mod:`.ippo`, :mod:`.dials`) shares: what to
     train, for how long, how it is scored and where its run goes."""
 
-    env_id: str | None = arg(None, "domain id (required)", aliases=("--env",))
+    env_id: str | None = arg(None, "the domain to train on", aliases=("--env",), required=True)
     agents: str = arg("all", "learning agents, comma-separated, or 'all'")
     seed: int = arg(0, "run seed")
     total_timesteps: int | None = arg(None, "environment steps per agent (default: the domain's multi-agent budget)")

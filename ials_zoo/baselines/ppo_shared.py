@@ -125,7 +125,7 @@ def make_shared_vec_env(env_id: str, learners=None, n_copies: int = 1, seed: int
 class Args(PPOSettings):
     """Arguments of :func:`main` (``python -m baselines.ppo_shared --help``)."""
 
-    env_id: str | None = arg(None, "domain id (required)", aliases=("--env",))
+    env_id: str | None = arg(None, "the domain to train on", aliases=("--env",), required=True)
     learners: str = arg("all", "comma-separated learning agents, or 'all'")
     eval_agents: str | None = arg(None, "comma-separated learners to score (default: the domain's default agents among the learners, else the first learner)")
     seed: int = arg(0, "training seed")

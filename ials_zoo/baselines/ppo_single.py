@@ -98,7 +98,7 @@ class Args(AblatedPPOSettings):
     which beat SPEC §3's here too (:data:`PREVIOUS_SETTINGS`; one seed each, tls_12 on the GS
     166 against 112, on the IALS 156 against 110; robot_20 8.7 against 7.7 and 9.8 against 7.4)."""
 
-    env_id: str | None = arg(None, "domain id (required)", aliases=("--env",))
+    env_id: str | None = arg(None, "the domain to train on", aliases=("--env",), required=True)
     agent: str | None = arg(None, "learning agent (default: the domain's first default agent)")
     simulator: str = arg("gs", "gs | ials | untrained-ials | uniform | fixed:P | marginal | PATH.pt")
     seed: int = arg(0, "training seed")

@@ -527,6 +527,9 @@ def run(args) -> int:
         raise CommandError(f"{', '.join(ials_flags)}: --domain {args.domain} has no IALS to measure; "
                            "its benchmark takes --net and --repeats")
     nets = None if args.net is None else [x.strip() for x in args.net.split(",") if x.strip()]
+    known = bench_of(args.domain).nets if gs_only else ()
+    if nets is not None and known and not set(nets) <= set(known):
+        raise CommandError(f"--net: unknown map(s) {sorted(set(nets) - set(known))}; expected some of {', '.join(known)}")
     machine = machine_info()
     print(f"machine: {machine['cpu']}, {machine['cores']} cores; python {machine['python']}, torch {machine['torch']}, "
           f"numpy {machine['numpy']}, SUMO {machine['sumo']}, ials_zoo {machine['ials_zoo']}", flush=True)

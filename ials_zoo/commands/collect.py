@@ -30,7 +30,9 @@ def add_collect_arguments(parser, required: bool = True) -> None:
 
     parser.add_argument("--env", required=required, help="domain id",
                         choices=[d for d in domain_ids() if get_domain(d).has_local_simulator])
-    parser.add_argument("--agent", required=required, help="learning agent, e.g. robot_20")
+    parser.add_argument("--agent", required=required,
+                        help="learning agent, e.g. robot_20; 'all' (or a comma-separated list): every agent's data "
+                             "from one GS run")
     parser.add_argument("--steps", type=int, default=50_000,
                         help="steps to record, rounded up to whole episodes (default 50000)")
     parser.add_argument("--seed", type=int, default=0)

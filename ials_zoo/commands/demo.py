@@ -9,6 +9,7 @@ and return, and a colour legend on every frame.
 
 from __future__ import annotations
 
+import os
 import time
 
 import numpy as np
@@ -29,6 +30,8 @@ def configure(parser):
     parser.add_argument("--agent", default=None,
                         help="the randomly acting agent (default: the domain's first paper agent)")
     parser.add_argument("--net", default=None, metavar="NAME", help=NET_HELP)
+    parser.add_argument("--sumocfg", default=None, metavar="PATH",
+                        help="a network of your own instead of --net (a domain that takes files: sumo_net_v0)")
     parser.add_argument("--gif", default=None, metavar="PATH",
                         help="save the episode as an animated GIF here")
 
@@ -42,6 +45,14 @@ def run(args) -> int:
     if args.seed < 0:
         raise CommandError(f"--seed must be >= 0, got {args.seed}")
     network = with_network(domain, {}, args.net)
+    if args.sumocfg is not None:
+        if "sumocfg" not in domain.file_options:
+            raise CommandError(f"--sumocfg: {domain.env_id} takes no network of your own")
+        if args.net is not None:
+            raise CommandError("--net and --sumocfg both name a network; give one")
+        if not os.path.isfile(args.sumocfg):
+            raise CommandError(f"--sumocfg: no such file {args.sumocfg!r}")
+        network = domain.with_absolute_files({"sumocfg": args.sumocfg})
     try:
         agent = args.agent or (domain.agents(**network)[0] if network else domain.default_agents[0])
         domain.check_agent(agent, **network)

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from ials_zoo.baselines.arguments import parse_env_options
 from ials_zoo.commands import CommandError
-from ials_zoo.core.domains import get_domain
+from ials_zoo.core.domains import domain_ids, get_domain
 from ials_zoo.evaluation import PROTOCOL_EPISODES
 from ials_zoo.leaderboard import write_result
 from ials_zoo.leaderboard.build import external_training, result_for
@@ -26,7 +26,7 @@ from ials_zoo.utils import check_output_file, check_seed
 
 def configure(parser):
 
-    parser.add_argument("--env", dest="env_id", default=None,
+    parser.add_argument("--env", dest="env_id", default=None, choices=domain_ids(),
                         help="domain id (default: from the policy file)")
     parser.add_argument("--agent", default=None,
                         help="agent to control (default: the policy's, else the domain's first paper agent)")

@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 
 from ials_zoo.commands import NET_HELP, with_network
-from ials_zoo.core.domains import get_domain
+from ials_zoo.core.domains import domain_ids, get_domain
 from ials_zoo.errors import BadInput
 from ials_zoo.evaluation import estimate_evaluation_seconds
 from ials_zoo.influence.base import MAX_INFLUENCE_LAGS
@@ -25,7 +25,8 @@ MAX_EPISODES = 100_000  # per policy and simulator: 10**12 is a typo, not a stud
 
 
 def configure(parser):
-    parser.add_argument("--env", required=True, help="domain id")
+    parser.add_argument("--env", required=True, choices=[d for d in domain_ids() if get_domain(d).has_ials_parallel_env],
+                        help="domain id")
     parser.add_argument("--options", default=None,
                         help="the domain's options as a JSON object, e.g. '{\"net\": \"cologne8\"}' for sumo_net_v0")
     parser.add_argument("--net", default=None, metavar="NAME", help=NET_HELP)

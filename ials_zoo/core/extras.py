@@ -184,6 +184,8 @@ class BenchSettings:
     gs_runner: Callable | None = None
     """For a domain without an IALS: ``gs_runner(nets, repeats) -> rows`` measures (and prints)
     its GS instead, ``nets`` the ``--net`` names (None: the domain's defaults)."""
+    nets: tuple[str, ...] = ()
+    """The names ``--net`` takes (checked before any work; empty: the runner checks)."""
 
 
 def _extra(domain, kind: str, default):

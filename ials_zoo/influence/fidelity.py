@@ -306,8 +306,28 @@ def on_policy_aips(env_id: str, agents, policy, steps: int, seed: int, autoregre
 
 def default_watched(domain, agents: Sequence[str]) -> list[str]:
     """The first and second agents and the domain's default one (see the module docstring)."""
-    picks = [agents[0], agents[1], domain.default_agents[0]]
+    picks = [*agents[:2], domain.default_agents[0]]  # a network of one light has no second
     return list(dict.fromkeys(a for a in picks if a in agents))
+
+
+def _check_aips_exist(env_id: str, agents: list, predictor, options: dict) -> None:
+    """A fixed AIP set that is neither shipped nor cached is refused before any GS episode (not
+    after the policies' episodes ran)."""
+    from ials_zoo.influence.ials import resolve_predictor
+    from ials_zoo.influence.multi import resolve_predictor_set
+    from ials_zoo.influence.specs import parse_predictor
+
+    if not isinstance(predictor, str) or parse_predictor(predictor).kind != "trained" or \
+            parse_predictor(predictor).train_if_missing:
+        return
+    try:  # as the domain's multi-agent IALS resolves them: its own env per light, or one set
+        if get_domain(env_id).ials_parallel_env is not None:
+            for agent in agents:
+                resolve_predictor(predictor, env_id, agent, options=options)
+        else:
+            resolve_predictor_set(predictor, env_id, agents, options=options)
+    except FileNotFoundError as exc:
+        raise BadInput(f"predictor {predictor!r}: {exc}") from None
 
 
 def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: int = 0, watched=None,
@@ -353,6 +373,8 @@ def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: i
         (report["aip_lr"], report["aip_epochs"], report["aip_lr_schedule"],
          report["aip_influence_lags"]) = on_policy_training(env_id, predictor == "on-policy-autoregressive", aip_lr,
                                                             aip_epochs, aip_lr_schedule, aip_influence_lags)
+    if predictor not in ON_POLICY:
+        _check_aips_exist(env_id, agents, predictor, options)
     d = dials_of(domain)
     steps = int(collect_steps or d.fidelity_collect_steps or d.collect_steps)
     report["collect_steps"] = steps if predictor in ON_POLICY else None

@@ -96,6 +96,14 @@ def entry_name(data: dict) -> str:
     return "__".join([data["env_id"], who, _slug(data["algorithm"]), _slug(sim), identity(data)[:12]]) + ".json"
 
 
+def _refuse_duplicate(board: Path, data: dict) -> None:
+    mine = identity(data)
+    for p, other in load_entries(board)[0]:
+        if identity(other) == mine:
+            raise ResultError("(file)", f"duplicate: {p.name} already scores the same policies of the same agents with "
+                              "the same protocol")
+
+
 def resolve_policy_file(spec: str, result_path: Path, board: Path | None = None) -> Path | None:
     """Where a recorded ``policy_file`` is: as given, relative to the result's folder, or
     relative to the board."""
@@ -223,18 +231,14 @@ def submit(path, directory=None, remeasure: bool = True, max_remeasure_seconds: 
         else:
             data.pop("provenance", None)
         validate_result(data)
+        _refuse_duplicate(board, data)  # before the re-measure's minutes (again under the lock below)
         if remeasure:
             reports = remeasure_result(data, [str(c) for c, _ in copies] or None, max_seconds=max_remeasure_seconds)
             bad = [r for r in reports if not r["ok"]]
             if bad:
                 raise ResultError("scores", f"re-measured on the GS, {mismatch_text(bad[0])}")
         with _board_lock(board):
-            entries, _ = load_entries(board)
-            mine = identity(data)
-            for p, other in entries:
-                if identity(other) == mine:
-                    raise ResultError("(file)", f"duplicate: {p.name} already scores the same policies of the same "
-                                      "agents with the same protocol")
+            _refuse_duplicate(board, data)  # one submitted meanwhile
             dest = results / entry_name(data)
             if dest.exists():
                 raise ResultError("(file)", f"{dest} already exists; refusing to overwrite it")

@@ -9,6 +9,7 @@ from __future__ import annotations
 from ials_zoo.core.domains import Domain
 from ials_zoo.core.extras import BenchSettings, DIALSSettings, StudySettings, ViewerSettings
 from ials_zoo.sumo_net.names import BOARD_OPTIONS, DEFAULT_NET, ENV_ID, SCENARIO_OPTIONS
+from ials_zoo.sumo_net.scenario import RESCO_MAPS
 
 
 def parallel_env(**options):
@@ -150,6 +151,6 @@ DOMAIN = Domain(
              "throughput": "higher", "queue": "lower"},
     score_metric="delay",  # RESCO's average delay per vehicle ranks the board, lower first
     track_options=("net",),  # one board track per RESCO map
-    extras={"tools": TOOLS, "study": STUDY, "dials": DIALS, "bench": BenchSettings(gs_runner=bench_gs),
+    extras={"tools": TOOLS, "study": STUDY, "dials": DIALS, "bench": BenchSettings(gs_runner=bench_gs, nets=tuple(RESCO_MAPS)),
             "viewer": ViewerSettings(legend=_legend(), episode_summary=episode_summary)},
 )

@@ -83,9 +83,10 @@ class SumoNetEnv(ParallelEnv):
     one junction (3 actions there, 4 in RESCO), and grid4x4/arterial4x4 have only their first
     per-episode route file (here every episode uses it, with its own SUMO seed).
 
-    **Agents**: every signalised junction (a ``tlLogic`` that controls a lane), named by its
-    traffic-light id. ``learners`` (default: all) are driven by actions; the others run the
-    network's own program.
+    **Agents**: every signalised junction (a ``tlLogic`` that controls a lane) with at least two
+    greens, named by its traffic-light id; a light of one green (the corners of a grid made by
+    ``netgenerate``) has no choice to learn and runs its own program. ``learners`` (default: all)
+    are driven by actions; the others run the network's own program.
 
     **Action** (RESCO's): ``Discrete(n)``, ``n`` = the light's green phases in program 0
     (phases with no ``y`` and some ``g``/``G``, file order; 2 to 8 on RESCO's maps). A change
@@ -127,6 +128,13 @@ class SumoNetEnv(ParallelEnv):
     **Rendering**: ``"rgb_array"`` (a top view: roads, vehicles, each incoming lane's signal,
     learners ringed; :mod:`ials_zoo.sumo_net.render`), ``"ansi"`` (one line per light: its phase
     and queue), ``"human"`` prints the ``"ansi"`` view.
+
+    **Other options**: ``region_data=True`` has the GS watch its learners' regions every second
+    and report each one's influence sources and d-set in ``infos`` (what AIP data is collected
+    from; a cost, so off by default). ``scripted_learners`` exists for the zoo's single-agent
+    scoring and must stay ``False``: this env has no scripted controller for a learner (pass
+    ``learners=[]`` to run every light on its own program, or see
+    :mod:`ials_zoo.sumo_net.controllers`). Any other keyword is refused, naming the valid options.
 
     Version history: v0 -- first version.
     """

@@ -30,6 +30,7 @@ from ials_zoo.sumo.lease import SimHandle
 from ials_zoo.sumo_net.core import NetCore
 from ials_zoo.sumo_net.env import SumoNetEnv, scenario_of
 from ials_zoo.sumo_net.names import SCENARIO_OPTIONS
+from ials_zoo.sumo_net.network import read_network
 from ials_zoo.sumo_net.regions import regions_of
 from ials_zoo.sumo_net.replay import ReplayCore, cut_regions, vehicle_types
 
@@ -113,7 +114,8 @@ class RegionsNetEnv(SumoNetEnv):
         scenario = scenario_of(**{k: options[k] for k in SCENARIO_OPTIONS if k in options})
         self._folder = Path(tempfile.mkdtemp(prefix="ials_zoo_regions_"))
         try:
-            self.regions = regions_of(scenario.net_file)
+            agents = set(read_network(scenario.net_file).ids)  # a light of one green is no agent: no region
+            self.regions = {k: r for k, r in regions_of(scenario.net_file).items() if k in agents}
             self._merged = cut_regions(scenario.net_file, self.regions, self._folder)
             self._vtypes = vehicle_types(scenario.route_files, self._folder / "vtypes.add.xml")
             self._prepare(scenario)

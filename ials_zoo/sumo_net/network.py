@@ -128,8 +128,10 @@ def _read_network(path: str, mtime: float) -> Network:
         greens = tuple(i for i, (_, s) in enumerate(phases) if is_green(s))
         tls_links = tuple(links.get(tls, ()))
         lanes = tuple(dict.fromkeys(i for i, _, _ in tls_links))
-        if not greens or not lanes:
-            continue  # a light that controls nothing, or never shows green, is no agent
+        if len(greens) < 2 or not lanes:
+            # a light that controls nothing, or has one green only (a generated grid's corners): no
+            # choice to learn, so no agent; it runs its own program
+            continue
         lights.append(Light(tls, tuple(phases), greens, lanes, tls_links, tuple(lengths.get(x, 0.0) for x in lanes)))
     return Network(tuple(lights), lane_edges, shapes)
 
@@ -143,7 +145,8 @@ def read_network(net_file: str) -> Network:
             raise
         raise BadInput(f"{net_file} is not a valid SUMO network ({type(exc).__name__}: {exc})") from None
     if not net.lights:
-        raise BadInput(f"{net_file} has no traffic light that controls a lane: nothing to learn")
+        raise BadInput(f"{net_file} has no traffic light that controls a lane with two greens or more: nothing to "
+                       "learn")
     return net
 
 

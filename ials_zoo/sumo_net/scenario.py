@@ -149,7 +149,8 @@ def make_scenario(net=None, sumocfg=None, net_file=None, route_files=None, begin
     if net is not None:
         if net not in RESCO_MAPS:
             raise BadInput(f"unknown map {net!r}; expected one of {', '.join(RESCO_MAPS)} "
-                           "(or sumocfg=PATH / net_file=PATH for a network of your own)")
+                           "(or sumocfg=PATH / net_file=PATH for a network of your own: --env-options "
+                           "'{\"sumocfg\": PATH}' on the command line, demo --sumocfg PATH)")
         b, e, decision, yellow, routes = RESCO_MAPS[net]
         folder = resco_map_folder(net)
         name, net_path, route_paths = net, str(folder / f"{net}.net.xml"), [str(folder / routes)]
