@@ -66,7 +66,7 @@ def test_a_light_of_one_green_is_no_agent(own_network):  # noqa: F811
 def test_ppo_single_on_a_domain_of_per_agent_spaces_says_what_it_lacks(capsys):
     assert main(["train", "ppo_single", "--env", "sumo_net_v0"]) == 2
     err = capsys.readouterr().err
-    assert "share one observation and action space" in err and "does not have yet" not in err
+    assert "its agents each have their own spaces" in err and "does not have yet" not in err
 
 
 def test_train_requires_the_domain_and_lists_it_first(capsys):
@@ -88,7 +88,25 @@ def test_train_requires_the_domain_and_lists_it_first(capsys):
 
 
 def test_evaluate_and_fidelity_name_their_domains(capsys):
-    for argv in (["evaluate", "--env", "warehouse", "--policy", "random"], ["fidelity", "--env", "warehouse"]):
-        with pytest.raises(SystemExit) as done:
-            main(argv)
-        assert done.value.code == 2 and "invalid choice: 'warehouse'" in capsys.readouterr().err
+    for command in ("evaluate", "fidelity"):
+        with pytest.raises(SystemExit):
+            main([command, "--help"])
+        text = " ".join(capsys.readouterr().out.split())
+        assert "domain id, one of sumo_net_v0, traffic_grid_v0, warehouse_v0" in text
+
+
+def test_bench_says_what_all_covers_and_gives_a_verdict_across_domains(capsys):
+    from ials_zoo.commands.bench import verdict
+
+    with pytest.raises(SystemExit):
+        main(["bench", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "'all' (the default): every domain whose agents share their spaces" in text and "sumo_net_v0" in text
+
+    def row(name, speed, cost):
+        return {"domain": name, "single_agent": {"ials_vs_gs_speed": {"median": speed}},
+                "every_agent": {"ials_dials_cost_vs_gs": {"median": cost}}}
+
+    lines = verdict([row("warehouse_v0", 1.2, 0.06), row("traffic_grid_v0", 3.0, 1.3)])
+    assert "warehouse_v0 1.2x as fast for one learner, 0.06x the GS's cost" in lines[0]
+    assert "pays (costs less than the GS) in: warehouse_v0 on this machine" in lines[1]

@@ -45,7 +45,11 @@ from ials_zoo.utils import atomic_path, atomic_write_text
 
 
 def configure(parser):
-    parser.add_argument("--domain", choices=["all", *domain_ids()], default="all")
+    parser.add_argument("--domain", choices=["all", *domain_ids()], default="all",
+                        help="'all' (the default): every domain whose agents share their spaces ("
+                             + ", ".join(ials_domain_ids()) + "), one after the other; a domain whose agents each "
+                             "have their own (a network's lights: sumo_net_v0) has a benchmark of its own, "
+                             "--domain NAME [--net M,...]")
     parser.add_argument("--steps", type=int, default=None,
                         help="GS steps per measurement (default: 10 episodes)")
     parser.add_argument("--repeats", type=int, default=5, help="repeats of every measurement (median, min, max)")
@@ -336,7 +340,8 @@ def conclusion(row: dict) -> list[str]:
     array_cost = ea["ials_dials_cost_vs_gs"]["median"]
     faster = "cheaper than" if array_cost < 1 else "dearer than"
     lines = [
-        "  what to take from it:",
+        "  what to take from it (GS: the global simulator, the whole system; IALS: one agent's local simulator, "
+        "its region only, plus its AIP, the network that predicts what comes in from outside):",
         f"    - one learner among scripted neighbours: its IALS steps {sa['ials_vs_gs_speed']['median']:.1f}x as fast "
         f"as the GS, {sa['ials_batched_vs_gs_speed']['median']:.1f}x batched ({row['batch']} copies in one array).",
         f"    - every agent learning: the array API (MultiAgentIALS, arrays [agents, copies, ...], what DIALS steps) "
@@ -352,6 +357,17 @@ def conclusion(row: dict) -> list[str]:
     ]
     return lines
 
+
+
+def verdict(rows: list[dict]) -> list[str]:
+    """One line across the domains measured: where the IALS pays and where it does not."""
+    parts = [f"{r['domain']} {r['single_agent']['ials_vs_gs_speed']['median']:.1f}x as fast for one learner, "
+             f"{r['every_agent']['ials_dials_cost_vs_gs']['median']:.2f}x the GS's cost with every agent learning"
+             for r in rows]
+    pays = [r["domain"] for r in rows if r["every_agent"]["ials_dials_cost_vs_gs"]["median"] < 1]
+    return ["\nacross domains: the IALS is " + "; ".join(parts) + ".",
+            f"  every agent learning on the IALS pays (costs less than the GS) in: {', '.join(pays) or 'none'} on this "
+            "machine. A network's lights (sumo_net_v0) are measured apart: ials-zoo bench --domain sumo_net_v0."]
 
 
 def bench_scaling(env_id: str, steps: int | None, seed: int) -> list[dict]:
@@ -565,6 +581,9 @@ def run(args) -> int:
         for env_id in env_ids:
             rows.append(bench_domain(env_id, args.steps, args.batch, args.predictor, args.seed, args.repeats))
             _print_domain(rows[-1])
+        if len(rows) > 1:
+            for line in verdict(rows):
+                print(line)
     if args.out:
         atomic_write_text(args.out, json.dumps({"machine": machine, "rows": rows}, indent=2) + "\n")
         print(f"figures written to {args.out}")

@@ -26,8 +26,8 @@ from ials_zoo.utils import check_output_file, check_seed
 
 def configure(parser):
 
-    parser.add_argument("--env", dest="env_id", default=None, choices=domain_ids(),
-                        help="domain id (default: from the policy file)")
+    parser.add_argument("--env", dest="env_id", default=None,
+                        help=f"domain id, one of {', '.join(domain_ids())} (default: from the policy file)")
     parser.add_argument("--agent", default=None,
                         help="agent to control (default: the policy's, else the domain's first paper agent)")
     parser.add_argument("--joint", action="store_true",

@@ -25,8 +25,8 @@ MAX_EPISODES = 100_000  # per policy and simulator: 10**12 is a typo, not a stud
 
 
 def configure(parser):
-    parser.add_argument("--env", required=True, choices=[d for d in domain_ids() if get_domain(d).has_ials_parallel_env],
-                        help="domain id")
+    parser.add_argument("--env", required=True,
+                        help="domain id, one of " + ", ".join(d for d in domain_ids() if get_domain(d).has_ials_parallel_env))
     parser.add_argument("--options", default=None,
                         help="the domain's options as a JSON object, e.g. '{\"net\": \"cologne8\"}' for sumo_net_v0")
     parser.add_argument("--net", default=None, metavar="NAME", help=NET_HELP)

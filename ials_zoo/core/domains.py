@@ -253,9 +253,9 @@ class Domain:
         if self.has_local_simulator and not self.has_ials:
             others = ", ".join(d for d in domain_ids() if get_domain(d).has_ials)
             multi = (" (every agent at once: `ials-zoo train ippo|dials`)" if self.has_ials_parallel_env else "")
-            raise BadInput(f"{what} needs agents that share one observation and action space; {self.env_id}'s agents "
-                           f"each have their own. Its one-agent IALS is ials_zoo.make_ials({self.env_id!r}, AGENT, "
-                           f"...){multi}; domains whose agents share their spaces: {others}")
+            raise BadInput(f"{what} needs a local simulator and shared agent spaces: {self.env_id} has the first, but "
+                           f"its agents each have their own spaces. Its one-agent IALS is ials_zoo.make_ials("
+                           f"{self.env_id!r}, AGENT, ...){multi}; domains whose agents share their spaces: {others}")
         return self._require("has_ials", what, "a local simulator and shared agent spaces", "domains with an IALS")
 
     @property
