@@ -339,7 +339,7 @@ def trained_predictor(
             f"no trained influence predictor for {env_id}/{agent} ({dset_kind!r} d-set, "
             f"options {options}); train one with `ials-zoo train-aip --env {env_id} --agent {agent}"
             f"{_options_flag(options)} --out FILE` "
-            "and pass its file, or ask for the predictor 'train' (`--predictor train` on the command line) to have it "
+            "and pass its file, or ask for predictor='train' (`--predictor train` on the command line) to have it "
             "collected and trained now (minutes)"
         )
 

@@ -79,7 +79,7 @@ def trained_predictor_set(env_id: str, agents=None, dset_kind: str = "dset", opt
     if not train_if_missing:
         raise FileNotFoundError(f"no trained AIPs for the agents of {env_id} (options {options}); train them with "
                                 f"`ials-zoo train-aip --env {env_id} --agent all --out FILE.pt` and pass the file, "
-                                "or ask for the predictor 'train' (`--predictor train` on the command line) to have "
+                                "or ask for predictor='train' (`--predictor train` on the command line) to have "
                                 "them collected and trained now (minutes)")
 
     d = dials_of(domain)
