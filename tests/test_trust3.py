@@ -213,8 +213,9 @@ def _forged_entry(tmp_path, trained, weights_of: int, **header):
     policy = tmp_path / "forged.safetensors"
     shutil.copyfile(trained / f"s{weights_of}" / "policy.safetensors", policy)
     result = json.loads((trained / "s0" / "result.json").read_text())
+    # the forger makes every field submit compares agree (the machine's timings too, since round four)
     _rewrite_header(policy, **{"seed": 0, "training.wall_clock_seconds": result["training"]["wall_clock_seconds"],
-                               **header})
+                               "training.reference": result["training"]["reference"], **header})
     ev = evaluate_joint(ENV, str(policy), agents=AGENTS, episodes=20, **OPTIONS)
     forged = lb.make_result([ev], algorithm="ippo", training_seeds=[0],
                             training=dict(result["training"], **{k.split(".", 1)[1]: v for k, v in header.items()
