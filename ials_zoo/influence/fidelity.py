@@ -330,6 +330,23 @@ def _check_aips_exist(env_id: str, agents: list, predictor, options: dict) -> No
         raise BadInput(f"predictor {predictor!r}: {exc}") from None
 
 
+def _check_aip_settings(predictor, aip_seeds, aip_lr_schedule, aip_influence_lags, aip_clock_horizon) -> int:
+    """Clear errors for :func:`fidelity_report`'s AIP settings; returns ``aip_seeds`` as an int."""
+    if isinstance(aip_seeds, bool) or not isinstance(aip_seeds, numbers.Integral) or aip_seeds < 1:
+        raise BadInput(f"aip_seeds must be an int >= 1, got {aip_seeds!r}")
+    if aip_lr_schedule is not None and aip_lr_schedule not in LR_SCHEDULES:
+        raise BadInput(f"aip_lr_schedule must be one of {list(LR_SCHEDULES)} (or None: the domain's), "
+                       f"got {aip_lr_schedule!r}")
+    if aip_seeds > 1 and predictor not in ON_POLICY:
+        raise BadInput(f"aip_seeds > 1 needs on-policy AIPs (trained per run); {predictor!r} is one fixed set")
+    if aip_clock_horizon is not None:
+        check_clock_horizon(aip_clock_horizon)
+    if (aip_influence_lags is not None or aip_clock_horizon is not None) and predictor not in ON_POLICY:
+        raise BadInput(f"aip_influence_lags and aip_clock_horizon need on-policy AIPs (trained per run); "
+                       f"{predictor!r} is one fixed set")
+    return int(aip_seeds)
+
+
 def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: int = 0, watched=None,
                     predictor="trained", tolerance: float = 0.1, progress: bool = True,
                     collect_steps: int | None = None, aip_lr: float | None = None, aip_epochs: int | None = None,
@@ -348,14 +365,7 @@ def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: i
     to the next."""
     from ials_zoo.influence.multi import make_ials_parallel_env  # lazy: SB3/torch
 
-    if isinstance(aip_seeds, bool) or not isinstance(aip_seeds, numbers.Integral) or aip_seeds < 1:
-        raise BadInput(f"aip_seeds must be an int >= 1, got {aip_seeds!r}")
-    aip_seeds = int(aip_seeds)
-    if aip_lr_schedule is not None and aip_lr_schedule not in LR_SCHEDULES:
-        raise BadInput(f"aip_lr_schedule must be one of {list(LR_SCHEDULES)} (or None: the domain's), "
-                       f"got {aip_lr_schedule!r}")
-    if aip_seeds > 1 and predictor not in ON_POLICY:
-        raise BadInput(f"aip_seeds > 1 needs on-policy AIPs (trained per run); {predictor!r} is one fixed set")
+    aip_seeds = _check_aip_settings(predictor, aip_seeds, aip_lr_schedule, aip_influence_lags, aip_clock_horizon)
     domain = get_domain(env_id)
     agents = domain.agents(**options)
     sizes = joint_sizes(domain, agents, options)
@@ -364,11 +374,6 @@ def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: i
                     "predictor": str(predictor), "aip_lr": aip_lr, "aip_epochs": aip_epochs,
                     "aip_lr_schedule": aip_lr_schedule, "aip_influence_lags": aip_influence_lags,
                     "aip_seeds": aip_seeds, "policies": {}}
-    if aip_clock_horizon is not None:
-        check_clock_horizon(aip_clock_horizon)
-    if (aip_influence_lags is not None or aip_clock_horizon is not None) and predictor not in ON_POLICY:
-        raise BadInput(f"aip_influence_lags and aip_clock_horizon need on-policy AIPs (trained per run); "
-                       f"{predictor!r} is one fixed set")
     if predictor in ON_POLICY:
         (report["aip_lr"], report["aip_epochs"], report["aip_lr_schedule"],
          report["aip_influence_lags"]) = on_policy_training(env_id, predictor == "on-policy-autoregressive", aip_lr,
