@@ -5,7 +5,7 @@ Usage: python docs/sumo_net_worker_overhead.py [--net cologne8] [--repeats 5] [-
 Run it on a quiet machine: it measures, in one run,
 1. the GS's share of raw SUMO in both modes (as ``ials-zoo bench``), and SUMO's own steps per second
    in each (raw SUMO time only);
-2. a worker round trip (``ials_zoo.processes.Worker`` answering a trivial call), median and 10th/90th
+2. a worker round trip (``ials_zoo.runtime.processes.Worker`` answering a trivial call), median and 10th/90th
    percentiles over 3,000 calls;
 3. the minor page faults of one episode's steps, in this process and in a fresh worker;
 4. the default mode again beside two busy loops at the lowest priority (nice 19), which keep the
@@ -35,8 +35,8 @@ from multiprocessing.connection import Connection
 
 import numpy as np
 
-from ials_zoo import processes
-from ials_zoo.processes import Worker
+from ials_zoo.runtime import processes
+from ials_zoo.runtime.processes import Worker
 from ials_zoo.sumo_net.benchmark import MODES, bench_map
 from ials_zoo.sumo_net.core import NetCore
 from ials_zoo.sumo_net.env import SumoNetEnv

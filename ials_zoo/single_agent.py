@@ -29,7 +29,7 @@ from gymnasium import spaces
 
 from ials_zoo.core.domains import get_domain
 from ials_zoo.errors import BadInput, BadInputType
-from ials_zoo.processes import Worker, call_all, start_all
+from ials_zoo.runtime.processes import Worker, call_all, start_all
 
 
 def box_space(space: spaces.Space) -> spaces.Box:
@@ -120,7 +120,7 @@ def _make_single_agent_gs(env_id: str, agent: str, options: dict, in_worker: boo
 
 
 class _EnvServer:
-    """One gymnasium env in a :class:`~ials_zoo.processes.Worker`, answering what SB3's
+    """One gymnasium env in a :class:`~ials_zoo.runtime.processes.Worker`, answering what SB3's
     ``SubprocVecEnv`` worker answers (auto-reset after an episode's end included)."""
 
     def __init__(self, env_fn):
@@ -175,9 +175,9 @@ def _worker_vec_env_class():
     from stable_baselines3.common.vec_env.subproc_vec_env import _stack_obs
 
     class WorkerVecEnv(VecEnv):
-        """SB3's ``SubprocVecEnv`` on :class:`ials_zoo.processes.Worker`: one env per worker
+        """SB3's ``SubprocVecEnv`` on :class:`ials_zoo.runtime.processes.Worker`: one env per worker
         process (fresh interpreters dying with this one), and never a wait without end: a
-        dead, stopped or hung worker raises :class:`ials_zoo.processes.WorkerError` within
+        dead, stopped or hung worker raises :class:`ials_zoo.runtime.processes.WorkerError` within
         seconds, and ``close()`` kills workers that do not exit promptly."""
 
         def __init__(self, env_fns):

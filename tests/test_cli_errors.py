@@ -105,7 +105,7 @@ def test_a_bug_shows_its_traceback_while_bad_input_does_not(monkeypatch, capsys)
 
 def test_a_dead_or_stopped_worker_ends_a_command_in_one_line_with_exit_1(monkeypatch, capsys):
     from ials_zoo.commands import evaluate
-    from ials_zoo.processes import WorkerError
+    from ials_zoo.runtime.processes import WorkerError
 
     def stopped(args):
         raise WorkerError("DIALS worker 1 (pid 123, agents robot_18..robot_35) is stopped (SIGSTOP or a debugger: "

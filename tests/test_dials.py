@@ -360,7 +360,7 @@ def _gone(pid, within=10.0):
 @pytest.mark.parametrize("how", ["kill", "stop"])
 def test_a_dead_or_stopped_worker_is_named_within_seconds_and_nothing_is_left(how):
     from ials_zoo.dials.backends import ProcessBackend
-    from ials_zoo.processes import WorkerError
+    from ials_zoo.runtime.processes import WorkerError
 
     backend = ProcessBackend(_specs(), unresponsive_after=3.0)
     pids = [w.pid for w in backend.workers]
@@ -376,7 +376,7 @@ def test_a_dead_or_stopped_worker_is_named_within_seconds_and_nothing_is_left(ho
 def test_a_stopped_ray_actor_is_named_within_seconds():
     pytest.importorskip("ray")
     from ials_zoo.dials.backends import RayBackend
-    from ials_zoo.processes import WorkerError
+    from ials_zoo.runtime.processes import WorkerError
 
     backend = RayBackend(_specs())
     try:
@@ -437,7 +437,7 @@ def test_kill_9_of_a_ray_run_leaves_no_ray_process():
     """The local Ray cluster a run starts (raylet, GCS, dashboard and runtime-env agents, the
     actors) dies with the run even after kill -9 (a watchdog reaps it); nothing is left."""
     pytest.importorskip("ray")
-    from ials_zoo.processes import _descendants, _proc_table
+    from ials_zoo.runtime.processes import _descendants, _proc_table
 
     cmd = [sys.executable, "-m", "baselines.dials", "--env", ENV, "--agents", ",".join(AGENTS), "--env-options",
            json.dumps(OPTIONS), "--total-timesteps", "100000", "--samples-per-update", "128", "--batch-size", "64",
@@ -482,7 +482,7 @@ def test_kill_9_of_a_run_on_a_cluster_it_joined_leaves_the_cluster_alone(tmp_pat
     pytest.importorskip("ray")
     import socket
 
-    from ials_zoo.processes import _descendants, _proc_table
+    from ials_zoo.runtime.processes import _descendants, _proc_table
 
     # no token authentication: Ray 2.59+ turns it on for a head where ~/.ray/auth_token exists,
     # and a joining driver sends no token (an in-process ray.init() may also have set the mode)

@@ -172,8 +172,8 @@ def test_sumo_workers_die_with_their_parent(tmp_path):
 def test_forked_workers_are_the_zygotes_leave_no_zombies_and_die_with_it():
     import random
 
-    from ials_zoo.processes import SERVE_ENTRY, Worker
-    from ials_zoo.zygote import zygote_for
+    from ials_zoo.runtime.processes import SERVE_ENTRY, Worker
+    from ials_zoo.runtime.zygote import zygote_for
 
     preload = ("random", "no_such_module_here")  # a preload that fails costs nothing but its speed
     workers = [Worker(random.Random, (seed,), name="forked worker", preload=preload) for seed in (1, 2, 3)]
@@ -206,7 +206,7 @@ def test_a_worker_killed_between_calls_is_named_dead_whichever_end_notices():
     that too says it died, as when the death shows while waiting for an answer."""
     import random
 
-    from ials_zoo.processes import Worker
+    from ials_zoo.runtime.processes import Worker
 
     worker = Worker(random.Random, (1,), name="forked worker", preload=("random",))
     try:
@@ -222,8 +222,8 @@ def test_a_worker_killed_between_calls_is_named_dead_whichever_end_notices():
 def test_an_answer_cut_short_is_never_taken_for_the_next_one(monkeypatch):
     import random
 
-    from ials_zoo import zygote as zygotes
-    from ials_zoo.processes import SERVE_ENTRY, Worker
+    from ials_zoo.runtime import zygote as zygotes
+    from ials_zoo.runtime.processes import SERVE_ENTRY, Worker
 
     preload = ("random", "json")
     Worker(random.Random, (0,), preload=preload).close()  # the zygote has answered once
@@ -253,7 +253,7 @@ def test_an_answer_cut_short_is_never_taken_for_the_next_one(monkeypatch):
 def test_a_fork_of_the_parent_leaves_the_parents_workers_alone():
     import random
 
-    from ials_zoo.processes import Worker
+    from ials_zoo.runtime.processes import Worker
 
     w = Worker(random.Random, (0,), preload=("random",))
     w.started()
@@ -311,7 +311,7 @@ def test_a_worker_answers_calls_and_names_its_errors():
     import queue
     import random
 
-    from ials_zoo.processes import Worker, WorkerError, call_all, start_all
+    from ials_zoo.runtime.processes import Worker, WorkerError, call_all, start_all
 
     workers = [Worker(random.Random, (seed,), name=f"test worker {seed}") for seed in (1, 2)]
     start_all(workers)
@@ -339,7 +339,7 @@ def test_a_worker_answers_calls_and_names_its_errors():
 def test_a_dead_or_stopped_worker_is_named_within_seconds(how, preload):
     import random
 
-    from ials_zoo.processes import Worker, WorkerError
+    from ials_zoo.runtime.processes import Worker, WorkerError
 
     worker = Worker(random.Random, (0,), name="test worker", unresponsive_after=3.0, preload=preload)
     worker.started()
@@ -354,7 +354,7 @@ def test_sending_to_a_stopped_worker_never_blocks_and_bad_input_inside_stays_bad
     import random
 
     from ials_zoo.errors import BadInput
-    from ials_zoo.processes import Worker, WorkerError
+    from ials_zoo.runtime.processes import Worker, WorkerError
 
     worker = Worker(random.Random, (0,), name="test worker")
     worker.started()

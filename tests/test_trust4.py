@@ -138,7 +138,7 @@ def test_workers_orphaned_by_kill_9_leave_quietly():
 
     here = Path(__file__).resolve().parent
     code = (f"import os, signal, sys; sys.path.insert(0, {str(here)!r})\n"
-            "from ials_zoo.processes import Worker\n"
+            "from ials_zoo.runtime.processes import Worker\n"
             "from worker_fixtures import Slow\n"
             "w = Worker(Slow, (), preload=('worker_fixtures:linger_at_exit',)); w.started()\n"
             "w.send('nap'); os.kill(os.getpid(), signal.SIGKILL)\n")

@@ -17,7 +17,7 @@ from ials_zoo.influence.specs import GS
 from ials_zoo.leaderboard import make_result, write_result
 from ials_zoo.learners.sb3_state import checkpoint_models, resume_models
 from ials_zoo.policy import PolicyNetwork, policy_from_sb3_model
-from ials_zoo.processes import shutdown_pool, spawn_pool
+from ials_zoo.runtime.processes import shutdown_pool, spawn_pool
 from ials_zoo.single_agent import box_space
 
 

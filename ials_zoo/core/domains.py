@@ -34,7 +34,7 @@ from ials_zoo.core.gym_ids import register_ials
 from ials_zoo.core.local import LocalSimulator
 from ials_zoo.core.region import RegionSpec
 from ials_zoo.errors import BadInput, BadInputType
-from ials_zoo.processes import add_worker_context
+from ials_zoo.runtime.processes import add_worker_context
 
 ENTRY_POINT_GROUP = "ials_zoo.domains"
 # the subsystems that keep per-domain settings in Domain.extras (ials_zoo.core.extras)
@@ -367,7 +367,7 @@ def _install_domains(payload: bytes) -> None:
 
 
 def _worker_context():
-    # a worker (ials_zoo.processes.Worker) starts a fresh interpreter: the domains registered
+    # a worker (ials_zoo.runtime.processes.Worker) starts a fresh interpreter: the domains registered
     # here at run time go with it (their functions must live in modules it can import)
     with _lock:
         domains = list(_registered.values())

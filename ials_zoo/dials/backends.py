@@ -6,8 +6,8 @@ Every backend runs one :class:`~ials_zoo.dials.shard.AgentShard` per worker and 
 * :class:`InProcessBackend` (``workers=0``): the shards in this process, one after the other;
 * :class:`ProcessBackend` (default): one fresh interpreter per shard (no extra dependency),
   dying with this process; a worker that dies, is stopped, or stops sending its heartbeat for
-  :data:`UNRESPONSIVE_SECONDS` raises :class:`~ials_zoo.processes.WorkerError` naming it;
-* :class:`RayBackend`: one Ray actor per shard (:class:`~ials_zoo.ray_actors.RayActors`: a
+  :data:`UNRESPONSIVE_SECONDS` raises :class:`~ials_zoo.runtime.processes.WorkerError` naming it;
+* :class:`RayBackend`: one Ray actor per shard (:class:`~ials_zoo.runtime.ray_actors.RayActors`: a
   local Ray of the run's own or an existing cluster, with our worker rules).
 """
 
@@ -15,8 +15,8 @@ from __future__ import annotations
 
 from ials_zoo.dials.shard import AgentShard, ShardSpec
 from ials_zoo.errors import BadInput
-from ials_zoo.processes import Worker, call_all, start_all
-from ials_zoo.ray_actors import RayActors, check_ray_address
+from ials_zoo.runtime.processes import Worker, call_all, start_all
+from ials_zoo.runtime.ray_actors import RayActors, check_ray_address
 
 BACKENDS = ("process", "ray")
 UNRESPONSIVE_SECONDS = 20.0
@@ -47,7 +47,7 @@ class InProcessBackend:
 
 
 class ProcessBackend:
-    """One worker process per shard (module docstring): a :class:`~ials_zoo.processes.Worker`
+    """One worker process per shard (module docstring): a :class:`~ials_zoo.runtime.processes.Worker`
     holding an :class:`AgentShard`."""
 
     name = "process"
@@ -74,7 +74,7 @@ class ProcessBackend:
 
 
 class RayBackend(RayActors):
-    """One Ray actor per shard (module docstring; :class:`~ials_zoo.ray_actors.RayActors`)."""
+    """One Ray actor per shard (module docstring; :class:`~ials_zoo.runtime.ray_actors.RayActors`)."""
 
     name = "ray"
 

@@ -159,7 +159,7 @@ class AgentShard:
 
     def where(self) -> tuple[int, str]:
         """This shard's process id and host (so that a backend can watch it)."""
-        from ials_zoo.ray_actors import where
+        from ials_zoo.runtime.ray_actors import where
 
         return where()
 

@@ -37,7 +37,7 @@ from ials_zoo._version import __version__
 from ials_zoo.core.domains import get_domain
 from ials_zoo.core.region import DSET_KINDS, INFLUENCE_KEY, RegionSpec, dset_key
 from ials_zoo.errors import BadInput, BadInputType
-from ials_zoo.processes import shutdown_pool, spawn_pool
+from ials_zoo.runtime.processes import shutdown_pool, spawn_pool
 from ials_zoo.utils import atomic_path, check_seed, parse_untrusted_json_object
 
 FORMAT = "ials_zoo.influence_dataset"

@@ -40,7 +40,7 @@ from ials_zoo.influence.predictors import (
     cross_entropy_per_source,
     init_arrays,
 )
-from ials_zoo.processes import keep_freed_memory
+from ials_zoo.runtime.processes import keep_freed_memory
 
 DEFAULTS = {
     "gru": {"epochs": 120, "lr": 2e-3, "batch_episodes": 16, "hidden": 64},

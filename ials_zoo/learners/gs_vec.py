@@ -4,7 +4,7 @@ spaces of their own, every region in one simulation per copy).
 
 Copies run in this process (``processes=0``) or spread over ``processes`` worker processes
 (fresh interpreters that die with this one), or Ray actors (``copies_on="ray"``, on a local Ray
-of their own or the cluster at ``ray_address``: :class:`~ials_zoo.ray_actors.RayActors`), which
+of their own or the cluster at ``ray_address``: :class:`~ials_zoo.runtime.ray_actors.RayActors`), which
 step their copies while the others do theirs. A domain whose GS holds a process-wide resource (SUMO) puts at most one copy in this
 process and the others in workers of its own lease, which step one after the other; use
 ``processes`` to step them at once. ``reset(seed)`` resets copy ``j`` with
@@ -20,8 +20,8 @@ from ials_zoo.core.domains import get_domain
 from ials_zoo.core.spaces import sizes_of_env, stack_observations
 from ials_zoo.core.streams import derived_seed
 from ials_zoo.errors import BadInput
-from ials_zoo.processes import Worker, call_all, start_all
-from ials_zoo.ray_actors import where
+from ials_zoo.runtime.processes import Worker, call_all, start_all
+from ials_zoo.runtime.ray_actors import where
 
 
 class _Copies:
@@ -121,7 +121,7 @@ class GSVecEnv:
         shares = [[int(x) for x in s] for s in np.array_split(seeds, min(self.processes, self.n_envs)) if len(s)]
         arguments = [(env_id, self.agents, options, share, simulator, predictor) for share in shares]
         if copies_on == "ray":
-            from ials_zoo.ray_actors import RayActors
+            from ials_zoo.runtime.ray_actors import RayActors
 
             self._workers = RayActors(_Copies, arguments, ray_address, what=f"{simulator.upper()} Ray actor")
         else:

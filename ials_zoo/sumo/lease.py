@@ -11,13 +11,13 @@ work, and a
   *lease* allows one live in-process simulation per process; asking for a second one raises
   :class:`SimulationBusyError` (also when someone else started a libsumo simulation outside
   this module: ``libsumo.simulation.isLoaded()``);
-* in a **worker process** (``backend="worker"``): a :class:`ials_zoo.processes.Worker` that
-  holds the core, forked from a :class:`ials_zoo.zygote.Zygote` that imported libsumo and
+* in a **worker process** (``backend="worker"``): a :class:`ials_zoo.runtime.processes.Worker` that
+  holds the core, forked from a :class:`ials_zoo.runtime.zygote.Zygote` that imported libsumo and
   the core's module but never started a simulation (nothing of the parent inherited; it starts
   in milliseconds, not the second a fresh interpreter takes to import them); one pipe round
   trip per call over two dedicated pipes (SUMO's own console output cannot corrupt the
   protocol). The worker dies with this process and exits when its pipe closes; it sends a
-  heartbeat every :data:`ials_zoo.processes.HEARTBEAT_SECONDS`. The parent raises
+  heartbeat every :data:`ials_zoo.runtime.processes.HEARTBEAT_SECONDS`. The parent raises
   :class:`WorkerDiedError` when the worker dies, and :class:`WorkerUnresponsiveError` (and
   kills it) when it is stopped, stops beating for ``unresponsive_after`` seconds (a hung
   process) or a call outlasts ``timeout``. The next ``reset`` spawns a new worker;
@@ -39,7 +39,7 @@ import threading
 import weakref
 
 from ials_zoo.errors import BadInput
-from ials_zoo.processes import Worker, WorkerError
+from ials_zoo.runtime.processes import Worker, WorkerError
 
 BACKENDS = ("auto", "inprocess", "worker")
 
@@ -163,7 +163,7 @@ def _kill_workers():
 
 
 class _WorkerCore:
-    """A core in a :class:`~ials_zoo.processes.Worker` (holding this worker's lease), whose
+    """A core in a :class:`~ials_zoo.runtime.processes.Worker` (holding this worker's lease), whose
     SUMO errors come back as :class:`SimulationError` with SUMO's message."""
 
     def __init__(self, core: str, config: dict):

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from ials_zoo.errors import BadInput
-from ials_zoo.processes import die_with_parent
+from ials_zoo.runtime.processes import die_with_parent
 from ials_zoo.sumo.command import sumo_binary
 from ials_zoo.sumo.lease import SimulationError
 from ials_zoo.sumo_net import resco

@@ -18,7 +18,7 @@ import socket
 from urllib.parse import urlparse
 
 from ials_zoo.errors import BadInput
-from ials_zoo.processes import WorkerError, process_state, reap_descendants_when_gone
+from ials_zoo.runtime.processes import WorkerError, process_state, reap_descendants_when_gone
 
 
 def check_ray_address(address: str, timeout: float = 5.0) -> None:

@@ -3,15 +3,15 @@
 A fresh interpreter spends most of a second importing libsumo, numpy and the zoo before it can
 run anything; a fork of a process that has imported them, and done nothing else (no simulation
 started, nothing of the parent's state), is ready in milliseconds. :class:`Zygote` is the parent's
-handle on one such process (``python -m ials_zoo._zygote``), :class:`ForkedProcess` its handle on
+handle on one such process (``python -m ials_zoo.runtime._zygote``), :class:`ForkedProcess` its handle on
 a worker the zygote forked, with the part of ``subprocess.Popen`` that
-:class:`ials_zoo.processes.Worker` uses.
+:class:`ials_zoo.runtime.processes.Worker` uses.
 
 The rules every child process of ours keeps, kept here as follows:
 
 * **Dies with its parent.** The zygote exits when the parent's socket closes, however the parent
   dies (the kernel closes it); its workers get ``SIGKILL`` when the zygote dies (they set the
-  death signal themselves: :func:`ials_zoo.processes.serve`). The zygote sets no death signal of
+  death signal themselves: :func:`ials_zoo.runtime.processes.serve`). The zygote sets no death signal of
   its own: that signal follows the *thread* that started it, and a zygote shared by all the
   threads of the parent must not die with one of them.
 * **Nothing waits forever.** Every request waits for its answer at most
@@ -46,9 +46,9 @@ import threading
 import time
 import traceback
 
-from ials_zoo.children import fresh_interpreter, process_state
+from ials_zoo.runtime.children import fresh_interpreter, process_state
 
-ZYGOTE_MODULE = "ials_zoo._zygote"
+ZYGOTE_MODULE = "ials_zoo.runtime._zygote"
 _FORK, _REAP = b"F", b"R"
 _ANSWER = struct.Struct("!qq")  # request number, value
 _UNKNOWN = -(1 << 40)  # an exit code the zygote does not know (yet)

@@ -1,5 +1,5 @@
-"""Starting a child interpreter and reading a process's state: what :mod:`ials_zoo.processes`
-and :mod:`ials_zoo.zygote` share."""
+"""Starting a child interpreter and reading a process's state: what :mod:`ials_zoo.runtime.processes`
+and :mod:`ials_zoo.runtime.zygote` share."""
 
 from __future__ import annotations
 

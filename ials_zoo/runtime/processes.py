@@ -36,8 +36,8 @@ import threading
 import time
 import traceback
 
-from ials_zoo import zygote as zygotes
-from ials_zoo.children import fresh_interpreter, process_cpu_ticks, process_state
+from ials_zoo.runtime import zygote as zygotes
+from ials_zoo.runtime.children import fresh_interpreter, process_cpu_ticks, process_state
 from ials_zoo.errors import BadInput
 
 _PR_SET_PDEATHSIG = 1
@@ -144,7 +144,7 @@ def _dumps(obj) -> bytes:
 
 _loads = pickle.loads
 _EXIT = _dumps(("exit", None, None))
-WORKER_MODULE = "ials_zoo._worker"
+WORKER_MODULE = "ials_zoo.runtime._worker"
 
 
 def _heartbeat(fd: int) -> None:
@@ -172,7 +172,7 @@ def _error(exc: BaseException) -> tuple:
 
 
 def serve(read_fd: int, write_fd: int, beat_fd: int) -> None:
-    """A :class:`Worker`'s process (``python -m ials_zoo._worker R W B``): take the parent's
+    """A :class:`Worker`'s process (``python -m ials_zoo.runtime._worker R W B``): take the parent's
     ``sys.path``, set up its contexts, build the object the init message names, then answer
     calls until told to exit (or the pipe closes). An exception goes back as ``(type name,
     message, traceback)`` and the loop goes on; with no object built, every call is refused."""
@@ -239,16 +239,16 @@ def _start(fds: tuple[int, int, int], preload):
                 raise WorkerError(f"could not start a worker: {exc}", kind=exc.kind) from None
 
 
-SERVE_ENTRY = "ials_zoo.processes:serve"
+SERVE_ENTRY = "ials_zoo.runtime.processes:serve"
 
 
 class Worker:
-    """``factory(*args)`` built in a fresh interpreter (``python -m ials_zoo._worker``: nothing
+    """``factory(*args)`` built in a fresh interpreter (``python -m ials_zoo.runtime._worker``: nothing
     of this process is inherited but ``sys.path`` and the registered contexts
     (:func:`add_worker_context`), no ``__main__`` guard needed, its console output dropped)
     that dies with this process, and called by method name over two dedicated pipes.
     ``preload`` (module names, or ``"module:function"`` to call): the interpreter is instead a
-    fork of a :class:`ials_zoo.zygote.Zygote` that imported them once (Linux), which starts in
+    fork of a :class:`ials_zoo.runtime.zygote.Zygote` that imported them once (Linux), which starts in
     milliseconds instead of the second a fresh interpreter needs to import them.
 
     Nothing waits forever on it, sending included. A :class:`WorkerError` naming the worker
@@ -516,7 +516,7 @@ def reap_descendants_when_gone() -> None:
         return
     r, w = os.pipe()
     with sigint_ignored_at_birth():
-        _REAPER = subprocess.Popen([sys.executable, "-c", f"from ials_zoo.processes import _reaper; _reaper({os.getpid()}, {r})"],
+        _REAPER = subprocess.Popen([sys.executable, "-c", f"from ials_zoo.runtime.processes import _reaper; _reaper({os.getpid()}, {r})"],
                                    pass_fds=(r,), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                    start_new_session=True)
     os.close(r)
