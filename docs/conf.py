@@ -18,7 +18,7 @@ copyright = "the ials_zoo developers"
 extensions = ["myst_parser", "sphinx.ext.autodoc", "sphinx.ext.napoleon"]
 source_suffix = {".md": "markdown", ".rst": "restructuredtext"}
 root_doc = "index"
-exclude_patterns = ["_build", "fidelity_diagnostics", "screenshots", "Thumbs.db", ".DS_Store"]
+exclude_patterns = ["_build", "screenshots", "Thumbs.db", ".DS_Store"]
 
 myst_heading_anchors = 4  # the guides link to their sections by GitHub's anchors
 myst_enable_extensions = ["colon_fence"]

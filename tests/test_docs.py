@@ -50,7 +50,7 @@ def test_the_site_builds_and_each_environment_page_is_its_docstring(site):
 def test_a_broken_reference_fails_the_build(tmp_path):
     """The same site with one link to a page that does not exist: the build fails, naming it."""
     copy = tmp_path / "docs"
-    shutil.copytree(DOCS, copy, ignore=shutil.ignore_patterns("_build", "fidelity_diagnostics"))
+    shutil.copytree(DOCS, copy, ignore=shutil.ignore_patterns("_build"))
     # the pages the site includes from the board's folder, not its entries (no board page then)
     shutil.copytree(DOCS.parent / "leaderboard", tmp_path / "leaderboard",
                     ignore=shutil.ignore_patterns("results", "policies", "archive", "plots", "index.html"))

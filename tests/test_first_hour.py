@@ -96,7 +96,7 @@ def test_evaluate_and_fidelity_name_their_domains(capsys):
 
 
 def test_bench_says_what_all_covers_and_gives_a_verdict_across_domains(capsys):
-    from ials_zoo.commands.bench import verdict
+    from ials_zoo.bench.report import verdict
 
     with pytest.raises(SystemExit):
         main(["bench", "--help"])

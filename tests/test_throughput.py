@@ -36,7 +36,7 @@ def test_ppo_throughput_runs_the_baselines_ppo_on_each_simulator():
 def test_the_bench_says_what_to_take_from_its_figures():
     """The conclusion lines read the medians: which API is cheaper than the GS and by how
     much, and what the two ratios mean."""
-    from ials_zoo.commands.bench import conclusion
+    from ials_zoo.bench.report import conclusion
 
     def s(m):
         return {"median": m, "min": m, "max": m}

@@ -6,7 +6,7 @@ every agent's local simulator and AIP side by side in one simulation, the region
 only by its own AIP). DIALS then trains every agent's PPO, as IPPO does on the GS (the same
 batched learner, observations zero-padded, missing actions masked), on ``--n-envs`` copies of
 that IALS spread over ``--workers`` worker processes (or Ray actors, ``--backend ray``), and retrains the AIPs at the refresh points
-on GS data from the joint policy (:class:`~ials_zoo.baselines.dials.AIPRefreshes`). The work is
+on GS data from the joint policy (:class:`~ials_zoo.baselines.aip_rounds.AIPRefreshes`). The work is
 split by copies, not by agents: each worker steps every agent's region of its copies.
 """
 
@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ials_zoo.baselines.dials import AIPRefreshes, aip_training_of
+from ials_zoo.baselines.aip_rounds import AIPRefreshes, aip_training_of
 from ials_zoo.baselines.ippo import GSCopiesLearner
 from ials_zoo.baselines.multiagent import save_aips
 from ials_zoo.learners.gs_vec import GSVecEnv

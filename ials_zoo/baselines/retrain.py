@@ -372,7 +372,7 @@ def run_parts(data: dict, args) -> list[tuple[str, float]]:
 def _aip_parts(domain, args, total: float, agents: int, rate: float) -> list[tuple[str, float]]:
     """DIALS's AIP rounds: each collects ``collect_steps`` GS steps of every agent and trains
     every agent's AIP ``aip_epochs`` times over them (an MLP of the domain's width, at least)."""
-    from ials_zoo.baselines.dials import parse_refresh
+    from ials_zoo.baselines.aip_rounds import parse_refresh
     from ials_zoo.core.extras import dials_of
 
     if not hasattr(args, "refresh"):

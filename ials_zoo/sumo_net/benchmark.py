@@ -43,8 +43,8 @@ def gs_step_seconds(**options) -> float:
     """About how long one GS decision takes under ``options`` (every light acting, the default
     mode), for the estimates long commands print first: a measured map's figure, else
     :data:`LANE_SIM_SECOND_SECONDS` per lane of the network."""
-    from ials_zoo.sumo_net.env import scenario_of
     from ials_zoo.sumo_net.network import read_network
+    from ials_zoo.sumo_net.scenario import scenario_of
 
     chosen = {k: v for k, v in options.items() if k in SCENARIO_OPTIONS and k != "max_cycles"}
     scenario = scenario_of(**chosen)
@@ -141,7 +141,7 @@ def bench_local(net: str, repeats: int = 3, max_cycles: int | None = None) -> di
     against the GS, per agent-decision: both in a worker process (one pipe round trip per
     decision each), episodes of the same seed alternating, one ratio per pair; and the array API
     (:func:`ials_zoo.make_ials_vector_env`, one copy in this process's own worker) in the same turn."""
-    import ials_zoo
+    from ials_zoo.learners.gs_vec import GSVecEnv
     from ials_zoo.sumo_net.ials_env import IALSNetEnv
     from ials_zoo.sumo_net.island import gs_marginal_predictors
 
@@ -154,7 +154,7 @@ def bench_local(net: str, repeats: int = 3, max_cycles: int | None = None) -> di
         aips = gs_marginal_predictors(gs.possible_agents, net=net, max_cycles=max_cycles)
         local = IALSNetEnv(predictors=aips, **options)
         built = time.perf_counter() - start
-        vector = ials_zoo.make_ials_vector_env(ENV_ID, aips, **options)
+        vector = GSVecEnv(ENV_ID, None, 1, 0, 0, simulator="ials", predictor=aips, **options)  # make_ials_vector_env's
         counts = [gs.action_space(a).n for a in gs.possible_agents]
         for seed in range(repeats):
             runs.append((_random_episode(gs, seed), _random_episode(local, seed),
@@ -176,7 +176,7 @@ def bench_single(net: str, repeats: int = 3, max_cycles: int | None = None) -> d
     """Every light's own IALS (``make_ials``, the recorded-frequency AIP) against the GS with one
     learner, decisions per second, both in this process; the GS's median over ``repeats`` episodes
     of its first light learning, each IALS one episode."""
-    import ials_zoo
+    from ials_zoo.influence.ials import make_ials
     from ials_zoo.sumo_net.island import gs_marginal_predictors
 
     gs = SumoNetEnv(net=net, max_cycles=max_cycles, backend="inprocess", fresh_process=False)
@@ -189,7 +189,7 @@ def bench_single(net: str, repeats: int = 3, max_cycles: int | None = None) -> d
         gs.close()
     aips, rates = gs_marginal_predictors(lights, net=net, max_cycles=max_cycles), []
     for k, light in enumerate(lights):
-        env = ials_zoo.make_ials("sumo_net_v0", light, predictor=aips[light], seed=k, net=net, max_cycles=max_cycles)
+        env = make_ials(ENV_ID, light, predictor=aips[light], seed=k, net=net, max_cycles=max_cycles)
         try:
             rng = np.random.default_rng(k)
             env.reset(seed=k)

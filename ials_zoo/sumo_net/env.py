@@ -16,32 +16,15 @@ from ials_zoo.errors import BadInput, BadInputType
 from ials_zoo.sumo.command import load_budget
 from ials_zoo.sumo.lease import SimHandle
 from ials_zoo.sumo_net.core import MEASURES
+from ials_zoo.sumo_net.influence import full_dset, region_layout, region_spec
 from ials_zoo.sumo_net.mdp import BATCHED_OBSERVATIONS, N_FEATURES, lanes_tables, observation_fn, reward_fn
 from ials_zoo.sumo_net.metrics import episode_metrics, scheduled_departures
-from ials_zoo.sumo_net.names import DEFAULT_NET, ENV_ID, OPTIONS, SCENARIO_OPTIONS
+from ials_zoo.sumo_net.names import ENV_ID, OPTIONS, SCENARIO_OPTIONS
 from ials_zoo.sumo_net.network import read_network
-from ials_zoo.sumo_net.scenario import make_scenario
+from ials_zoo.sumo_net.scenario import scenario_of
 from ials_zoo.utils import check_reset_options, check_seed
 
 SUMO_SEED_MAX = 2**31 - 2
-
-
-def scenario_of(net=None, sumocfg=None, net_file=None, route_files=None, begin=None, end=None,
-                decision_seconds=None, yellow_seconds=None, max_cycles=None):
-    """The :class:`~ials_zoo.sumo_net.scenario.Scenario` the options name (no network named:
-    RESCO's cologne8); ``max_cycles`` decisions, if given, set the end."""
-    if net is None and sumocfg is None and net_file is None:
-        net = DEFAULT_NET
-    scenario = make_scenario(net, sumocfg, net_file, route_files, begin, end, decision_seconds, yellow_seconds)
-    if max_cycles is None:
-        return scenario
-    if isinstance(max_cycles, bool) or not isinstance(max_cycles, (int, np.integer)) or max_cycles < 1:
-        raise BadInput(f"max_cycles must be an int >= 1 (decisions per episode), got {max_cycles!r}")
-    if end is not None:
-        raise BadInput("give end or max_cycles, not both")
-    import dataclasses
-
-    return dataclasses.replace(scenario, end=scenario.begin + int(max_cycles) * scenario.decision_seconds)
 
 
 def possible_agents(**options) -> list[str]:
@@ -214,14 +197,10 @@ class SumoNetEnv(ParallelEnv):
     def _region_layouts(self) -> list[dict]:
         from dataclasses import asdict
 
-        from ials_zoo.sumo_net.influence import region_layout
-
         return [asdict(region_layout(self.scenario.net_file, a)) for a in self.possible_agents]
 
     def region_spec(self, agent):
         """The region layout of a learner (:func:`ials_zoo.sumo_net.influence.region_spec`)."""
-        from ials_zoo.sumo_net.influence import region_spec
-
         return region_spec(self._check_agent(agent), **self._scenario_options)
 
     # -- spaces
@@ -273,8 +252,6 @@ class SumoNetEnv(ParallelEnv):
         """Every learner's region data (``region_data=True``; :mod:`ials_zoo.core.region`), else {}."""
         if not self.region_data:
             return {a: {} for a in self.agents}
-        from ials_zoo.sumo_net.influence import full_dset
-
         influences, dsets = self._region
         rows = self._region_rows
         return {a: {"influence": influences[rows[a]].copy(), "dset": dsets[rows[a]].copy(),

@@ -52,6 +52,7 @@ import numpy as np
 from ials_zoo.core.region import RegionSpec
 from ials_zoo.sumo_net.core import NetCore
 from ials_zoo.sumo_net.names import ENV_ID, SCENARIO_OPTIONS
+from ials_zoo.sumo_net.scenario import scenario_of
 
 ENTRY_CLASSES = 3  # 0, 1, 2 or more vehicles in one second at one entry point
 EXIT_CLASSES = 2  # an exit free or blocked
@@ -121,8 +122,6 @@ def region_layout(net_file: str, light: str) -> RegionLayout:
 
 
 def _scenario(options: dict):
-    from ials_zoo.sumo_net.env import scenario_of
-
     return scenario_of(**{k: options[k] for k in SCENARIO_OPTIONS if k in options})
 
 

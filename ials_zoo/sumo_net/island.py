@@ -134,7 +134,7 @@ def gs_marginal_predictors(lights, record_seconds: int | None = None, record_see
     (:func:`entry_histograms`; a :class:`~ials_zoo.influence.constant.MarginalPredictor`), every
     exit free. Costs what a trained MLP costs to within a call, so the benchmark uses it."""
     from ials_zoo.influence.constant import MarginalPredictor
-    from ials_zoo.sumo_net.env import scenario_of
+    from ials_zoo.sumo_net.scenario import scenario_of
 
     scenario_options = _scenario_options(options)
     scenario = scenario_of(**scenario_options)
@@ -303,8 +303,8 @@ class SumoNetLocalSimulator(LocalSimulator):
     def __init__(self, agents, n_envs: int = 1, backend: str = "auto", record_seconds: int | None = None,
                  record_seed: int = 0, observation: str = "drq_norm", reward: str = "wait_norm",
                  max_distance: float = 200.0, measure_entries: bool = False, **options):
-        from ials_zoo.sumo_net.env import scenario_of
         from ials_zoo.sumo_net.network import read_network
+        from ials_zoo.sumo_net.scenario import scenario_of
 
         self.scenario = scenario_of(**_scenario_options(options))
         self.n_envs = check_n_envs(n_envs)

@@ -28,11 +28,12 @@ import numpy as np
 from ials_zoo.sumo.command import load_budget
 from ials_zoo.sumo.lease import SimHandle
 from ials_zoo.sumo_net.core import NetCore
-from ials_zoo.sumo_net.env import SumoNetEnv, scenario_of
+from ials_zoo.sumo_net.env import SumoNetEnv
 from ials_zoo.sumo_net.names import SCENARIO_OPTIONS
 from ials_zoo.sumo_net.network import read_network
 from ials_zoo.sumo_net.regions import regions_of
 from ials_zoo.sumo_net.replay import ReplayCore, cut_regions, vehicle_types
+from ials_zoo.sumo_net.scenario import scenario_of
 
 
 def record_influence(scenario, regions: dict, seconds: int, seed: int = 0) -> list:

@@ -16,13 +16,17 @@ with its own SUMO seed).
 
 from __future__ import annotations
 
+import dataclasses
 import importlib.util
 import os
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from ials_zoo.errors import BadInput
+from ials_zoo.sumo_net.names import DEFAULT_NET
 from ials_zoo.utils import read_regular_file
 
 MAX_CONFIG_BYTES = 1 << 20  # a .sumocfg is a few hundred bytes
@@ -177,3 +181,19 @@ def make_scenario(net=None, sumocfg=None, net_file=None, route_files=None, begin
 
 
 __all__ = ["RESCO_MAPS", "Scenario", "make_scenario", "resco_map_folder"]
+
+
+def scenario_of(net=None, sumocfg=None, net_file=None, route_files=None, begin=None, end=None,
+                decision_seconds=None, yellow_seconds=None, max_cycles=None):
+    """The :class:`~ials_zoo.sumo_net.scenario.Scenario` the options name (no network named:
+    RESCO's cologne8); ``max_cycles`` decisions, if given, set the end."""
+    if net is None and sumocfg is None and net_file is None:
+        net = DEFAULT_NET
+    scenario = make_scenario(net, sumocfg, net_file, route_files, begin, end, decision_seconds, yellow_seconds)
+    if max_cycles is None:
+        return scenario
+    if isinstance(max_cycles, bool) or not isinstance(max_cycles, (int, np.integer)) or max_cycles < 1:
+        raise BadInput(f"max_cycles must be an int >= 1 (decisions per episode), got {max_cycles!r}")
+    if end is not None:
+        raise BadInput("give end or max_cycles, not both")
+    return dataclasses.replace(scenario, end=scenario.begin + int(max_cycles) * scenario.decision_seconds)
