@@ -31,7 +31,8 @@ napoleon_numpy_docstring = False
 
 html_theme = "furo"
 html_title = f"ials_zoo {release}"
-html_static_path: list[str] = []
+html_static_path = ["_static"]
+html_css_files = ["custom.css"]  # code blocks wrap (a browser test holds it)
 html_show_sourcelink = False
 
 

@@ -85,8 +85,8 @@ def browser():
         b.close()
 
 
-def _open(browser, path: Path):
-    page = browser.new_page(viewport={"width": 1300, "height": 900})
+def _open(browser, path: Path, width: int = 1300):
+    page = browser.new_page(viewport={"width": width, "height": 900})
     errors: list[str] = []
     page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
     page.on("pageerror", lambda e: errors.append(str(e)))
@@ -159,6 +159,100 @@ def test_a_curves_points_are_the_result_jsons_numbers(site, browser):
     box.click()
     assert page.eval_on_selector_all(f'[data-series="{series}"]', "gs => gs.filter(g => g.tagName == 'g')"
                                      ".every(g => g.style.display == 'none')")
+    assert not errors
+
+
+LAPTOP = 1400  # px: the width the pages must fit, a laptop's browser window
+
+
+def test_every_table_of_the_board_fits_a_laptops_width(site, browser):
+    """No table of the board runs off the page (its last column, the files and checks, was off
+    screen at 1,682 px)."""
+    page, errors = _open(browser, site / "board.html", LAPTOP)
+    assert page.evaluate("document.documentElement.scrollWidth") <= LAPTOP
+    rights = page.eval_on_selector_all("table.board", "ts => ts.map(t => t.getBoundingClientRect().right)")
+    assert rights and max(rights) <= LAPTOP, max(rights)
+    assert not errors
+
+
+def test_no_code_block_of_the_docs_hides_its_end(site, browser):
+    """At a laptop's width no code block hides its end behind a scroll bar (the first hour's
+    commands end with their durations)."""
+    errors = []
+    for path in sorted(site.rglob("*.html")):
+        page, page_errors = _open(browser, path, LAPTOP)
+        errors += page_errors
+        cut = page.eval_on_selector_all("div.highlight pre", "ps => ps.filter(p => p.scrollWidth > p.clientWidth + 1)"
+                                                               ".map(p => p.textContent.slice(0, 60))")
+        assert not cut, (path.name, cut)
+        page.close()
+    assert not errors
+
+
+def test_every_curve_label_lies_inside_its_panel(site, browser):
+    page, errors = _open(browser, site / "board.html", LAPTOP)
+    outside = page.evaluate("""() => { const out = [];
+        for (const s of document.querySelectorAll('svg')) { const r = s.getBoundingClientRect();
+          for (const t of s.querySelectorAll('text')) { const q = t.getBoundingClientRect();
+            if (q.left < r.left - 0.5 || q.right > r.right + 0.5) out.push(t.textContent); } }
+        return out; }""")
+    assert page.eval_on_selector_all("svg text", "ts => ts.length") > 100
+    assert not outside, outside
+    assert not errors
+
+
+def test_every_column_of_numbers_sorts_by_its_numbers(site, browser):
+    """Every numeric column of every table (the 95% CI by its lower end, the IQM, the metrics)
+    sorts by its values both ways, its empty cells ("-") last."""
+    page, errors = _open(browser, site / "board.html", LAPTOP)
+    checked, names = 0, set()
+    for table in page.query_selector_all("table.board"):
+        if len(table.query_selector_all("tbody tr")) < 2:
+            continue
+        headers = table.query_selector_all("thead th")
+        for i, header in enumerate(headers):
+            numeric = table.eval_on_selector_all("tbody tr", f"rs => rs.every(r => r.cells[{i}].classList.contains('num'))")
+            if not numeric:
+                continue
+            names.add(header.text_content())
+            for _ in range(2):
+                header.click()
+                values = table.eval_on_selector_all("tbody tr", f"rs => rs.map(r => r.cells[{i}].dataset.sort ?? null)")
+                assert None not in values, header.text_content()  # every number cell says how it sorts
+                filled = [float(v) for v in values if v != ""]
+                ascending = "sorted-asc" in (header.get_attribute("class") or "")
+                assert filled == sorted(filled, reverse=not ascending), (header.text_content(), values)
+                assert values[len(filled):] == [""] * (len(values) - len(filled)), (header.text_content(), values)
+                checked += 1
+    assert checked >= 40
+    assert {"GS score", "95% CI", "IQM [95% CI]", "seeds", "env steps"} <= names, names
+    assert not errors
+
+
+def test_hovering_a_point_reaches_the_point(site, browser):
+    """The bands of the other series do not take the pointer: at every visible point's centre
+    the element under the pointer is a point (the one drawn last there)."""
+    page, errors = _open(browser, site / "board.html", LAPTOP)
+    missed = page.evaluate("""() => { let missed = [], seen = 0;
+        for (const c of document.querySelectorAll('circle.point')) {
+          let r = c.getBoundingClientRect(); if (!r.width) continue; seen++;
+          window.scrollTo(0, window.scrollY + r.top - 300); r = c.getBoundingClientRect();
+          const e = document.elementFromPoint(r.left + r.width / 2, r.top + r.height / 2);
+          if (!e || !e.classList.contains('point')) missed.push(c.dataset.entry); }
+        return [seen, missed]; }""")
+    seen, missed = missed
+    assert seen > 100 and not missed, (seen, len(missed))
+    assert not errors
+
+
+def test_the_boards_contents_lead_with_the_networks(site, browser):
+    """The table of contents opens with the tables of the real maps (a track per network), and
+    every entry of it leads to its table."""
+    page, errors = _open(browser, site / "board.html", LAPTOP)
+    first = page.eval_on_selector_all("nav.toc ul:first-of-type a", "as => as.map(a => [a.textContent, a.hash])")
+    assert first and all("net=" in text for text, _ in first), first
+    for text, hash_ in page.eval_on_selector_all("nav.toc a", "as => as.map(a => [a.textContent, a.hash])"):
+        assert page.eval_on_selector(hash_, "h => h.textContent") == text
     assert not errors
 
 

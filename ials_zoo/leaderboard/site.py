@@ -41,16 +41,20 @@ COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e3
           "#17becf")
 
 STYLE = """
-body{font-family:system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;margin:2em auto;max-width:1200px;padding:0 1em;
+body{font-family:system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;margin:2em auto;max-width:1400px;padding:0 1em;
 color:#222}
 h1{font-size:1.6em}h2{margin-top:2em;border-bottom:1px solid #ccc}h3{margin-top:1.6em}
-table.board{border-collapse:collapse;font-size:.88em;margin:.6em 0}
-table.board th,table.board td{border:1px solid #ddd;padding:.25em .5em;text-align:left;vertical-align:top}
+table.board{border-collapse:collapse;font-size:.85em;margin:.6em 0;width:100%}
+table.board th,table.board td{border:1px solid #ddd;padding:.25em .4em;text-align:left;vertical-align:top;
+overflow-wrap:anywhere}
+table.board details code{display:block;white-space:normal;overflow-wrap:anywhere;margin-top:.2em}
 table.board th{background:#f4f4f4;cursor:pointer;user-select:none}
 table.board th.sorted-asc::after{content:" \\25B2"}table.board th.sorted-desc::after{content:" \\25BC"}
 td.num{text-align:right;font-variant-numeric:tabular-nums}code{font-size:.92em}
 .curves{display:flex;flex-wrap:wrap;gap:1em}.legend label{margin-right:1em;font-size:.88em;white-space:nowrap}
 svg text{font-size:11px;fill:#333}.note{color:#555;font-size:.9em}
+svg polygon,svg polyline{pointer-events:none}
+nav.toc{font-size:.92em;columns:2;margin:1em 0}nav.toc ul{margin:.2em 0 .6em}nav.toc p{margin:.2em 0;font-weight:600}
 """
 
 SCRIPT = """
@@ -99,7 +103,8 @@ def _links(d: dict, folder: str, link_base: str) -> str:
     checks = [f"ials-zoo leaderboard verify {folder}/{name}"]
     if (d.get("training") or {}).get("reproduce"):
         checks.append(f"ials-zoo leaderboard verify --retrain {folder}/{name}")
-    return " ".join(parts) + "".join(f"<br><code>{_e(c)}</code>" for c in checks)
+    return (" ".join(parts) + "<details><summary>verify</summary>"
+            + "".join(f"<code>{_e(c)}</code>" for c in checks) + "</details>")
 
 
 def _label(d: dict) -> str:
@@ -117,17 +122,19 @@ def _table(rows: list[dict], folder: str, link_base: str) -> str:
     metrics = get_domain(env_id).metrics
     names = [m for m in metrics if any(m in (d.get("metrics") or {}) for d in rows)]
     head = ['<th data-better="higher">policy / algorithm</th>', "<th>trained on</th>",
-            '<th data-better="higher">GS score</th>', "<th>95% CI</th>", '<th data-better="higher">IQM [95% CI]</th>',
+            '<th data-better="higher">GS score</th>', '<th data-better="higher" title="sorts by the interval\'s lower end">95% CI</th>',
+            '<th data-better="higher">IQM [95% CI]</th>',
             "<th>seeds</th>", "<th>episodes</th>", "<th>env steps</th>", '<th data-better="lower">wall-clock (+AIP) [on the reference machine]</th>']
     head += [f'<th data-better="{metrics[m]}">{_e(m)} ({metrics[m]} is better)</th>' for m in names]
     head += ["<th>date</th>", "<th>files and checks</th>"]
     body = []
     for d in rows:
         s, t = d["score"], d["training"]
-        total = _total_seconds(d)
+        total, iqm = _total_seconds(d), _iqm(d)
         cells = [_cell(_label(d)), _cell(_e(_training_label(d))),
-                 _cell(f"{s['mean']:.2f}", s["mean"], True), _cell(f"[{s['ci_low']:.2f}, {s['ci_high']:.2f}]"),
-                 _cell(_e(_iqm(d))), _cell(str(len(d["scores"])) if t else "-", len(d["scores"]) if t else "", True),
+                 _cell(f"{s['mean']:.2f}", s["mean"], True),
+                 _cell(f"[{s['ci_low']:.2f}, {s['ci_high']:.2f}]", s["ci_low"], True),
+                 _cell(_e(iqm), iqm.split()[0] if iqm != "-" else "", True), _cell(str(len(d["scores"])) if t else "-", len(d["scores"]) if t else "", True),
                  _cell(str(d["evaluation"]["episodes"]), d["evaluation"]["episodes"], True),
                  _cell(f"{t['env_steps']:,}" if t else "-", t["env_steps"] if t else "", True),
                  _cell(_e(wall_clock_text(d)), "" if total is None else total, True)]
@@ -140,6 +147,15 @@ def _table(rows: list[dict], folder: str, link_base: str) -> str:
     return (f'<table class="board"><thead><tr>{"".join(head)}</tr></thead><tbody>{"".join(body)}</tbody></table>')
 
 
+def _tick(value: float) -> str:
+    """An axis label short enough for its place: 3 significant digits, k and M for thousands
+    and millions (``3.58k``, not ``3.58e+03``)."""
+    for size, unit in ((1e6, "M"), (1e3, "k")):
+        if abs(value) >= size:
+            return f"{value / size:.3g}{unit}"
+    return f"{value:.3g}"
+
+
 def _svg(curves: list[tuple[str, dict]], x_key: str, x_label: str, y_label: str, width=540, height=320) -> str:
     """One panel: each entry's seeds as lines over their 95% bands, a circle per point whose
     title is its numbers and whose data attributes are the result's own values."""
@@ -148,7 +164,7 @@ def _svg(curves: list[tuple[str, dict]], x_key: str, x_label: str, y_label: str,
     ys = [float(v) for p in points for v in (p["ci_low"], p["ci_high"], p["mean"])]
     x0, x1 = min(xs), max(xs) if max(xs) > min(xs) else min(xs) + 1.0
     y0, y1 = min(ys), max(ys) if max(ys) > min(ys) else min(ys) + 1.0
-    left, right, top, bottom = 56, 12, 12, 40
+    left, right, top, bottom = 56, 24, 12, 40
 
     def X(v):
         return left + (float(v) - x0) / (x1 - x0) * (width - left - right)
@@ -162,8 +178,9 @@ def _svg(curves: list[tuple[str, dict]], x_key: str, x_label: str, y_label: str,
            'stroke="#999"/>']
     for i in range(5):
         yv, xv = y0 + (y1 - y0) * i / 4, x0 + (x1 - x0) * i / 4
-        out.append(f'<text x="{left - 4}" y="{Y(yv) + 4:.1f}" text-anchor="end">{yv:.3g}</text>')
-        out.append(f'<text x="{X(xv):.1f}" y="{height - bottom + 14}" text-anchor="middle">{xv:,.3g}</text>')
+        out.append(f'<text x="{left - 4}" y="{Y(yv) + 4:.1f}" text-anchor="end">{_tick(yv)}</text>')
+        anchor = "end" if i == 4 else "start" if i == 0 else "middle"  # the end ticks stay inside the panel
+        out.append(f'<text x="{X(xv):.1f}" y="{height - bottom + 14}" text-anchor="{anchor}">{_tick(xv)}</text>')
     out.append(f'<text x="{(left + width - right) / 2}" y="{height - 6}" text-anchor="middle">{_e(x_label)}</text>')
     out.append(f'<text x="12" y="{(top + height - bottom) / 2}" transform="rotate(-90 12 {(top + height - bottom) / 2})" '
                f'text-anchor="middle">{_e(y_label)}</text>')
@@ -217,13 +234,37 @@ def _sections(groups: dict, folder: str, link_base: str, titles: dict, start: in
         if section != current:
             parts.append(f"<h2>{_e(titles.get(section, section))}</h2>")
             current = section
-        parts.append(f"<h3>{_e(env_id)} / {_e(who)}</h3>")
+        parts.append(f'<h3 id="{_anchor(n)}">{_e(env_id)} / {_e(who)}</h3>')
         rank = get_domain(env_id).score_metric
         if rank is not None:
             parts.append(f'<p class="note">Ranked by {_e(rank)}, {_e(get_domain(env_id).metrics[rank])} is better.</p>')
         parts.append(_table(rows, folder, link_base))
         parts.append(_curves(rows, n))
     return parts
+
+
+def _anchor(n: int) -> str:
+    return f"table-{n}"
+
+
+def _toc(groups: dict, titles: dict) -> str:
+    """The page's contents: first the tables of a domain with a track per network (real city
+    maps are what most traffic users look for), then every section's tables in page order."""
+    keys = list(groups)
+    networks = [n for n, (_, env_id, who) in enumerate(keys) if get_domain(env_id).track_options]
+    sections: dict = {}
+    for n, (section, env_id, who) in enumerate(keys):
+        sections.setdefault(titles.get(section, section), []).append(n)
+    blocks = ([("Networks and maps (a table per network)", networks)] if networks else []) + list(sections.items())
+
+    def item(n):
+        section, env_id, who = keys[n]
+        where = "" if section in (SINGLE, MULTI) else f" ({_e(section)})"
+        return f'<li><a href="#{_anchor(n)}">{_e(env_id)} / {_e(who)}</a>{where}</li>'
+
+    return ('<nav class="toc" aria-label="contents">'
+            + "".join(f"<p>{_e(title)}</p><ul>{''.join(item(n) for n in ns)}</ul>" for title, ns in blocks)
+            + "</nav>")
 
 
 TITLES = {SINGLE: "Single-agent track (one agent learns, the others are scripted)",
@@ -251,6 +292,7 @@ def render_site(directory=None, out: str | Path | None = None, link_base: str = 
     if problems:
         parts.append("<p><strong>Skipped files</strong>: " + "; ".join(f"<code>{_e(p.name)}</code>: {_e(w)}"
                                                                          for p, w in problems) + "</p>")
+    parts.append(_toc(groups, TITLES))
     parts += _sections(groups, "results", link_base, TITLES)
     if archived:
         parts += _sections({("archive", k[1], k[2]): v for k, v in group_entries(archived).items()}, ARCHIVE_SUBDIR,
