@@ -27,7 +27,7 @@ import gymnasium
 import numpy as np
 from gymnasium import spaces
 
-from ials_zoo.core.domains import get_domain
+from ials_zoo.core.domains import Domain, get_domain
 from ials_zoo.errors import BadInput, BadInputType
 from ials_zoo.runtime.processes import Worker, call_all, start_all
 
@@ -244,7 +244,7 @@ def _worker_vec_env_class():
 
 
 def make_gs_vec_env(
-    env_id: str,
+    env_id: str | Domain,
     agent: str,
     n_envs: int = 8,
     vec_env: str = "auto",
@@ -257,14 +257,20 @@ def make_gs_vec_env(
             copy) or ``"auto"``: subproc for domains that need their own process (SUMO),
             dummy otherwise.
     """
+    return gs_vec_env(get_domain(env_id), agent, n_envs, vec_env, **options)
+
+
+def gs_vec_env(domain: Domain, agent: str, n_envs: int = 8, vec_env: str = "auto", **options):
+    """:func:`make_gs_vec_env` of a resolved :class:`~ials_zoo.core.domains.Domain`."""
     from stable_baselines3.common.vec_env import DummyVecEnv
 
     if n_envs < 1:
         raise BadInput(f"n_envs must be >= 1, got {n_envs}")
     if vec_env not in ("auto", "dummy", "subproc"):
         raise BadInput(f"vec_env must be 'auto', 'dummy' or 'subproc', got {vec_env!r}")
-    get_domain(env_id).check_agent(agent)
-    own = get_domain(env_id).one_simulation_per_process
+    env_id = domain.env_id  # what the env factories (and worker processes) are given
+    domain.check_agent(agent)
+    own = domain.one_simulation_per_process
     if vec_env == "dummy" and own:
         raise BadInput(
             f"{env_id} holds one simulation per process (libsumo); use vec_env='subproc'"

@@ -6,17 +6,18 @@ record of the result (its file, sha256 and cost). The ``--simulator`` vocabulary
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
-import ials_zoo
 from ials_zoo.evaluation import sha256_file
 from ials_zoo.influence.ials import pretrained_path
-from ials_zoo.influence.specs import GS, predictor_for
+from ials_zoo.influence.specs import PredictorSpec
+
+PACKAGE = Path(__file__).resolve().parents[1]  # the installed ials_zoo folder
 
 
-def predictor_record(venv, simulator: str, env_id: str, agent: str, made_now: bool = True) -> dict | None:
-    """What the training record says about the AIP behind an IALS vec env (None on the GS).
+def predictor_record(venv, spec: PredictorSpec | None, env_id: str, agent: str, made_now: bool = True) -> dict | None:
+    """What the training record says about the AIP behind an IALS vec env (None on the GS:
+    ``spec`` None; else the parsed ``--simulator``, :func:`ials_zoo.influence.specs.parse_simulator`).
 
     The IALS vec env exposes its predictor as ``venv.predictor``; a trained AIP's
     ``metadata`` holds its training report, with ``dataset.collect_seconds`` (Algorithm 1)
@@ -26,26 +27,22 @@ def predictor_record(venv, simulator: str, env_id: str, agent: str, made_now: bo
     count 0; so does ``marginal``, whose metadata does not carry the data collection time
     (documented limitation). A shipped file is named relative to the package, not by an
     absolute path of this machine."""
-    if simulator == GS:
+    if spec is None:
         return None
     pred = getattr(venv, "predictor", None)
     meta = dict(getattr(pred, "metadata", None) or {})
     collect = (meta.get("dataset") or {}).get("collect_seconds") or meta.get("collect_seconds")
     train = meta.get("train_seconds")
     file = None
-    if os.path.exists(simulator):
-        file = simulator
-    elif predictor_for(simulator).startswith(("trained", "marginal")):
-
+    if spec.kind == "file":
+        file = spec.path
+    elif spec.kind in ("trained", "marginal"):
         shipped = pretrained_path(env_id, agent)
         file = shipped if shipped.is_file() and not made_now else None
-    sha = None
-    if file:
-
-        sha = sha256_file(file)
+    sha = sha256_file(file) if file else None
     meta.pop("marginal", None)
     return {
-        "variant": str(meta.get("variant") or predictor_for(simulator)),
+        "variant": str(meta.get("variant") or spec),
         "class": type(pred).__name__ if pred is not None else None,
         "file": portable_path(file) if file else None,
         "charged": bool(made_now),
@@ -59,9 +56,8 @@ def predictor_record(venv, simulator: str, env_id: str, agent: str, made_now: bo
 def portable_path(path) -> str:
     """A file inside the installed package as ``ials_zoo/<path in the package>``; any other
     file as given."""
-    package = Path(ials_zoo.__file__).resolve().parent
     try:
-        return "ials_zoo/" + Path(path).resolve().relative_to(package).as_posix()
+        return "ials_zoo/" + Path(path).resolve().relative_to(PACKAGE).as_posix()
     except ValueError:
         return str(path)
 

@@ -85,9 +85,9 @@ from ials_zoo.baselines.sb3_run import (
 from ials_zoo.core.domains import get_domain, ials_domain_ids
 from ials_zoo.core.extras import dials_of, study_of
 from ials_zoo.errors import BadInput
-from ials_zoo.influence.ials import make_ials_vec_env, trained_predictor
-from ials_zoo.influence.specs import parse_predictor, predictor_for, simulator_label
-from ials_zoo.single_agent import make_gs_vec_env
+from ials_zoo.influence.ials import ials_vec_env, trained_aip
+from ials_zoo.influence.specs import parse_simulator, predictor_for, simulator_label
+from ials_zoo.single_agent import gs_vec_env
 from ials_zoo.utils import check_seed, format_seconds
 
 
@@ -174,32 +174,30 @@ def check_args(args: Args) -> None:
 
 
 def make_training_env(args: Args, agent: str):
-    """The training vec env (GS or IALS) and the AIP record (None on the GS)."""
+    """The training vec env (GS or IALS) and the AIP record (None on the GS). The domain and the
+    ``--simulator`` spec are resolved here, once, and passed down as objects."""
 
-    predictor = predictor_for(args.simulator)
+    domain = get_domain(args.env_id)
     options = parse_env_options(args.env_options)
-    if predictor is None:
-        venv = make_gs_vec_env(args.env_id, agent, n_envs=args.n_envs, vec_env=args.vec_env,
-                               **options)
+    spec = parse_simulator(args.simulator)
+    if spec is None:
+        venv = gs_vec_env(domain, agent, n_envs=args.n_envs, vec_env=args.vec_env, **options)
         venv.seed(args.seed)
         return venv, None
 
     kw = dict(options) if args.dset_kind is None else dict(options, dset_kind=args.dset_kind)
     # an AIP file is charged (the study trains one per run, and the paper's IALS cost includes
     # it); a shipped or cached AIP only when this run had to make it
-    made_now = True
-    if predictor.startswith("trained"):
+    made_now, predictor = True, spec
+    if spec.kind == "trained" and not spec.train_if_missing:
         made_now = False  # a training command may train its AIP (and says so)
-
         try:
-            trained_predictor(args.env_id, agent, args.dset_kind or "dset", arch=parse_predictor(predictor).arch,
-                              options=options, progress=False)
+            trained_aip(domain, agent, args.dset_kind or "dset", arch=spec.arch, options=options, progress=False)
         except FileNotFoundError:
             made_now = True  # none shipped or cached: this run collects the data and trains it
-        predictor = "train" + predictor[len("trained"):]
-    venv = make_ials_vec_env(args.env_id, agent, n_envs=args.n_envs, predictor=predictor,
-                             seed=args.seed, **kw)
-    return venv, predictor_record(venv, args.simulator, args.env_id, agent, made_now=made_now)
+        predictor = dataclasses.replace(spec, train_if_missing=True)
+    venv = ials_vec_env(domain, agent, n_envs=args.n_envs, predictor=predictor, seed=args.seed, **kw)
+    return venv, predictor_record(venv, spec, domain.env_id, agent, made_now=made_now)
 
 
 def default_out_dir(args: Args, agent: str) -> Path:

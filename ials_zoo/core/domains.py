@@ -331,8 +331,12 @@ def dials_domain_ids() -> list[str]:
     return [d for d in domain_ids() if get_domain(d).has_ials_parallel_env]
 
 
-def get_domain(env_id: str) -> Domain:
-    """The domain ``env_id``; a ValueError naming the available ones for an unknown id."""
+def get_domain(env_id: str | Domain) -> Domain:
+    """The domain ``env_id``; a ValueError naming the available ones for an unknown id. A
+    :class:`Domain` is returned as it is: a caller that resolved the id once passes the object
+    down, and a function that takes either needs no second lookup."""
+    if isinstance(env_id, Domain):
+        return env_id
     with _lock:
         if env_id in _registered:
             return _registered[env_id]

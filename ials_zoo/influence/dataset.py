@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from ials_zoo._version import __version__
-from ials_zoo.core.domains import get_domain
+from ials_zoo.core.domains import Domain, get_domain
 from ials_zoo.core.region import DSET_KINDS, INFLUENCE_KEY, RegionSpec, dset_key
 from ials_zoo.errors import BadInput, BadInputType
 from ials_zoo.runtime.processes import shutdown_pool, spawn_pool
@@ -218,7 +218,7 @@ class _JointActor:
 
 
 def collect(
-    env_id: str,
+    env_id: str | Domain,
     agent: str,
     steps: int = 50_000,
     policy=None,
@@ -233,7 +233,7 @@ def collect(
 
 
 def collect_all(
-    env_id: str,
+    env_id: str | Domain,
     agents=None,
     steps: int = 50_000,
     policy=None,
@@ -247,7 +247,7 @@ def collect_all(
     learner's region is recorded at every step.
 
     Args:
-        env_id: a domain id (``ials_zoo.core.domain_ids()``).
+        env_id: a domain id (``ials_zoo.core.domain_ids()``) or the :class:`~ials_zoo.core.domains.Domain`.
         agents: the learning agents whose regions are recorded (None: every agent).
         steps: GS steps, rounded up to whole episodes (each step gives one pair per agent).
         policy: ``None`` (uniform random actions), a callable ``obs -> action`` or an object
@@ -268,13 +268,20 @@ def collect_all(
     Returns:
         ``{agent: InfluenceDataset}``.
     """
+    return collect_regions(get_domain(env_id), agents, steps, policy, seed, gs_options, progress, workers)
+
+
+def collect_regions(domain: Domain, agents=None, steps: int = 50_000, policy=None, seed: int = 0,
+                    gs_options: dict | None = None, progress: bool = True,
+                    workers: int = 1) -> dict[str, InfluenceDataset]:
+    """:func:`collect_all` of a resolved :class:`~ials_zoo.core.domains.Domain`."""
     steps = int(steps)
     if steps < 1:
         raise BadInput(f"steps must be >= 1, got {steps}")
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise BadInput(f"workers must be a positive int, got {workers!r}")
     check_seed(seed)
-    domain = get_domain(env_id)
+    env_id = domain.env_id  # what worker processes are given
     gs_options = dict(gs_options or {})
     if "learners" in gs_options:
         raise BadInput("gs_options must not set 'learners': the collected agents are the learners")

@@ -30,15 +30,15 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
-from ials_zoo.core.domains import get_domain
+from ials_zoo.core.domains import Domain, get_domain
 from ials_zoo.core.region import check_dset_kind
 from ials_zoo.errors import BadInput, BadInputType
 from ials_zoo.influence.base import InfluencePredictor
 from ials_zoo.influence.constant import FixedPredictor, MarginalPredictor, UniformPredictor
-from ials_zoo.influence.dataset import collect
+from ials_zoo.influence.dataset import collect_regions
 from ials_zoo.influence.files import load_predictor, save_predictor
 from ials_zoo.influence.networks import untrained_predictor
-from ials_zoo.influence.specs import parse_predictor
+from ials_zoo.influence.specs import PredictorSpec, parse_predictor
 from ials_zoo.influence.train import format_report, train_predictor
 from ials_zoo.utils import check_seed
 
@@ -310,7 +310,7 @@ def _matches(pred, region, dset_kind) -> bool:
 
 
 def trained_predictor(
-    env_id: str,
+    env_id: str | Domain,
     agent: str,
     dset_kind: str = "dset",
     arch: str | None = None,
@@ -324,9 +324,17 @@ def trained_predictor(
 
     A shipped/cached AIP is used only if it was trained for exactly this region setting
     (``RegionSpec`` incl. its params), d-set kind and architecture (default: the domain's).
+    ``env_id``: a domain id or the :class:`~ials_zoo.core.domains.Domain` itself.
     """
-    domain = get_domain(env_id).require_local_simulator("make_ials")
-    options = dict(options or {})
+    return trained_aip(get_domain(env_id), agent, dset_kind, arch, options, train_if_missing, progress, steps)
+
+
+def trained_aip(domain: Domain, agent: str, dset_kind: str = "dset", arch: str | None = None,
+                options: dict | None = None, train_if_missing: bool = False, progress: bool = True,
+                steps: int = DEFAULT_COLLECT_STEPS) -> InfluencePredictor:
+    """:func:`trained_predictor` of a resolved :class:`~ials_zoo.core.domains.Domain`."""
+    domain = domain.require_local_simulator("make_ials")
+    dset_kind, options, env_id = check_dset_kind(dset_kind), dict(options or {}), domain.env_id
     region = domain.region_spec(agent, **options)
     arch = arch or domain.default_predictor
     for path in (pretrained_path(env_id, agent), _cache_path(region, arch, dset_kind)):
@@ -347,7 +355,7 @@ def trained_predictor(
         f"ials_zoo: no trained AIP for {env_id}/{agent} ({dset_kind!r} d-set); collecting "
         f"{steps} steps and training one (cached in {cache_dir()})"
     )
-    data = collect(env_id, agent, steps=steps, gs_options=options, progress=progress)
+    data = collect_regions(domain, [agent], steps=steps, gs_options=options, progress=progress)[agent]
     pred, report = train_predictor(data, arch=arch, dset_kind=dset_kind, progress=progress)
     print(format_report(report))
     save_predictor(pred, _cache_path(region, arch, dset_kind))
@@ -361,45 +369,28 @@ def _options_flag(options: dict) -> str:
 
 def resolve_predictor(
     predictor,
-    env_id: str,
+    env_id: str | Domain,
     agent: str,
     dset_kind: str | None = None,
     seed: int | None = None,
     options: dict | None = None,
 ) -> InfluencePredictor:
-    """Turn a predictor (object, path or spec, see :mod:`ials_zoo.influence.specs`) into a
-    predictor for ``agent``."""
-    domain = get_domain(env_id)
-    options = dict(options or {})
+    """Turn a predictor (object, path, spec text or parsed :class:`PredictorSpec`, see
+    :mod:`ials_zoo.influence.specs`) into a predictor for ``agent`` of ``env_id`` (an id or
+    the :class:`~ials_zoo.core.domains.Domain`)."""
+    return _resolve(get_domain(env_id), agent, predictor, dset_kind, seed, dict(options or {}))
+
+
+def _resolve(domain: Domain, agent: str, predictor, dset_kind: str | None, seed: int | None,
+             options: dict) -> InfluencePredictor:
+    """:func:`resolve_predictor` with its domain resolved."""
+    env_id = domain.env_id
+    kind = check_dset_kind(dset_kind or "dset")
     if isinstance(predictor, InfluencePredictor):
-        # A private copy: the recurrent state must not be shared between envs.
-        pred = copy.deepcopy(predictor)
-    elif isinstance(predictor, (str, os.PathLike)):
-        spec = parse_predictor(predictor)
-        kind = check_dset_kind(dset_kind or "dset")
-        if spec.kind == "file":
-            pred = load_predictor(spec.path, env_id=env_id, agent=agent)
-        else:
-            region = domain.region_spec(agent, **options)
-            if spec.kind == "trained":
-                pred = trained_predictor(env_id, agent, kind, arch=spec.arch, options=options,
-                                         train_if_missing=spec.train_if_missing)
-            elif spec.kind == "uniform":
-                pred = UniformPredictor(region, dset_kind=kind, probs=domain.untrained_probs)
-            elif spec.kind == "untrained":
-                pred = untrained_predictor(region, arch=domain.default_predictor, dset_kind=kind,
-                                             seed=0 if seed is None else seed)
-            elif spec.kind == "fixed":
-                pred = FixedPredictor(region, spec.p, dset_kind=kind, null_class=domain.null_influence)
-            else:  # marginal
-                trained = trained_predictor(env_id, agent, kind, options=options)
-                marg = trained.metadata.get("marginal")
-                if marg is None:
-                    raise BadInput(
-                        f"the trained AIP of {env_id}/{agent} carries no data marginal; build a "
-                        "MarginalPredictor.fit(dataset) from collected data instead"
-                    )
-                pred = MarginalPredictor(region, marg, dset_kind=kind, metadata={"from": "trained AIP data"})
+        pred = copy.deepcopy(predictor)  # a private copy: the recurrent state must not be shared between envs
+    elif isinstance(predictor, (str, os.PathLike, PredictorSpec)):
+        spec = predictor if isinstance(predictor, PredictorSpec) else parse_predictor(predictor)
+        pred = _from_spec(domain, agent, spec, kind, seed, options)
     else:
         raise BadInputType(
             f"predictor must be a name, a path or an InfluencePredictor, got {type(predictor).__name__}"
@@ -409,13 +400,38 @@ def resolve_predictor(
             f"the influence predictor is for {pred.region.domain}/{pred.region.agent}, not "
             f"{env_id}/{agent}"
         )
-    if dset_kind is not None and pred.dset_kind != check_dset_kind(dset_kind):
+    if dset_kind is not None and pred.dset_kind != kind:
         raise BadInput(f"the influence predictor reads the {pred.dset_kind!r} d-set, not {dset_kind!r}")
     return pred
 
 
+def _from_spec(domain: Domain, agent: str, spec: PredictorSpec, kind: str, seed: int | None,
+               options: dict) -> InfluencePredictor:
+    """The predictor a parsed spec names (module :mod:`ials_zoo.influence.specs`)."""
+    if spec.kind == "file":
+        return load_predictor(spec.path, env_id=domain.env_id, agent=agent)
+    if spec.kind == "trained":
+        return trained_aip(domain, agent, kind, spec.arch, options, spec.train_if_missing)
+    region = domain.region_spec(agent, **options)
+    if spec.kind == "uniform":
+        return UniformPredictor(region, dset_kind=kind, probs=domain.untrained_probs)
+    if spec.kind == "untrained":
+        return untrained_predictor(region, arch=domain.default_predictor, dset_kind=kind,
+                                   seed=0 if seed is None else seed)
+    if spec.kind == "fixed":
+        return FixedPredictor(region, spec.p, dset_kind=kind, null_class=domain.null_influence)
+    trained = trained_aip(domain, agent, kind, None, options)  # marginal
+    marg = trained.metadata.get("marginal")
+    if marg is None:
+        raise BadInput(
+            f"the trained AIP of {domain.env_id}/{agent} carries no data marginal; build a "
+            "MarginalPredictor.fit(dataset) from collected data instead"
+        )
+    return MarginalPredictor(region, marg, dset_kind=kind, metadata={"from": "trained AIP data"})
+
+
 def make_ials(
-    env_id: str,
+    env_id: str | Domain,
     agent: str,
     predictor="trained",
     dset_kind: str | None = None,
@@ -426,7 +442,7 @@ def make_ials(
     """The IALS of ``agent`` in domain ``env_id`` as a Gymnasium env.
 
     Args:
-        env_id: domain id, e.g. ``"warehouse_v0"``.
+        env_id: domain id, e.g. ``"warehouse_v0"`` (or the :class:`~ials_zoo.core.domains.Domain`).
         agent: the agent whose region is simulated, e.g. ``"robot_20"``.
         predictor: an :class:`InfluencePredictor`, a path, or a name (module docstring).
         dset_kind: d-set the AIP reads (``"dset"`` default, ``"full"`` for the ablation).
@@ -438,7 +454,7 @@ def make_ials(
         raise BadInput(f"IALS envs do not render; got render_mode={render_mode!r}")
     domain = get_domain(env_id).require_local_simulator("make_ials")
     domain.check_agent(agent, **options)
-    pred = resolve_predictor(predictor, env_id, agent, dset_kind, seed, options)
+    pred = _resolve(domain, agent, predictor, dset_kind, seed, options)
     ls = domain.local_simulator(agent, n_envs=1, **options)
     try:
         return IALSEnv(ls, pred, seed=seed)
@@ -456,7 +472,7 @@ def gymnasium_entry_point(env_id: str, agent: str | None = None, **kwargs) -> IA
 
 
 def make_ials_vec_env(
-    env_id: str,
+    env_id: str | Domain,
     agent: str,
     n_envs: int = 8,
     predictor="trained",
@@ -469,11 +485,17 @@ def make_ials_vec_env(
     Arguments as :func:`make_ials`. The predictor object is used by this VecEnv alone (its
     recurrent state holds the ``n_envs`` histories): do not share it with another env.
     """
+    return ials_vec_env(get_domain(env_id), agent, n_envs, predictor, dset_kind, seed, **options)
+
+
+def ials_vec_env(domain: Domain, agent: str, n_envs: int = 8, predictor="trained", dset_kind: str | None = None,
+                 seed: int | None = None, **options) -> IALSVecEnv:
+    """:func:`make_ials_vec_env` of a resolved :class:`~ials_zoo.core.domains.Domain`."""
     if isinstance(n_envs, bool) or not isinstance(n_envs, (int, np.integer)) or n_envs < 1:
         raise BadInput(f"n_envs must be a positive int, got {n_envs!r}")
-    domain = get_domain(env_id).require_local_simulator("make_ials_vec_env")
+    domain = domain.require_local_simulator("make_ials_vec_env")
     domain.check_agent(agent, **options)
-    pred = resolve_predictor(predictor, env_id, agent, dset_kind, seed, options)
+    pred = _resolve(domain, agent, predictor, dset_kind, seed, options)
     ls = domain.local_simulator(agent, n_envs=int(n_envs), **options)
     try:
         return IALSVecEnv(ls, pred, seed=seed)
@@ -486,9 +508,11 @@ __all__ = [
     "IALSEnv",
     "IALSVecEnv",
     "cache_dir",
+    "ials_vec_env",
     "make_ials",
     "make_ials_vec_env",
     "pretrained_path",
     "resolve_predictor",
+    "trained_aip",
     "trained_predictor",
 ]

@@ -17,9 +17,9 @@ from ials_zoo.baselines.ppo_single import Args
 from ials_zoo.baselines.ppo_single import main as train_ppo_single
 from ials_zoo.baselines.runs import run_state
 from ials_zoo.errors import BadInput
-from ials_zoo.runtime.processes import die_with_parent
 from ials_zoo.reproduce import experiments as X
 from ials_zoo.reproduce.plan import Job
+from ials_zoo.runtime.processes import die_with_parent
 
 
 def run_job(job) -> None:

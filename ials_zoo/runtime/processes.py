@@ -36,9 +36,9 @@ import threading
 import time
 import traceback
 
+from ials_zoo.errors import BadInput
 from ials_zoo.runtime import zygote as zygotes
 from ials_zoo.runtime.children import fresh_interpreter, process_cpu_ticks, process_state
-from ials_zoo.errors import BadInput
 
 _PR_SET_PDEATHSIG = 1
 _M_TRIM_THRESHOLD, _M_MMAP_MAX = -1, -4  # glibc <malloc.h>
