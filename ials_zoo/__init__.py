@@ -40,10 +40,10 @@ def _quiet_interrupts_while_starting() -> None:
     raised inside an import that runs compiled code (torch's) aborts the process instead of
     unwinding it. ``ials_zoo.cli.main`` ends the command once its start-up is done, then gives
     Python's handler back."""
-    import os
-    import signal
-    import sys
-    import threading
+    import os  # lazy: here, not at the top, so that the package has no attribute os
+    import signal  # lazy: likewise
+    import sys  # lazy: likewise
+    import threading  # lazy: likewise
 
     if threading.current_thread() is not threading.main_thread():
         return
@@ -66,6 +66,7 @@ _quiet_interrupts_while_starting()
 from ials_zoo._version import __version__  # noqa: E402
 from ials_zoo.core.domains import Domain, domain_ids, get_domain, ials_domain_ids, register_domain  # noqa: E402
 from ials_zoo.core.gym_ids import register_ials  # noqa: E402
+from ials_zoo.learners.gs_vec import GSVecEnv as _GSVecEnv  # noqa: E402
 
 
 def make_ials(*args, **kwargs):
@@ -100,9 +101,7 @@ def make_gs_vector_env(env_id: str, agents=None, n_envs: int = 1, processes: int
     GS beside :func:`make_multi_agent_ials` (IPPO trains on it). ``processes`` spreads the
     copies over worker processes. ``reset(seed) -> obs``, ``step(actions [A, n]) -> (obs,
     rewards, done)``. See :class:`ials_zoo.learners.gs_vec.GSVecEnv`."""
-    from ials_zoo.learners.gs_vec import GSVecEnv
-
-    return GSVecEnv(env_id, agents, n_envs, processes, seed, **options)
+    return _GSVecEnv(env_id, agents, n_envs, processes, seed, **options)
 
 
 def make_ials_vector_env(env_id: str, predictor="trained", agents=None, n_envs: int = 1, processes: int = 0,
@@ -112,10 +111,8 @@ def make_ials_vector_env(env_id: str, predictor="trained", agents=None, n_envs: 
     zero-padded to the longest agent's): what DIALS trains on where the agents have spaces of
     their own (``sumo_net_v0``), and ``set_predictors(aips)`` swaps every copy's AIPs. Agents
     that share their spaces have the faster :func:`make_multi_agent_ials`."""
-    from ials_zoo.learners.gs_vec import GSVecEnv
-
     get_domain(env_id).require_ials_parallel_env("make_ials_vector_env")
-    return GSVecEnv(env_id, agents, n_envs, processes, seed, simulator="ials", predictor=predictor, **options)
+    return _GSVecEnv(env_id, agents, n_envs, processes, seed, simulator="ials", predictor=predictor, **options)
 
 
 for _env_id in ials_domain_ids():  # every IALS domain's IALS as a Gymnasium id (ials_zoo.core.gym_ids)

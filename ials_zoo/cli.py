@@ -15,7 +15,9 @@ import argparse
 import importlib
 import importlib.util
 import os
+import signal
 import sys
+import threading
 
 from ials_zoo._version import __version__
 from ials_zoo.core.domains import domain_ids
@@ -86,15 +88,12 @@ def _deepest(parser, argv: list[str]):
 
 
 def threading_main() -> bool:
-    import threading
-
     return threading.current_thread() is threading.main_thread()
 
 
 def _sigterm_interrupts() -> None:
     """SIGTERM ends a command like Ctrl-C: cleanup runs (workers stopped, the run folder marked
     interrupted) before the process exits."""
-    import signal
 
     def interrupt(signum, frame):
         raise KeyboardInterrupt
@@ -110,7 +109,6 @@ def _noted_interrupts():
     imports) aborts the process. A noted Ctrl-C leaves the signal's default action in place, so
     a second one ends the process at once. None where it is not ours to handle (another thread,
     another program's handler)."""
-    import signal
 
     if not threading_main():
         return None
@@ -133,7 +131,6 @@ def _python_interrupts(noted) -> None:
     """Give Ctrl-C back to Python (a KeyboardInterrupt, handled by :func:`_run`) once the
     start-up, with its imports, is done: in place of the noting handler, or of the default
     action it left after a Ctrl-C."""
-    import signal
 
     if not threading_main() or noted is None:
         return
@@ -204,8 +201,6 @@ def _run(module, args, noted) -> int:
         print(f"ials-zoo {args.command}: {exc}", file=sys.stderr)
         return 1
     finally:
-        import signal
-
         if threading_main():
             signal.signal(signal.SIGTERM, signal.SIG_DFL)
 

@@ -46,8 +46,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from tqdm.auto import tqdm
 
 from ials_zoo.core.domains import domain_ids, get_domain
+from ials_zoo.core.extras import study_of
 from ials_zoo.core.spaces import sizes_of_env, stack_observations
 from ials_zoo.errors import BadInput, BadInputType
 from ials_zoo.policy import (
@@ -243,7 +245,6 @@ def estimate_evaluation_seconds(env_id: str, episodes: int, **options) -> float:
     map's), else their agent-steps at the training speed the domain's study measured, which
     evaluation beats (an upper estimate; what a re-measure or a long command is bounded by
     before it starts)."""
-    from ials_zoo.core.extras import study_of
 
     domain = get_domain(env_id)
     study = study_of(domain)
@@ -498,8 +499,6 @@ def evaluate(env_id: str, agent: str, policy, episodes: int = PROTOCOL_EPISODES,
     start = time.perf_counter()
     iterator = seeds
     if progress:
-        from tqdm.auto import tqdm
-
         iterator = tqdm(seeds, desc=f"evaluate {agent}", unit="episode")
     try:
         returns, length = [], 0
@@ -580,8 +579,6 @@ def evaluate_joint(env_id: str, policy, agents=None, episodes: int = PROTOCOL_EP
     start = time.perf_counter()
     iterator = seeds
     if progress:
-        from tqdm.auto import tqdm
-
         iterator = tqdm(seeds, desc=f"evaluate {len(agents)} agents", unit="episode")
     per_agent = np.zeros((len(agents), len(seeds)))
     length = 0

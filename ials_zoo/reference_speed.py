@@ -24,6 +24,8 @@ import platform
 import statistics
 import time
 
+import numpy as np
+
 WORKLOAD = "ref-1"
 """The workload's version: change it whenever :func:`_workload` changes."""
 REFERENCE_WORKLOAD_SECONDS = 0.0585
@@ -46,8 +48,6 @@ def _interpreter(n: int = 100_000) -> int:
 
 
 def _arrays(n: int = 1_200) -> float:
-    import numpy as np
-
     rng = np.random.default_rng(0)
     a, b = rng.standard_normal((64, 64)), rng.standard_normal(64)
     for _ in range(n):

@@ -23,6 +23,7 @@ stratified bootstrap interval too.
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Sequence
 
 import numpy as np
@@ -59,7 +60,6 @@ def t_interval(values: Sequence[float], level: float = CI_LEVEL) -> tuple[float,
 
 def bootstrap_interval(values: Sequence[float], level: float = CI_LEVEL) -> tuple[float, float, float]:
     """``(mean, low, high)``: the BCa bootstrap interval of the mean (module docstring)."""
-    import warnings
 
     from scipy import stats
 
@@ -92,7 +92,6 @@ def iqm(values: Sequence[float]) -> float:
 def iqm_interval(per_task: Sequence[Sequence[float]], level: float = CI_LEVEL) -> tuple[float, float, float]:
     """``(iqm, low, high)`` of the scores of every task and seed, with a stratified percentile
     bootstrap interval (each task's scores resampled within the task; one task: a plain one)."""
-    import warnings
 
     from scipy import stats
 
@@ -118,7 +117,6 @@ def probability_of_improvement(x: Sequence[float], y: Sequence[float], level: fl
     """``(p, low, high)``: P(X > Y) + P(X = Y) / 2 for a score X of ``x``'s runs and Y of ``y``'s
     (the Mann-Whitney U statistic of ``x`` over ``len(x) * len(y)``), with a percentile
     bootstrap interval that resamples each algorithm's runs."""
-    import warnings
 
     from scipy import stats
 

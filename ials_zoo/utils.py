@@ -5,7 +5,11 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import re
+import stat
 import tempfile
+import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -58,7 +62,6 @@ _JSON_STRING = None
 
 def json_depth(text: str) -> int:
     """The deepest nesting of ``[``/``{`` in JSON ``text`` (brackets inside strings ignored)."""
-    import re
 
     global _JSON_STRING
     if _JSON_STRING is None:
@@ -106,7 +109,6 @@ def read_regular_file(path: str | os.PathLike, max_bytes: int, follow_links: boo
     """The bytes of ``path`` if it is a regular file of at most ``max_bytes``; a ValueError
     otherwise. Never blocks on a fifo, never reads a device, reads at most ``max_bytes + 1``
     bytes whatever the file claims; with ``follow_links=False`` a symbolic link is refused."""
-    import stat
 
     flags = os.O_RDONLY | os.O_NONBLOCK | (0 if follow_links else os.O_NOFOLLOW)
     try:
@@ -196,8 +198,6 @@ def check_reset_options(options, known=()) -> dict:
         raise BadInputType(f"reset options must be a dict or None, got {type(options).__name__} {options!r}")
     unknown = sorted(str(k) for k in options if k not in known)
     if unknown:
-        import warnings
-
         warnings.warn(f"reset option(s) {unknown} are not used: this env knows {sorted(known) or 'none'} (GS options "
                       "such as item_lifetime or grid are given when the env is made)", UserWarning, stacklevel=3)
     return dict(options)
@@ -226,7 +226,6 @@ def remove_stale_temporaries(folder, max_age_seconds: float = 3600.0) -> int:
     """Remove the temporary files :func:`atomic_path` leaves behind when a process is killed
     mid-write (``.<name>.<random>.tmp`` and the like) older than ``max_age_seconds`` in
     ``folder``; returns how many. Younger ones may belong to a write still under way."""
-    import time
 
     folder = Path(folder)
     if not folder.is_dir():

@@ -6,6 +6,9 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
+import re
+import sys
 import typing
 
 from ials_zoo.errors import BadInput, is_run_failure
@@ -64,7 +67,6 @@ def parse_args(cls, argv=None, description: str | None = None):
 def run_cli(module) -> int:
     """``python -m`` entry point of a baseline module: parse its ``Args``, run its ``main``;
     bad arguments print one clear line instead of a traceback (``ials-zoo train``'s style)."""
-    import sys
 
     args = parse_args(module.Args, description=module.__doc__.splitlines()[0])
     name = module.__name__.rsplit(".", 1)[-1]
@@ -118,7 +120,6 @@ class AblatedPPOSettings(PPOSettings):
 
 def check_ppo_settings(args) -> None:
     """Clear errors for the :class:`PPOSettings` fields of ``args``."""
-    import math
 
     if args.n_epochs < 1:
         raise BadInput(f"n_epochs must be >= 1, got {args.n_epochs}")
@@ -178,7 +179,6 @@ def check_frame_stack(frame_stack) -> None:
 def flag_named(message: str, args_class) -> str:
     """A baseline's error as the command line says it: a message that opens with an argument's
     name (``total_timesteps must be >= 1``) opens with its flag (``--total-timesteps``)."""
-    import re
 
     first = re.match(r"[a-z_]+", message)
     names = {f.name for f in dataclasses.fields(args_class)}

@@ -37,6 +37,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import supersuit as ss
+import torch
+from supersuit.vector.sb3_vector_wrapper import SB3VecEnvWrapper
 
 from ials_zoo.baselines.arguments import PPOSettings, arg, hidden_sizes, parse_env_options, run_cli
 from ials_zoo.baselines.driver import RunPlan, run
@@ -56,8 +59,6 @@ from ials_zoo.errors import BadInput
 
 
 def _sb3_wrapper_base():
-    from supersuit.vector.sb3_vector_wrapper import SB3VecEnvWrapper
-
     return SB3VecEnvWrapper
 
 
@@ -104,8 +105,6 @@ class TruncationAwareSB3VecEnv(_sb3_wrapper_base()):
 def make_shared_vec_env(env_id: str, learners=None, n_copies: int = 1, seed: int | None = None,
                         **options):
     """All learners of ``n_copies`` GS copies as one SB3 ``VecEnv`` (one entry per agent)."""
-    import supersuit as ss
-
 
     if n_copies < 1:
         raise BadInput(f"n_copies must be >= 1, got {n_copies}")
@@ -150,7 +149,6 @@ class Args(PPOSettings):
 
 
 def _agent_list(text: str | None, env_id: str, default, **options) -> list[str]:
-
     if text is None or text == "":
         return list(default)
     return get_domain(env_id).check_agents(None if text == "all" else text, **options)
@@ -165,7 +163,6 @@ def check_args(args: Args) -> None:
 
 def main(args: Args | None = None) -> list[dict]:
     """Train, evaluate and save; returns one result dict per evaluated agent."""
-    import torch
 
     args = args or Args()
     check_args(args)

@@ -60,6 +60,8 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
+import torch
+
 from ials_zoo.baselines.aip_record import predictor_record
 from ials_zoo.baselines.arguments import (
     AblatedPPOSettings,
@@ -208,7 +210,6 @@ def default_out_dir(args: Args, agent: str) -> Path:
 
 def main(args: Args | None = None) -> dict:
     """Train, evaluate and save; returns the result dict (also written to result.json)."""
-    import torch
 
     args = args or Args()
     check_args(args)

@@ -29,6 +29,7 @@ import argparse
 import contextlib
 import copy
 import dataclasses
+import importlib
 import io
 import json
 import math
@@ -41,10 +42,17 @@ import numpy as np
 
 import ials_zoo
 from ials_zoo import reference_speed
+from ials_zoo.baselines import BASELINES
+from ials_zoo.baselines.arguments import add_dataclass_args, dataclass_from_namespace, flag_named, hidden_sizes
+from ials_zoo.core.domains import get_domain
+from ials_zoo.core.extras import dials_of, study_of
 from ials_zoo.errors import BadInput
+from ials_zoo.evaluation import estimate_evaluation_seconds, load_model, sha256_file
 from ials_zoo.leaderboard.build import hardware_info, now_iso
+from ials_zoo.leaderboard.store import board_path, resolve_policy_file, training_provenance
 from ials_zoo.leaderboard.validate import ResultError, load_result, validate_result
-from ials_zoo.utils import atomic_write_text, format_seconds
+from ials_zoo.policy import HEADER_KEY
+from ials_zoo.utils import atomic_write_text, format_seconds, parse_json_object, parse_untrusted_json_object
 
 FILE_SUFFIXES = (".pt", ".pth", ".safetensors", ".npz", ".zip", ".json", ".xml", ".sumocfg", ".csv", ".txt")
 """Values that name a file: a recorded command with one is refused (it would read that file)."""
@@ -129,10 +137,6 @@ def command_without_seed(command: str) -> list[str]:
 
 def parse_command(command: str, seed: int):
     """``(baseline module, Args)`` of a recorded command for ``seed``, checked as above."""
-    import importlib
-
-    from ials_zoo.baselines import BASELINES
-    from ials_zoo.baselines.arguments import add_dataclass_args, dataclass_from_namespace
 
     words = command_without_seed(command)
     if words[:2] != ["ials-zoo", "train"] or len(words) < 3 or words[2] not in BASELINES:
@@ -165,7 +169,6 @@ def _check_values(module, args) -> None:
     """The baseline's own checks of its arguments, on a copy (they fill in defaults): a value
     that would crash the re-train (a batch of 1, a network no policy file holds, 10**6 stacked
     frames) is refused by its flag before anything trains."""
-    from ials_zoo.baselines.arguments import flag_named
 
     try:
         module.check_args(copy.deepcopy(args))
@@ -176,8 +179,6 @@ def _check_values(module, args) -> None:
 def _check_matches_entry(data: dict, baseline: str, args) -> None:
     """The recorded command trains what the entry is: its baseline, domain, GS options and
     agents; otherwise a re-train would run first and fail only after."""
-    from ials_zoo.core.domains import get_domain
-    from ials_zoo.utils import parse_json_object
 
     where = "training.reproduce.command"
     options = parse_json_object(args.env_options, "--env-options")
@@ -204,8 +205,6 @@ def _check_matches_entry(data: dict, baseline: str, args) -> None:
 def _check_resources(ns, baseline: str) -> None:
     """No process count past :data:`MAX_PROCESSES`, no Ray, and GS options of the board's kind
     only (no file paths): a recorded command asks for no more than a re-run needs."""
-    from ials_zoo.core.domains import get_domain
-    from ials_zoo.utils import parse_json_object
 
     where = "training.reproduce.command"
     for name in ("n_envs", "gs_processes", "workers"):
@@ -226,9 +225,6 @@ def _check_resources(ns, baseline: str) -> None:
 
 def _header(path: Path) -> dict:
     from safetensors import safe_open
-
-    from ials_zoo.policy import HEADER_KEY
-    from ials_zoo.utils import parse_untrusted_json_object
 
     with safe_open(str(path), framework="np") as f:
         return parse_untrusted_json_object((f.metadata() or {}).get(HEADER_KEY, "{}"), f"the header of {path}")
@@ -314,8 +310,6 @@ def policy_difference(retrained: Path, submitted: Path) -> str | None:
 def _submitted_policy(data: dict, i: int, path: Path, board) -> Path:
     """Seed ``i``'s policy file as ``verify`` finds it: a relative path inside the board or next
     to the entry, with its recorded sha256, whose header agrees with the entry."""
-    from ials_zoo.evaluation import load_model, sha256_file
-    from ials_zoo.leaderboard.store import resolve_policy_file, training_provenance
 
     spec = data["scores"][i]["policy_file"]
     if Path(spec).is_absolute() or ".." in Path(spec).parts:
@@ -339,11 +333,6 @@ def run_parts(data: dict, args) -> list[tuple[str, float]]:
     the setting that drives it: the steps of every agent (at the slowest speed the domain's
     study measured), the PPO epochs over them, the learning-curve evaluations and the final
     evaluations (sampled and deterministic; their episodes' length included)."""
-    from ials_zoo.baselines.arguments import hidden_sizes
-    from ials_zoo.core.domains import get_domain
-    from ials_zoo.core.extras import study_of
-    from ials_zoo.evaluation import estimate_evaluation_seconds
-    from ials_zoo.utils import parse_json_object
 
     domain = get_domain(data["env_id"])
     study = study_of(domain)
@@ -373,7 +362,6 @@ def _aip_parts(domain, args, total: float, agents: int, rate: float) -> list[tup
     """DIALS's AIP rounds: each collects ``collect_steps`` GS steps of every agent and trains
     every agent's AIP ``aip_epochs`` times over them (an MLP of the domain's width, at least)."""
     from ials_zoo.baselines.aip_rounds import parse_refresh
-    from ials_zoo.core.extras import dials_of
 
     if not hasattr(args, "refresh"):
         return []
@@ -392,9 +380,6 @@ def _check_cost(data: dict, jobs: list, max_seconds: float) -> None:
     entry's own training wall-clock per seed (AIP included), three times over, or what its
     command's settings make of it (:func:`run_parts`), whichever is longer; the refusal names
     the setting that costs most (an episode longer than the whole limit: its length)."""
-    from ials_zoo.core.domains import get_domain
-    from ials_zoo.evaluation import estimate_evaluation_seconds
-    from ials_zoo.utils import format_seconds, parse_json_object
 
     t = data["training"]
     claimed = 3.0 * (float(t["wall_clock_seconds"]) + float(t["aip_seconds"]))
@@ -421,7 +406,6 @@ def retrain(path, seeds: int = 1, directory=None, progress: bool = False,
     report per seed: ``seed``, ``ok`` (the policy file re-made bit for bit, as above),
     ``difference`` (where it first differs, or None), ``platform`` (this one) and
     ``entry_platform``."""
-    from ials_zoo.leaderboard.store import board_path
 
     path = Path(path)
     data = load_result(path)

@@ -25,6 +25,7 @@ atomically, so a crash never leaves half a file.
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import hashlib
 import json
 import os
@@ -101,7 +102,6 @@ class RunFolder:
         """Hold an exclusive lock on ``<folder>/.lock`` (flock, with this process's pid in it)
         for the run's life: a second run on the same folder is refused at once, and the lock
         dies with the process however it dies."""
-        import fcntl
 
         self._created = not self.path.exists()
         self._had_lock = (self.path / LOCK).exists()
@@ -253,7 +253,6 @@ class Clock:
 def save_training_state(folder, state: dict, info: dict) -> None:
     """``checkpoint.pt`` (tensors and plain containers) and ``checkpoint.json`` (``info``)."""
     import torch
-
 
     folder = Path(folder)
     with atomic_path(folder / "checkpoint.pt", suffix=".pt") as tmp:

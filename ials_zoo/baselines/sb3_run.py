@@ -8,6 +8,11 @@ others scripted, scored in a worker process where the GS is SUMO).
 from __future__ import annotations
 
 import numpy as np
+from gymnasium import spaces
+from stable_baselines3 import PPO
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.logger import KVWriter, Logger
+from stable_baselines3.common.vec_env import VecEnvWrapper, VecFrameStack, VecMonitor, VecNormalize
 
 from ials_zoo.baselines.runs import DETERMINISTIC_RESULT
 from ials_zoo.core.extras import study_of
@@ -24,9 +29,6 @@ from ials_zoo.single_agent import box_space
 def as_float_box(venv):
     """Make sure the observations are a float32 ``Box`` (what VecFrameStack and the evaluator
     use); wraps ``venv`` only when needed."""
-    from gymnasium import spaces
-    from stable_baselines3.common.vec_env import VecEnvWrapper
-
 
     space = venv.observation_space
     if isinstance(space, spaces.Box) and space.dtype == np.float32:
@@ -97,7 +99,6 @@ class Evaluator:
             raise
 
     def close(self, kill: bool = False):
-
         shutdown_pool(self._pool, kill=kill)
         self._pool = None
 
@@ -111,7 +112,6 @@ def make_ppo(venv, args, hidden: list[int], total: int | None = None):
     the learning rate decays linearly to 0 over ``total`` steps (the run's budget) when
     ``args.anneal_lr``. The schedule reads the model's step count, not SB3's progress, which
     restarts at every ``learn()`` call (one per stretch between the driver's evaluations)."""
-    from stable_baselines3 import PPO
 
     model = PPO(
         "MlpPolicy", venv, learning_rate=args.learning_rate, n_steps=args.n_steps, batch_size=args.batch_size,
@@ -138,7 +138,6 @@ def scale_rewards(venv, gamma: float):
     """``venv`` with its rewards divided by the running std of the discounted return (SB3's
     ``VecNormalize``, observations untouched): what the multi-agent learners do
     (:class:`~ials_zoo.learners.batched_ppo.RewardScale`)."""
-    from stable_baselines3.common.vec_env import VecNormalize
 
     return VecNormalize(venv, norm_obs=False, norm_reward=True, gamma=gamma)
 
@@ -147,7 +146,6 @@ def sb3_env(venv, reward_gamma: float | None, frame_stack: int):
     """The training vec env as PPO reads it: float observations, episode statistics
     (``VecMonitor``), rewards scaled with ``reward_gamma`` (:func:`scale_rewards`; None: not),
     the last ``frame_stack`` observations."""
-    from stable_baselines3.common.vec_env import VecFrameStack, VecMonitor
 
     venv = VecMonitor(as_float_box(venv))
     if reward_gamma is not None:
@@ -201,8 +199,6 @@ class SB3Learner:
         return self.charged_seconds > 0
 
     def load(self, state, info):
-        from stable_baselines3.common.logger import Logger
-
         self._venv, charged = self.make_env(self.training)  # closed by close() even if PPO fails to build
         self.model = make_ppo(self._venv, self.args, self.hidden, self.total)
         self.model.set_logger(Logger(None, [_recorder(self._log)]))
@@ -232,7 +228,6 @@ class SB3Learner:
         pass
 
     def train(self, steps, target, advance):
-        from stable_baselines3.common.callbacks import BaseCallback
 
         class Advance(BaseCallback):
             def _on_step(self):
@@ -266,7 +261,6 @@ class SB3Learner:
 
 def _recorder(rows: list):
     """An SB3 logger output that appends each dump (a dict) to ``rows``."""
-    from stable_baselines3.common.logger import KVWriter
 
     class Recorder(KVWriter):
         def write(self, key_values, key_excluded, step=0):

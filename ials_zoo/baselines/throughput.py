@@ -15,7 +15,8 @@ from __future__ import annotations
 import time
 
 import numpy as np
-from stable_baselines3.common.vec_env import VecEnv
+import torch
+from stable_baselines3.common.vec_env import VecEnv, VecFrameStack, VecMonitor
 
 from ials_zoo.baselines.arguments import hidden_sizes
 from ials_zoo.baselines.ppo_single import Args, make_training_env, update_size
@@ -78,9 +79,6 @@ def ppo_throughput(env_id: str, agent: str, simulator: str, steps: int = 30_000,
 
     Construction is not timed; the measurement includes rollouts and updates, as a training
     run's wall-clock does (but no GS evaluations)."""
-    import torch
-    from stable_baselines3.common.vec_env import VecFrameStack, VecMonitor
-
 
     if steps < 1 or n_envs < 1:
         raise BadInput(f"steps and n_envs must be >= 1, got {steps} and {n_envs}")

@@ -5,8 +5,11 @@ command offers (growing systems, PPO's throughput, two AIP sets, AIP architectur
 from __future__ import annotations
 
 import time
+from importlib.metadata import version
 
 import numpy as np
+import torch
+from tqdm.auto import tqdm
 
 import ials_zoo
 from ials_zoo.baselines.multiagent import PREVIOUS_PPO_SETTINGS
@@ -30,12 +33,9 @@ from ials_zoo.leaderboard import hardware_info
 def machine_info() -> dict:
     """What the numbers were measured on: the leaderboard's ``hardware`` record
     (:func:`ials_zoo.leaderboard.hardware_info`) plus SUMO, torch's threads and the date."""
-    import torch
 
     hardware = hardware_info()
     try:
-        from importlib.metadata import version
-
         sumo = version("eclipse-sumo")
     except Exception:  # not installed
         sumo = None
@@ -65,7 +65,6 @@ def bench_domain(domain: Domain, steps: int | None, batch: int, predictor, seed:
     aips = dict(zip(agents, resolve_predictor_set(predictor, env_id, agents, seed=seed)))
     runs: dict[str, list] = {k: [] for k in ("gs_one", "ials_one", "ials_batched", "gs_all", "ials_parallel",
                                              "ials_dials", "act", "update", "act_previous", "update_previous")}
-    from tqdm.auto import tqdm
 
     with tqdm(total=repeats * 8, desc=f"bench {env_id}", unit="measurement") as bar:
         for r in range(repeats):

@@ -7,6 +7,7 @@ from __future__ import annotations
 import time
 
 import numpy as np
+import torch
 
 from ials_zoo.baselines import dials
 from ials_zoo.baselines.multiagent import fill_update_size, frame_stack_of, ppo_config
@@ -117,8 +118,6 @@ def learner_seconds(domain: Domain, copies: int, seed: int, updates: int = 5,
     """(seconds per agent-step of action selection, per agent-sample of a PPO update) of the
     batched learner of every agent, at the multi-agent baselines' settings (default) or at
     ``settings`` (e.g. :data:`~ials_zoo.baselines.multiagent.PREVIOUS_PPO_SETTINGS`)."""
-    import torch
-
 
     agents = domain.agents()
     args = dials.Args(env_id=domain.env_id, **(settings or {}))

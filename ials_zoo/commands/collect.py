@@ -14,6 +14,8 @@ records every listed region at once (all of them acting randomly) into
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from ials_zoo.commands import NET_HELP, CommandError, with_network
 from ials_zoo.core.domains import domain_ids, get_domain
 from ials_zoo.influence.dataset import collect_all
@@ -21,7 +23,6 @@ from ials_zoo.utils import check_output_file, check_seed, parse_json_object, rem
 
 
 def _json_dict(text: str) -> dict:
-
     return parse_json_object(text, "--options")
 
 
@@ -75,8 +76,6 @@ def configure(parser):
 
 
 def run(args) -> int:
-    from pathlib import Path
-
 
     options = check_collect_arguments(args)
     agents = None if args.agent == "all" else [a.strip() for a in args.agent.split(",") if a.strip()]

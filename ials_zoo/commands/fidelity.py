@@ -11,6 +11,7 @@ trajectories, under several joint policies? (:mod:`ials_zoo.influence.fidelity`)
 from __future__ import annotations
 
 import math
+import os
 
 from ials_zoo.commands import NET_HELP, with_network
 from ials_zoo.core.domains import domain_ids, get_domain
@@ -66,8 +67,6 @@ def configure(parser):
 
 
 def run(args) -> int:
-    import os
-
 
     domain = get_domain(args.env).require_ials_parallel_env("fidelity")
     options = with_network(domain, parse_json_object(args.options, "--options") if args.options else {}, args.net)

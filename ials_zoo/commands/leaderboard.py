@@ -21,13 +21,18 @@ command).
 
 from __future__ import annotations
 
+import json
+import os
 import sys
 from pathlib import Path
 
 from ials_zoo import leaderboard as lb
+from ials_zoo.baselines.retrain import record_retrained, retrain, wall_clock_text
 from ials_zoo.errors import BadInput
 from ials_zoo.evaluation import load_model
 from ials_zoo.leaderboard.remeasure import MAX_REMEASURE_SECONDS, mismatch_text
+from ials_zoo.leaderboard.site import render_site
+from ials_zoo.leaderboard.store import resolve_policy_file
 from ials_zoo.policy import save_policy
 from ials_zoo.utils import atomic_write_text, check_output_file
 
@@ -35,9 +40,6 @@ from ials_zoo.utils import atomic_write_text, check_output_file
 def _policies_relative_to(result: dict, source, out) -> dict:
     """``result`` (read from ``source``) with each seed's policy file, if named relative to the
     result's folder (as a training run writes it), named relative to ``out``'s folder instead."""
-    import os
-
-    from ials_zoo.leaderboard.store import resolve_policy_file
 
     there = Path(out).resolve().parent
     for s in result["scores"]:
@@ -114,8 +116,6 @@ def _existing_inputs(args) -> None:
 
 
 def _retrain(args) -> int:
-    from ials_zoo.baselines.retrain import record_retrained, retrain, wall_clock_text
-
     if args.policy:
         raise BadInput("--policy goes with a re-score, not --retrain (the entry's own policy files are compared)")
     reports = retrain(args.file, args.seeds, args.dir, progress=True, max_seconds=args.max_remeasure_hours * 3600)
@@ -155,9 +155,6 @@ def run(args) -> int:
             compare = lb.compare_wall_clock if args.wall_clock else lb.compare_entries
             print(compare(lb.load_result(args.first), lb.load_result(args.second)))
         elif args.action == "export":
-            import json
-
-
             if args.out:
                 check_output_file(args.out, "--out")
             text = json.dumps(lb.export_board(args.format, args.dir), indent=1) + "\n"
@@ -167,8 +164,6 @@ def run(args) -> int:
             else:
                 sys.stdout.write(text)
         elif args.action == "render":
-            from ials_zoo.leaderboard.site import render_site
-
             print(f"wrote {lb.render(args.dir)} and {render_site(args.dir)}")
         elif args.action == "convert":
 

@@ -11,6 +11,8 @@ why this lives beside the domain registry.
 
 from __future__ import annotations
 
+import gymnasium
+
 ENTRY_POINT = "ials_zoo.influence.ials:gymnasium_entry_point"
 
 
@@ -21,8 +23,6 @@ def gym_id(env_id: str) -> str:
 
 def register_ials(env_id: str) -> str:
     """Register ``ials_zoo/IALS-<env_id>`` (once); returns the id."""
-    import gymnasium
-
     name = gym_id(env_id)
     if name not in gymnasium.registry:
         gymnasium.register(id=name, entry_point=ENTRY_POINT, kwargs={"env_id": env_id})

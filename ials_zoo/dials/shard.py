@@ -16,6 +16,7 @@ equality).
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -33,6 +34,7 @@ from ials_zoo.learners.batched_ppo import BatchedPPO, PPOConfig
 from ials_zoo.learners.rollout import IALSVecEnv, RolloutTrainer
 from ials_zoo.learners.sb3_state import checkpoint_models, resume_models
 from ials_zoo.policy import policy_from_sb3_model, stack_policies
+from ials_zoo.runtime.ray_actors import where
 
 LEARNERS = ("batched", "sb3")
 
@@ -142,8 +144,6 @@ class AgentShard:
             self.env.set_predictors(mine)
             self.trainer.new_episodes()  # an episode runs on one AIP throughout (and replays on it)
         else:
-            import copy
-
             for a, p in mine.items():
                 venv = self.models[a]._ials_venv
                 new, old = copy.deepcopy(p), venv.predictor
@@ -159,7 +159,6 @@ class AgentShard:
 
     def where(self) -> tuple[int, str]:
         """This shard's process id and host (so that a backend can watch it)."""
-        from ials_zoo.runtime.ray_actors import where
 
         return where()
 

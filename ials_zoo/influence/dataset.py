@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import copy
 import json
+import pickle
 import time
 import zipfile
 from collections.abc import Callable
@@ -32,6 +33,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from tqdm.auto import tqdm
 
 from ials_zoo._version import __version__
 from ials_zoo.core.domains import Domain, get_domain
@@ -305,8 +307,6 @@ def _collect_in_process(domain, env_id: str, agents: list, steps: int, policy, s
         T = None
         bar = None
         if progress:
-            from tqdm.auto import tqdm
-
             what = agents[0] if len(agents) == 1 else f"{len(agents)} agents"
             bar = tqdm(total=steps, desc=f"collect {env_id}/{what}", unit="step")
         total = 0
@@ -383,8 +383,6 @@ def _collect_share(kwargs: dict) -> dict[str, InfluenceDataset]:
 
 
 def _collect_in_processes(env_id, agents, steps, policy, seed, gs_options, progress, workers):
-    import pickle
-
     try:
         pickle.dumps(policy)
     except Exception as exc:
@@ -397,8 +395,6 @@ def _collect_in_processes(env_id, agents, steps, policy, seed, gs_options, progr
                  progress=False) for s in seeds]
     bar = None
     if progress:
-        from tqdm.auto import tqdm
-
         what = agents[0] if len(agents) == 1 else f"{len(agents)} agents"
         bar = tqdm(total=workers, desc=f"collect {env_id}/{what} ({workers} processes)", unit="share")
     # spawn: a fresh interpreter per worker, so no libsumo simulation is inherited by fork;

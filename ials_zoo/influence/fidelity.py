@@ -70,6 +70,7 @@ from ials_zoo.errors import BadInput
 from ials_zoo.evaluation import FrameStack, load_model
 from ials_zoo.influence.base import check_clock_horizon, check_influence_lags
 from ials_zoo.influence.dataset import collect_all
+from ials_zoo.influence.specs import parse_predictor
 from ials_zoo.influence.train import LR_SCHEDULES, train_predictors
 
 METRICS = ("active", "persistence", "arrivals", "run_length", "gap", "return")
@@ -315,7 +316,6 @@ def _check_aips_exist(env_id: str, agents: list, predictor, options: dict) -> No
     after the policies' episodes ran)."""
     from ials_zoo.influence.ials import resolve_predictor
     from ials_zoo.influence.multi import resolve_predictor_set
-    from ials_zoo.influence.specs import parse_predictor
 
     if not isinstance(predictor, str) or parse_predictor(predictor).kind != "trained" or \
             parse_predictor(predictor).train_if_missing:

@@ -26,6 +26,7 @@ from __future__ import annotations
 import time
 
 import numpy as np
+from tqdm.auto import tqdm
 
 from ials_zoo.core.domains import get_domain
 from ials_zoo.core.extras import LR_SCHEDULES
@@ -241,8 +242,6 @@ def _train(dataset, arch, dset_kind, epochs, seed, progress, lr, hidden, batch_s
 
     bar = None
     if progress:
-        from tqdm.auto import tqdm
-
         bar = tqdm(total=int(hp["epochs"]), desc=f"train {arch} AIP", unit="epoch")
     t0 = time.perf_counter()
     history = _fit(net, opt, X, U, batch, int(hp["epochs"]), rng, offsets, bar, lr_schedule)
@@ -506,8 +505,6 @@ def _fit_group(arch: str, arrays: list, X: np.ndarray, U: np.ndarray, hp: dict, 
         rngs = [np.random.default_rng([seed, k]) for k in keys]
         bar = None
         if progress:
-            from tqdm.auto import tqdm
-
             bar = tqdm(total=int(hp["epochs"]), desc=f"train {G} {arch} AIPs", unit="epoch")
         t0 = time.perf_counter()
         _fit_stacked(net, opt, X, U, batch, int(hp["epochs"]), rngs, offsets, bar, lr_schedule)

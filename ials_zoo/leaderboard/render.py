@@ -4,8 +4,11 @@ archive."""
 
 from __future__ import annotations
 
+import html
 import re
 from pathlib import Path
+
+import numpy as np
 
 from ials_zoo import reference_speed
 from ials_zoo.core.domains import get_domain
@@ -267,7 +270,6 @@ def _profile_plot(board: Path, key: tuple, rows: list[dict]) -> str | None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    import numpy as np
 
     section, env_id, who = key
     fig, ax = plt.subplots(figsize=(7, 4.5))
@@ -309,7 +311,6 @@ def _md_table(rows, link: str | None = "results") -> list[str]:
 def markdown_cell(text: str) -> str:
     """User text as one Markdown table cell: no line breaks, ``|`` and HTML escaped, so that no
     entry can add rows, links or markup to the page."""
-    import html
 
     flat = console_text(" ".join(str(text).split()))  # no control or direction characters either
     return html.escape(flat, quote=False).replace("|", "\\|").replace("[", "\\[").replace("]", "\\]")

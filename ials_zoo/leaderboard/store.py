@@ -20,6 +20,7 @@ name and skipped, so one bad file never hides the rest of the board.
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import hashlib
 import json
 import math
@@ -190,7 +191,6 @@ def _board_lock(board: Path):
     """One submission at a time per board: an exclusive ``flock`` on its ``results/`` folder
     (no lock file is left behind), so that two submissions of the same evaluation cannot both
     pass the duplicate check; the lock dies with the process that holds it."""
-    import fcntl
 
     fd = os.open(board / RESULTS_SUBDIR, os.O_RDONLY)
     try:

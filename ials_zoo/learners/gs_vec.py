@@ -21,7 +21,7 @@ from ials_zoo.core.spaces import sizes_of_env, stack_observations
 from ials_zoo.core.streams import derived_seed
 from ials_zoo.errors import BadInput
 from ials_zoo.runtime.processes import Worker, call_all, start_all
-from ials_zoo.runtime.ray_actors import where
+from ials_zoo.runtime.ray_actors import RayActors, where
 
 
 class _Copies:
@@ -121,8 +121,6 @@ class GSVecEnv:
         shares = [[int(x) for x in s] for s in np.array_split(seeds, min(self.processes, self.n_envs)) if len(s)]
         arguments = [(env_id, self.agents, options, share, simulator, predictor) for share in shares]
         if copies_on == "ray":
-            from ials_zoo.runtime.ray_actors import RayActors
-
             self._workers = RayActors(_Copies, arguments, ray_address, what=f"{simulator.upper()} Ray actor")
         else:
             self._workers = _ProcessWorkers(arguments, simulator)

@@ -22,14 +22,15 @@ default), so few episodes are cut.
 from __future__ import annotations
 
 import random
+from collections import deque
 
 import numpy as np
 import torch
+from stable_baselines3.common.vec_env import VecNormalize
 
 
 def reward_scale_of(venv):
     """The ``VecNormalize`` inside a chain of SB3 vec-env wrappers, or None."""
-    from stable_baselines3.common.vec_env import VecNormalize
 
     while venv is not None:
         if isinstance(venv, VecNormalize):
@@ -102,7 +103,6 @@ def _rows(columns: dict) -> list[dict]:
 
 def load_model_state(model, state: dict) -> None:
     """Put :func:`model_state`'s ``state`` back into ``model`` (built with the same settings)."""
-    from collections import deque
 
     model.policy.load_state_dict(state["policy"])
     model.policy.optimizer.load_state_dict(state["optimizer"])

@@ -13,12 +13,15 @@ over jobs. A job whose dependency failed is not started (reported as ``blocked``
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import os
 import signal
 import subprocess
 import sys
 import time
 from pathlib import Path
+
+from tqdm import tqdm
 
 from ials_zoo.errors import BadInput
 from ials_zoo.reproduce.plan import Job
@@ -68,7 +71,6 @@ def run_jobs(jobs: list[Job], n_jobs: int = 2, progress: bool = True, poll: floa
 def study_lock(folder: Path):
     """Hold ``<folder>/.reproduce.lock`` (flock) while jobs run: a second invocation on the
     same study would start the same unfinished jobs twice, so it is refused."""
-    import fcntl
 
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / ".reproduce.lock"
@@ -101,8 +103,6 @@ def _run(jobs, status, n_jobs, progress, poll) -> dict:
     running: dict[str, tuple[Job, subprocess.Popen, object, float]] = {}
     bar = None
     if progress:
-        from tqdm import tqdm
-
         bar = tqdm(total=len(pending), desc="reproduce", unit="run", dynamic_ncols=True)
     env = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", PYTHONUNBUFFERED="1")
     try:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import sys
 import time
+from importlib import import_module
 from pathlib import Path
 
 import torch
@@ -53,8 +54,6 @@ def run_job(job) -> None:
 def _run_multiagent(params: dict) -> None:
     """A GS-IPPO or DIALS run (:mod:`ials_zoo.baselines.ippo` / ``.dials``); a run killed
     earlier continues from its last checkpoint, one killed before it starts again."""
-    from importlib import import_module
-
 
     p = dict(params)
     module = import_module(f"ials_zoo.baselines.{p.pop('algorithm')}")
@@ -66,7 +65,6 @@ def _run_multiagent(params: dict) -> None:
 
 
 def main(argv=None) -> int:
-
     die_with_parent()  # the study's runner started this process: it ends with it
     argv = sys.argv[1:] if argv is None else argv
     if len(argv) != 1:

@@ -31,10 +31,12 @@ import pickle
 import select
 import signal
 import struct
+import subprocess
 import sys
 import threading
 import time
 import traceback
+from multiprocessing.connection import Connection
 
 from ials_zoo.errors import BadInput
 from ials_zoo.runtime import zygote as zygotes
@@ -84,7 +86,6 @@ def sigint_ignored_at_birth():
     """Start children inside this block: they are born ignoring ``SIGINT`` (the disposition
     survives ``exec``), so a Ctrl-C while a fresh interpreter is still importing prints no
     traceback from it; Ctrl-C stays the parent's to handle (it stops its workers)."""
-    import threading
 
     if threading.current_thread() is not threading.main_thread():
         yield
@@ -176,7 +177,6 @@ def serve(read_fd: int, write_fd: int, beat_fd: int) -> None:
     ``sys.path``, set up its contexts, build the object the init message names, then answer
     calls until told to exit (or the pipe closes). An exception goes back as ``(type name,
     message, traceback)`` and the loop goes on; with no object built, every call is refused."""
-    from multiprocessing.connection import Connection
 
     die_with_parent(ignore_sigint=True)
     threading.Thread(target=_heartbeat, args=(beat_fd,), daemon=True).start()
@@ -270,7 +270,6 @@ class Worker:
 
     def __init__(self, factory, args=(), name: str = "worker", detail: str = "",
                  unresponsive_after: float = 20.0, preload: tuple[str, ...] | None = None):
-        from multiprocessing.connection import Connection
 
         self.name, self.detail = name, detail
         self.unresponsive_after = float(unresponsive_after)
@@ -489,7 +488,6 @@ def _descendants(root: int, table: dict) -> dict[int, str]:
 def _reaper(parent: int, fd: int) -> None:
     """The watchdog of :func:`reap_descendants_when_gone`: every second, remember the parent's
     descendants; when the parent's pipe closes (it died or exited), kill those still alive."""
-    import select
 
     me, known = os.getpid(), {}
     while True:
@@ -509,7 +507,6 @@ def reap_descendants_when_gone() -> None:
     it goes (``kill -9`` included), for children we do not start ourselves and so cannot ask
     to die with us (a local Ray cluster's raylet, GCS and agents). Linux only; at most one per
     process."""
-    import subprocess
 
     global _REAPER
     if _REAPER is not None or not sys.platform.startswith("linux"):

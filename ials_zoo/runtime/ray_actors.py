@@ -14,6 +14,7 @@ multi-agent simulator (:class:`~ials_zoo.learners.gs_vec.GSVecEnv`).
 
 from __future__ import annotations
 
+import os
 import socket
 from urllib.parse import urlparse
 
@@ -125,7 +126,6 @@ class RayActors:
 
 def where() -> tuple[int, str]:
     """This process's id and host (what :class:`RayActors` needs of an actor to watch it)."""
-    import os
 
     return os.getpid(), socket.gethostname()
 

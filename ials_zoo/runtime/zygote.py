@@ -41,6 +41,7 @@ import select
 import signal
 import socket
 import struct
+import subprocess
 import sys
 import threading
 import time
@@ -183,8 +184,6 @@ class ForkedProcess:
         return -1 if code is None else code  # the lock was busy: exited, code asked for later
 
     def wait(self, timeout: float | None = None) -> int:
-        import subprocess
-
         if self.poll() is None and self._pidfd is not None and os.getpid() == self._owner:
             self._exited(3600.0 if timeout is None else timeout)
         code = self.poll()

@@ -24,9 +24,13 @@ import time
 import numpy as np
 
 from ials_zoo.errors import BadInput
+from ials_zoo.learners.gs_vec import GSVecEnv
 from ials_zoo.sumo_net.env import SumoNetEnv
+from ials_zoo.sumo_net.ials_env import IALSNetEnv
+from ials_zoo.sumo_net.island import gs_marginal_predictors
 from ials_zoo.sumo_net.names import DEFAULT_NET, ENV_ID, SCENARIO_OPTIONS
-from ials_zoo.sumo_net.scenario import RESCO_MAPS
+from ials_zoo.sumo_net.network import read_network
+from ials_zoo.sumo_net.scenario import RESCO_MAPS, scenario_of
 
 DEFAULT_MAPS = ("cologne8", "grid4x4", "ingolstadt21")
 
@@ -43,8 +47,6 @@ def gs_step_seconds(**options) -> float:
     """About how long one GS decision takes under ``options`` (every light acting, the default
     mode), for the estimates long commands print first: a measured map's figure, else
     :data:`LANE_SIM_SECOND_SECONDS` per lane of the network."""
-    from ials_zoo.sumo_net.network import read_network
-    from ials_zoo.sumo_net.scenario import scenario_of
 
     chosen = {k: v for k, v in options.items() if k in SCENARIO_OPTIONS and k != "max_cycles"}
     scenario = scenario_of(**chosen)
@@ -141,9 +143,6 @@ def bench_local(net: str, repeats: int = 3, max_cycles: int | None = None) -> di
     against the GS, per agent-decision: both in a worker process (one pipe round trip per
     decision each), episodes of the same seed alternating, one ratio per pair; and the array API
     (:func:`ials_zoo.make_ials_vector_env`, one copy in this process's own worker) in the same turn."""
-    from ials_zoo.learners.gs_vec import GSVecEnv
-    from ials_zoo.sumo_net.ials_env import IALSNetEnv
-    from ials_zoo.sumo_net.island import gs_marginal_predictors
 
     options = {"net": net, "backend": "worker", "fresh_process": False, "max_cycles": max_cycles}
     start = time.perf_counter()
@@ -177,7 +176,6 @@ def bench_single(net: str, repeats: int = 3, max_cycles: int | None = None) -> d
     learner, decisions per second, both in this process; the GS's median over ``repeats`` episodes
     of its first light learning, each IALS one episode."""
     from ials_zoo.influence.ials import make_ials
-    from ials_zoo.sumo_net.island import gs_marginal_predictors
 
     gs = SumoNetEnv(net=net, max_cycles=max_cycles, backend="inprocess", fresh_process=False)
     lights = list(gs.possible_agents)

@@ -17,9 +17,12 @@ network works. Ties go to the first green, as ``np.argmax`` does in RESCO.
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from ials_zoo.errors import BadInput
+from ials_zoo.sumo_net.env import SumoNetEnv
 from ials_zoo.sumo_net.network import Network
 
 # name -> RESCO's detection distance (m) for it (agent_config.py); None: no detection needed
@@ -95,9 +98,6 @@ def run_episode(controller: str, seed: int, **options) -> dict[str, float]:
 
     The episode runs in a fresh SUMO worker process, as every ``sumo_net_v0`` episode does by
     default (the env's ``fresh_process``): it is then plain ``sumo``'s episode."""
-    import time
-
-    from ials_zoo.sumo_net.env import SumoNetEnv
 
     check_controller(controller)
     rule_based = controller in ("greedy", "max_pressure", "random")

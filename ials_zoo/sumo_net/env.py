@@ -6,6 +6,7 @@ import contextlib
 import os
 import shutil
 import tempfile
+from dataclasses import asdict
 
 import numpy as np
 from gymnasium import spaces
@@ -21,6 +22,7 @@ from ials_zoo.sumo_net.mdp import BATCHED_OBSERVATIONS, N_FEATURES, lanes_tables
 from ials_zoo.sumo_net.metrics import episode_metrics, scheduled_departures
 from ials_zoo.sumo_net.names import ENV_ID, OPTIONS, SCENARIO_OPTIONS
 from ials_zoo.sumo_net.network import read_network
+from ials_zoo.sumo_net.render import NetworkView
 from ials_zoo.sumo_net.scenario import scenario_of
 from ials_zoo.utils import check_reset_options, check_seed
 
@@ -195,8 +197,6 @@ class SumoNetEnv(ParallelEnv):
         }
 
     def _region_layouts(self) -> list[dict]:
-        from dataclasses import asdict
-
         return [asdict(region_layout(self.scenario.net_file, a)) for a in self.possible_agents]
 
     def region_spec(self, agent):
@@ -386,8 +386,6 @@ class SumoNetEnv(ParallelEnv):
             return None
         if self.render_mode == "rgb_array":
             if self._view is None:
-                from ials_zoo.sumo_net.render import NetworkView
-
                 self._view = NetworkView(self.network)
             if self._metrics is not None:  # the episode is over and SUMO closed: the last picture
                 return self._last_frame if self._last_frame is not None else np.asarray(self._view.base)

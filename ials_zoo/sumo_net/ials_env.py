@@ -20,6 +20,9 @@ from pathlib import Path
 import numpy as np
 
 from ials_zoo.errors import BadInput, BadInputType
+from ials_zoo.influence.files import load_predictor_set
+from ials_zoo.sumo_net.influence import region_layout
+from ials_zoo.sumo_net.island import entry_tables
 from ials_zoo.sumo_net.local import RegionsNetEnv
 from ials_zoo.sumo_net.names import ENV_ID, SCENARIO_OPTIONS
 
@@ -28,7 +31,6 @@ def resolve_predictors(predictors, lights: list[str], options: dict) -> dict:
     """Every light's AIP: ``predictors`` is an AIP set file (``ials-zoo train-aip --agent all``),
     one spec for every light (``"uniform"``, ``"untrained"``), or a dict ``{light: predictor
     object, file or spec}``."""
-    from ials_zoo.influence.files import load_predictor_set
     from ials_zoo.influence.ials import resolve_predictor
 
     if isinstance(predictors, (str, Path)) and Path(predictors).is_file():
@@ -67,15 +69,11 @@ class IALSNetEnv(RegionsNetEnv):
         self._aip_rng = np.random.default_rng()
 
     def _prepare(self, scenario) -> None:
-        from ials_zoo.sumo_net.island import entry_tables
-
         predictors, given = self._aips
         self.predictors = resolve_predictors(predictors, list(self.regions), given)
         self._tables = entry_tables(scenario, list(self.regions), *self._record)
 
     def _core_config(self) -> dict:
-        from ials_zoo.sumo_net.influence import region_layout
-
         config = super()._core_config()
         ids = self.network.ids
         layouts = [region_layout(self.scenario.net_file, x).prefixed(f"{x}__") for x in ids]

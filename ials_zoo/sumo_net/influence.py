@@ -52,6 +52,8 @@ import numpy as np
 from ials_zoo.core.region import RegionSpec
 from ials_zoo.sumo_net.core import NetCore
 from ials_zoo.sumo_net.names import ENV_ID, SCENARIO_OPTIONS
+from ials_zoo.sumo_net.network import read_network
+from ials_zoo.sumo_net.regions import edge_lanes, regions_of
 from ials_zoo.sumo_net.scenario import scenario_of
 
 ENTRY_CLASSES = 3  # 0, 1, 2 or more vehicles in one second at one entry point
@@ -97,7 +99,6 @@ class RegionLayout:
         """The edges where vehicles leave the region (their exit sources' order)."""
         return tuple(e for e, _ in self.exits)
 
-
     def prefixed(self, prefix: str) -> RegionLayout:
         """The same region in a simulation whose ids carry ``prefix``."""
         def p(ids):
@@ -109,8 +110,6 @@ class RegionLayout:
 
 def region_layout(net_file: str, light: str) -> RegionLayout:
     """The layout of ``light``'s region in the network ``net_file``."""
-    from ials_zoo.sumo_net.network import read_network
-    from ials_zoo.sumo_net.regions import edge_lanes, regions_of
 
     region = regions_of(net_file)[light]
     lanes = next(x.lanes for x in read_network(net_file).lights if x.id == light)

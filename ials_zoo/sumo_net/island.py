@@ -39,6 +39,7 @@ from gymnasium import spaces
 from ials_zoo.core.local import LocalSimulator, agent_list, check_n_envs
 from ials_zoo.core.streams import agent_key
 from ials_zoo.errors import BadInput, BadInputType
+from ials_zoo.influence.constant import MarginalPredictor
 from ials_zoo.sumo.command import load_budget
 from ials_zoo.sumo.lease import SimHandle
 from ials_zoo.sumo_net.core import NetCore
@@ -50,8 +51,13 @@ from ials_zoo.sumo_net.influence import (
     region_layout,
     region_spec,
 )
+from ials_zoo.sumo_net.local import record_influence
 from ials_zoo.sumo_net.mdp import N_FEATURES, observation_fn, reward_fn
 from ials_zoo.sumo_net.names import SCENARIO_OPTIONS
+from ials_zoo.sumo_net.network import read_network
+from ials_zoo.sumo_net.regions import CHAIN_CAP_METRES, EXIT_METRES, REACH_METRES, regions_of
+from ials_zoo.sumo_net.replay import cut_regions, vehicle_types
+from ials_zoo.sumo_net.scenario import scenario_of
 from ials_zoo.utils import check_seed, parse_untrusted_json_object
 
 MAX_TABLE_BYTES = 64 << 20
@@ -63,7 +69,6 @@ GRIDLOCK_DECISIONS = 10  # an exit blocked this many decisions in a row stays bl
 
 def _table_path(scenario, light: str, seconds: int, seed: int) -> Path:
     root = os.environ.get("IALS_ZOO_CACHE")
-    from ials_zoo.sumo_net.regions import CHAIN_CAP_METRES, EXIT_METRES, REACH_METRES  # the regions' shape
 
     key = json.dumps([scenario.name, os.path.getsize(scenario.net_file), scenario.begin, light, seconds, seed,
                       CHAIN_CAP_METRES, EXIT_METRES, REACH_METRES])
@@ -110,9 +115,6 @@ def _cached(path: Path) -> dict | None:
 
 
 def _record_tables(scenario, lights: list, seconds: int, seed: int) -> dict[str, dict]:
-    from ials_zoo.sumo_net.local import record_influence
-    from ials_zoo.sumo_net.regions import regions_of
-
     regions = {light: regions_of(scenario.net_file)[light] for light in lights}
     point = {light: {e: j for j, e in enumerate(r.sources)} for light, r in regions.items()}
     tables = {light: [[] for _ in range(len(r.sources) + 1)] for light, r in regions.items()}
@@ -133,8 +135,6 @@ def gs_marginal_predictors(lights, record_seconds: int | None = None, record_see
     frequency of 0, 1 and 2+ entering vehicles per second at that entry point
     (:func:`entry_histograms`; a :class:`~ials_zoo.influence.constant.MarginalPredictor`), every
     exit free. Costs what a trained MLP costs to within a call, so the benchmark uses it."""
-    from ials_zoo.influence.constant import MarginalPredictor
-    from ials_zoo.sumo_net.scenario import scenario_of
 
     scenario_options = _scenario_options(options)
     scenario = scenario_of(**scenario_options)
@@ -303,8 +303,6 @@ class SumoNetLocalSimulator(LocalSimulator):
     def __init__(self, agents, n_envs: int = 1, backend: str = "auto", record_seconds: int | None = None,
                  record_seed: int = 0, observation: str = "drq_norm", reward: str = "wait_norm",
                  max_distance: float = 200.0, measure_entries: bool = False, **options):
-        from ials_zoo.sumo_net.network import read_network
-        from ials_zoo.sumo_net.scenario import scenario_of
 
         self.scenario = scenario_of(**_scenario_options(options))
         self.n_envs = check_n_envs(n_envs)
@@ -338,9 +336,6 @@ class SumoNetLocalSimulator(LocalSimulator):
         self._measures = None
 
     def _config(self, lights: dict, record_seconds, record_seed: int, max_distance: float) -> dict:
-        from ials_zoo.sumo_net.regions import regions_of
-        from ials_zoo.sumo_net.replay import cut_regions, vehicle_types
-
         s, rows = self.scenario, self.copy_agents()
         regions = regions_of(s.net_file)
         merged = cut_regions(s.net_file, {f"c{r}": regions[a] for r, a in enumerate(rows)}, self._folder)

@@ -30,8 +30,11 @@ from pathlib import Path
 import numpy as np
 
 from ials_zoo.sumo.command import close_any_simulation, load_budget, start_simulation, sumo_command
-from ials_zoo.sumo.lease import import_libsumo
+from ials_zoo.sumo.lease import SimHandle, import_libsumo
+from ials_zoo.sumo_net.core import _Signal
+from ials_zoo.sumo_net.mdp import wait_norm
 from ials_zoo.sumo_net.metrics import MAX_ROUTE_BYTES, iter_elements
+from ials_zoo.sumo_net.network import read_network
 from ials_zoo.sumo_net.regions import cut_network, netconvert
 
 MAX_DISTANCE = 200.0  # RESCO's detection (m), as the env's default
@@ -70,7 +73,6 @@ def measures_error(gs_measures, local_measures) -> dict[str, float]:
     """The lights' RESCO observation (per lane: approach, total wait, queue, speed sum) and
     reward (``wait_norm``) in both runs, at every decision: the mean absolute difference over the
     GS's mean absolute value, per quantity (the observation's over its lanes and decisions)."""
-    from ials_zoo.sumo_net.mdp import wait_norm
 
     out = {}
     gs = np.concatenate([np.concatenate(m) for m in gs_measures])  # [decisions * lanes, 5]
@@ -125,7 +127,6 @@ class ReplayCore:
     def _observer(self, signals, every: int):
         """A function of the step index that returns every light's RESCO measures (``[lanes, 5]``,
         :class:`ials_zoo.sumo_net.core._Signal`) every ``every`` steps, else None."""
-        from ials_zoo.sumo_net.core import _Signal
 
         watched = [_Signal(lanes, lengths) for lanes, lengths in signals]
         raw = self.ls._libsumo
@@ -232,8 +233,6 @@ def replay_regions(scenario, regions: dict, seconds: int, folder, seed: int = 0,
     ``noise_floor``: also the error between two replays of SUMO seeds ``seed`` and ``seed + 1``
     (SUMO's own randomness, given the same entries); ``each``: also every region alone
     (:func:`replay_each`, ``each_seconds_per_step``)."""
-    from ials_zoo.sumo.lease import SimHandle
-    from ials_zoo.sumo_net.network import read_network
 
     lights = [x for x in read_network(scenario.net_file).lights if x.id in regions]
     gs_lanes = [lane for x in lights for lane in x.lanes]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gymnasium
 import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
@@ -410,8 +411,6 @@ class WarehouseEnv(ParallelEnv):
     def render(self):
         """An RGB image (``"rgb_array"``) or a text view (``"ansi"``) of the floor."""
         if self.render_mode is None:
-            import gymnasium
-
             gymnasium.logger.warn("render() called without a render_mode; returning None")
             return None
 
