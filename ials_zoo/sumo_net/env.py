@@ -119,7 +119,8 @@ class SumoNetEnv(ParallelEnv):
     from; a cost, so off by default). ``scripted_learners`` exists for the zoo's single-agent
     scoring and must stay ``False``: this env has no scripted controller for a learner (pass
     ``learners=[]`` to run every light on its own program, or see
-    :mod:`ials_zoo.sumo_net.controllers`). Any other keyword is refused, naming the valid options.
+    :mod:`ials_zoo.sumo_net.controllers`). Any other keyword (``**unknown`` in the signature) is
+    refused, naming the valid options.
 
     Version history: v0 -- first version.
     """

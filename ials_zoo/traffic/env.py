@@ -149,7 +149,8 @@ class TrafficGridEnv(ParallelEnv):
     observed and rewarded but their lights keep the actuated program and actions are
     ignored: the actuated reference score), ``internal_links`` (default True: junctions have
     SUMO's internal lanes, so crossing takes time and space; False is about 1.6x faster in
-    SUMO but changes the junction dynamics -- the calibration below is for True).
+    SUMO but changes the junction dynamics -- the calibration below is for True). Any other
+    keyword (``**unknown`` in the signature) is refused, naming the valid options.
 
     **Rendering**: ``"rgb_array"`` draws a top view with numpy (grey roads, per intersection
     a north-south and an east-west mark coloured by its light, a magenta frame around each

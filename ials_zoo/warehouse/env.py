@@ -85,7 +85,8 @@ class WarehouseEnv(ParallelEnv):
 
     Options: ``learners``, ``item_probability=0.02``, ``max_cycles=100``,
     ``item_lifetime=None``, ``robots=(6, 6)``, ``render_mode=None``,
-    ``scripted_learners=False``.
+    ``scripted_learners=False`` (see above). Any other keyword (``**unknown`` in the signature)
+    is refused, naming the valid options.
 
     Version history: v0 -- first version (SPEC §1).
     """
