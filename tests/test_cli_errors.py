@@ -66,6 +66,14 @@ CASES = [
     (["train", "dials", "--env", "warehouse_v0", "--refresh", "0", "--out-dir", "{d}/r"], "--refresh"),
     (["train", "dials", "--env", "warehouse_v0", "--agents", "robot_99", "--out-dir", "{d}/r"], "robot_99"),
     (["train", "ippo", "--env", "nowhere_v0", "--out-dir", "{d}/r"], "nowhere_v0"),
+    (["train", "idqn", "--env", "warehouse_v0", "--eps-end", "1.5", "--out-dir", "{d}/r"], "--eps-end"),
+    (["train", "idqn", "--env", "warehouse_v0", "--buffer-size", "0", "--out-dir", "{d}/r"], "--buffer-size"),
+    (["train", "idqn", "--env", "warehouse_v0", "--buffer-size", "100000000", "--out-dir", "{d}/r"],
+     "--buffer-size"),
+    (["train", "idqn", "--env", "warehouse_v0", "--learning-rate", "nan", "--out-dir", "{d}/r"], "--learning-rate"),
+    (["train", "idqn", "--env", "warehouse_v0", "--total-timesteps", "50", "--out-dir", "{d}/r"],
+     "less than one episode"),
+    (["train", "idqn", "--env", "warehouse_v0", "--env-options", '{"gamma": 1}', "--out-dir", "{d}/r"], "gamma"),
     (["reproduce", "--experiments", "dials", "--dials-variants", "bogus", "--dry-run"], "bogus"),
 ]
 
@@ -78,6 +86,15 @@ def test_bad_input_is_one_clear_error_before_any_work(files, capsys, argv, words
     command = argv[0]
     assert f"ials-zoo {command}" in err and words in err and "Traceback" not in err
     assert not (files / "r").exists() and not (files / "o.pt").exists() and not (files / "c.npz").exists()
+
+
+@pytest.mark.parametrize("argv, words", [(["train", "iqdn", "--env", "warehouse_v0"], "invalid choice: 'iqdn'"),
+                                         (["train", "idqn", "--env", "warehouse_v0", "--n-epochs", "3"], "--n-epochs")])
+def test_an_unknown_learner_or_an_option_it_does_not_take_is_refused_by_argparse(tmp_path, capsys, argv, words):
+    with pytest.raises(SystemExit) as stop:
+        main(argv + ["--out-dir", str(tmp_path / "r")])
+    assert stop.value.code == 2 and words in capsys.readouterr().err
+    assert not (tmp_path / "r").exists()
 
 
 def test_a_bug_shows_its_traceback_while_bad_input_does_not(monkeypatch, capsys):

@@ -105,6 +105,26 @@ def test_a_resumed_ippo_run_ends_bitwise_as_the_uninterrupted_one(tmp_path, monk
     assert _progress_rows(whole[1]) == _progress_rows(resumed[1])
 
 
+IDQN = dict(env_id=ENV, agents=",".join(AGENTS), env_options=json.dumps(OPTIONS), n_envs=2, total_timesteps=768,
+            eval_every=256, eval_episodes=1, final_eval_episodes=2, progress=False, checkpoint_every=0, hidden="16",
+            buffer_size=300, target_update=50)
+
+
+@pytest.mark.parametrize("kwargs", [IDQN, dict(IDQN, env_id="sumo_net_v0", agents="all", n_envs=1,
+                                               env_options=json.dumps({"net": "cologne3", "max_cycles": 30}),
+                                               total_timesteps=96, eval_every=32, final_eval_episodes=1)],
+                         ids=["warehouse", "cologne3"])
+def test_a_resumed_idqn_run_ends_bitwise_as_the_uninterrupted_one(tmp_path, monkeypatch, kwargs):
+    """The replay buffers, target networks, optimiser and counters come back whole, and the
+    episode in flight is replayed; on cologne3 the lights have actions of their own counts."""
+    from ials_zoo.baselines import idqn
+
+    whole = idqn.main(idqn.Args(**kwargs, out_dir=str(tmp_path / "whole"))), tmp_path / "whole"
+    resumed = _stopped_and_resumed(monkeypatch, idqn, tmp_path / "resumed", kwargs)
+    assert_same_run(whole, resumed)
+    assert _progress_rows(whole[1]) == _progress_rows(resumed[1])
+
+
 @pytest.mark.parametrize("module_name", ["ippo", "dials"])
 def test_a_resumed_traffic_run_ends_bitwise_as_the_uninterrupted_one(tmp_path, monkeypatch, module_name):
     """SUMO in the GS copies (IPPO) and in the local simulators (DIALS), two lights."""

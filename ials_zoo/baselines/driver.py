@@ -166,10 +166,11 @@ class JointActors:
     ``frame_stack`` and ``actor_layers()``."""
 
     action_counts = None  # agents with action spaces of their own: each one's count
+    activation = "tanh"  # after every hidden layer of the actors
 
     def policy(self, metadata: dict):
         return joint_policy(self.agents, self.actor_layers(), self.obs_size, self.n_actions, self.frame_stack,
-                            metadata, self.action_counts)
+                            metadata, self.action_counts, self.activation)
 
 
 def estimate_text(plan: RunPlan, learner: Learner, domain) -> str:

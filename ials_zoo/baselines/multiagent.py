@@ -70,9 +70,9 @@ PREVIOUS_PPO_SETTINGS = {"learning_rate": 2.5e-4, "anneal_lr": True, "n_epochs":
 with the authors' buffer of 128): kept to measure against (``ials-zoo bench``, the ablation)."""
 
 @dataclass
-class MultiAgentRunArgs(MultiPPOSettings):
-    """The arguments every multi-agent baseline (:mod:`.ippo`, :mod:`.dials`) shares: what to
-    train, for how long, how it is scored and where its run goes."""
+class JointRunArgs:
+    """The arguments of every run in which all agents learn at once (:mod:`.ippo`, :mod:`.dials`,
+    :mod:`.idqn`): what to train, for how long, how it is scored and where its run goes."""
 
     env_id: str | None = arg(None, "the domain to train on", aliases=("--env",), required=True)
     agents: str = arg("all", "learning agents, comma-separated, or 'all'")
@@ -90,6 +90,12 @@ class MultiAgentRunArgs(MultiPPOSettings):
     progress: bool = arg(True, "show a progress bar")
     submitter: str = arg("", "submitter name for result.json")
     notes: str = arg("", "notes for result.json")
+
+
+@dataclass
+class MultiAgentRunArgs(JointRunArgs, MultiPPOSettings):
+    """The arguments every multi-agent PPO baseline (:mod:`.ippo`, :mod:`.dials`) shares: the
+    run's (:class:`JointRunArgs`) and every agent's PPO settings."""
 
 
 def check_multi_ppo(args, domain) -> list[int]:
@@ -177,13 +183,13 @@ def ppo_config(args, copies: int, frame_stack: int = 1) -> dict:
 
 
 def joint_policy(agents, layers, obs_size: int, n_actions: int, frame_stack: int, metadata: dict,
-                 action_counts=None):
+                 action_counts=None, activation: str = "tanh"):
     """The agents' actors (:meth:`~ials_zoo.learners.batched_ppo.BatchedPPO.actor_layers`: a
     GRU's four tensors first where the policy is recurrent) as one
     :class:`~ials_zoo.policy.PolicyNetwork` (``action_counts``: agents with their own)."""
     gru = layers[0] if len(layers[0]) == 4 else None
-    return PolicyNetwork(agents, obs_size, n_actions, layers[1:] if gru else layers, "tanh", frame_stack, metadata,
-                         recurrent=gru, action_counts=action_counts)
+    return PolicyNetwork(agents, obs_size, n_actions, layers[1:] if gru else layers, activation, frame_stack,
+                         metadata, recurrent=gru, action_counts=action_counts)
 
 
 class JointActor:

@@ -347,10 +347,15 @@ def run_parts(data: dict, args) -> list[tuple[str, float]]:
     weights += 3 * gru * (gru + sizes[0])
     eval_every = float(args.eval_every or (max(1.0, total // 10) if multi else total))
     evaluations = math.ceil(total / eval_every) + 1
+    if hasattr(args, "target_update"):  # a DQN: one minibatch update every --train-every transitions
+        updates = ("--train-every/--batch-size", total / args.train_every * agents * args.batch_size * 6 * weights
+                   / UPDATE_FLOPS_PER_SECOND)
+    else:
+        updates = ("--n-epochs" + (" and --recurrent-hidden" if gru else ""),
+                   args.n_epochs * total * agents * 6 * weights / UPDATE_FLOPS_PER_SECOND)
     return [
         ("--total-timesteps", total * agents / rate),
-        ("--n-epochs" + (" and --recurrent-hidden" if gru else ""),
-         args.n_epochs * total * agents * 6 * weights / UPDATE_FLOPS_PER_SECOND),
+        updates,
         (f"--eval-every/--eval-episodes ({evaluations:,} evaluations of {args.eval_episodes:,} episodes)",
          evaluations * estimate_evaluation_seconds(data["env_id"], args.eval_episodes, **options)),
         ("--final-eval-episodes", estimate_evaluation_seconds(data["env_id"], 2 * args.final_eval_episodes, **options)),
