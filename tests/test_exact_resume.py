@@ -122,7 +122,10 @@ def test_a_resumed_idqn_run_ends_bitwise_as_the_uninterrupted_one(tmp_path, monk
     whole = idqn.main(idqn.Args(**kwargs, out_dir=str(tmp_path / "whole"))), tmp_path / "whole"
     resumed = _stopped_and_resumed(monkeypatch, idqn, tmp_path / "resumed", kwargs)
     assert_same_run(whole, resumed)
-    assert _progress_rows(whole[1]) == _progress_rows(resumed[1])
+    rows = _progress_rows(whole[1])
+    assert rows == _progress_rows(resumed[1])
+    assert rows[0] == ["steps_per_agent", "mean_episode_return", "loss", "q_mean", "epsilon", "updates"]
+    assert all(row[2] and row[4] for row in rows[1:])  # every stretch says its loss and epsilon
 
 
 @pytest.mark.parametrize("module_name", ["ippo", "dials"])

@@ -91,6 +91,7 @@ class Learner(Protocol):
     simulator: str  # training.simulator, also the curve's header
     charged_seconds: float  # AIP seconds on the clock, excluded from training.wall_clock_seconds
     reports_aip_time: bool  # the closing line splits the wall-clock into training and AIPs
+    log_columns: tuple  # progress.csv's columns (optional: PPO's, TrainingLog.COLUMNS)
 
     def load(self, state: dict | None, info: dict | None) -> None:
         """Before the clock starts: a fresh start (``None``) or a checkpoint to resume (what
@@ -219,7 +220,7 @@ def run(plan: RunPlan, learner: Learner, description: str, domain, scoring: Scor
         training["reproduce"] = reproduce_record(plan.command)
     ok = False
     with folder.running():
-        log = TrainingLog(out / "progress.csv")
+        log = TrainingLog(out / "progress.csv", getattr(learner, "log_columns", TrainingLog.COLUMNS))
         steps, curve = 0, []
         try:
             try:

@@ -101,6 +101,8 @@ class DQNCopiesLearner(JointActors):
     copies in ``processes`` worker processes, one step of every copy at a time."""
 
     simulator, charged_seconds, reports_aip_time, activation = "gs", 0.0, False, "relu"
+    log_columns = ("steps_per_agent", "wall_clock_seconds", "mean_episode_return", "loss", "q_mean", "epsilon",
+                   "updates")
 
     def __init__(self, env_id, agents, options, copies, processes, cfg: DQNConfig, frame_stack, seed, total, sizes):
         self.env_id, self.agents, self.options, self.copies, self.processes = env_id, agents, options, copies, processes

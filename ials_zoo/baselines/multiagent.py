@@ -221,13 +221,13 @@ class JointActor:
 
 class TrainingLog:
     """``progress.csv``: one row per stretch of training (steps per agent, wall-clock, the
-    agents' mean episode return, PPO statistics)."""
+    agents' mean episode return, the learner's statistics: PPO's unless ``columns`` says)."""
 
     COLUMNS = ("steps_per_agent", "wall_clock_seconds", "mean_episode_return", "policy_loss", "value_loss",
                "entropy", "clip_fraction", "approx_kl", "learning_rate", "aip_refreshes")
 
-    def __init__(self, path: Path):
-        self.path = Path(path)
+    def __init__(self, path: Path, columns: tuple = COLUMNS):
+        self.path, self.COLUMNS = Path(path), tuple(columns)
         if not self.path.exists():
             with open(self.path, "w", newline="") as f:
                 csv.writer(f).writerow(self.COLUMNS)
