@@ -29,6 +29,7 @@ number of steps per agent, and where it must stop before that (:meth:`Learner.ne
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -38,8 +39,16 @@ from typing import Protocol
 from tqdm.auto import tqdm
 
 import ials_zoo
-from ials_zoo.baselines.multiagent import TrainingLog, final_results, joint_policy, policy_file, write_curve
-from ials_zoo.baselines.retrain import reproduce_record
+from ials_zoo.baselines.multiagent import (
+    TrainingLog,
+    checkpoint_every_of,
+    final_results,
+    joint_policy,
+    policy_file,
+    settings_of,
+    write_curve,
+)
+from ials_zoo.baselines.retrain import reproduce_record, training_command
 from ials_zoo.baselines.runs import Clock, RunFolder, check_binding, load_training_state, save_training_state
 from ials_zoo.core.extras import study_of
 from ials_zoo.errors import BadInput
@@ -172,6 +181,26 @@ class JointActors:
     def policy(self, metadata: dict):
         return joint_policy(self.agents, self.actor_layers(), self.obs_size, self.n_actions, self.frame_stack,
                             metadata, self.action_counts, self.activation)
+
+
+def gs_run_plan(algorithm: str, args, agents: list, options: dict, total: int, per_update: int, frame_stack: int,
+                processes: int, hyperparameters: dict) -> RunPlan:
+    """The plan of a run in which every agent learns on GS copies (IPPO, IDQN): the budget,
+    cadence, folder and training record from ``args`` (:class:`~.multiagent.JointRunArgs`),
+    with the learner's own ``hyperparameters`` recorded beside the arguments."""
+    eval_every = int(args.eval_every or max(per_update, total // 10))
+    training = {"simulator": "gs", "aip": None, "seeds": [args.seed], "env_steps": 0, "wall_clock_seconds": 0.0,
+                "aip_seconds": 0.0, "workers": max(processes, 1),
+                "hyperparameters": dict(dataclasses.asdict(args), agents=agents, total_timesteps=total,
+                                        eval_every=eval_every, **hyperparameters, gs_processes=processes)}
+    return RunPlan(algorithm, args.env_id, agents, options, args.seed, total, per_update, eval_every,
+                   args.eval_episodes, args.final_eval_episodes, frame_stack,
+                   Path(args.out_dir or f"runs/{args.env_id}__{algorithm}__s{args.seed}"),
+                   settings_of(args, skip=("resume", "overwrite", "progress", "out_dir", "submitter", "notes",
+                                           "gs_processes", "checkpoint_every")),
+                   training, args.resume, args.overwrite, args.progress, args.submitter, args.notes,
+                   checkpoint_every=checkpoint_every_of(args, eval_every, per_update),
+                   command=training_command(algorithm, args))
 
 
 def estimate_text(plan: RunPlan, learner: Learner, domain) -> str:
@@ -419,4 +448,5 @@ def check_run_args(args) -> None:
         raise BadInput(f"checkpoint_every must be >= 0 (0: at evaluations only), got {args.checkpoint_every}")
 
 
-__all__ = ["JointActors", "JointScoring", "Learner", "RunPlan", "Scoring", "check_run_args", "estimate_text", "run"]
+__all__ = ["JointActors", "JointScoring", "Learner", "RunPlan", "Scoring", "check_run_args", "estimate_text",
+           "gs_run_plan", "run"]

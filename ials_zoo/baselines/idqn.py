@@ -25,15 +25,13 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import torch
 
 from ials_zoo.baselines.arguments import arg, check_frame_stack, hidden_sizes, run_cli
-from ials_zoo.baselines.driver import JointActors, RunPlan, check_run_args, run
-from ials_zoo.baselines.multiagent import JointRunArgs, checkpoint_every_of, env_options_of, settings_of
-from ials_zoo.baselines.retrain import training_command
+from ials_zoo.baselines.driver import JointActors, check_run_args, gs_run_plan, run
+from ials_zoo.baselines.multiagent import JointRunArgs, env_options_of
 from ials_zoo.core.domains import domain_ids, get_domain
 from ials_zoo.core.extras import study_of
 from ials_zoo.core.spaces import joint_sizes
@@ -166,20 +164,8 @@ def main(args: Args | None = None) -> dict:
     cfg = dqn_config(args)
     per_update = args.n_envs  # one step of every copy: a transition of each agent per copy
     total = int(args.total_timesteps or study_of(domain).multi_agent_budget) // per_update * per_update
-    eval_every = int(args.eval_every or max(per_update, total // 10))
-    out = Path(args.out_dir or f"runs/{args.env_id}__idqn__s{args.seed}")
-    training = {"simulator": "gs", "aip": None, "seeds": [args.seed], "env_steps": 0, "wall_clock_seconds": 0.0,
-                "aip_seconds": 0.0, "workers": max(processes, 1),
-                "hyperparameters": dict(dataclasses.asdict(args), agents=agents, total_timesteps=total,
-                                        eval_every=eval_every, dqn=dataclasses.asdict(cfg), gs_processes=processes,
-                                        greedy_temperature=GREEDY_TEMPERATURE)}
-    plan = RunPlan("idqn", args.env_id, agents, options, args.seed, total, per_update, eval_every, args.eval_episodes,
-                   args.final_eval_episodes, frame_stack, out,
-                   settings_of(args, skip=("resume", "overwrite", "progress", "out_dir", "submitter", "notes",
-                                           "gs_processes", "checkpoint_every")),
-                   training, args.resume, args.overwrite, args.progress, args.submitter, args.notes,
-                   checkpoint_every=checkpoint_every_of(args, eval_every, per_update),
-                   command=training_command("idqn", args))
+    plan = gs_run_plan("idqn", args, agents, options, total, per_update, frame_stack, processes,
+                       {"dqn": dataclasses.asdict(cfg), "greedy_temperature": GREEDY_TEMPERATURE})
     learner = DQNCopiesLearner(args.env_id, agents, options, args.n_envs, processes, cfg, frame_stack, args.seed,
                                total, joint_sizes(domain, agents, options))
     copies = f"{args.n_envs} GS cop{'ies' if args.n_envs > 1 else 'y'}"

@@ -19,27 +19,22 @@ multi-agent track); wall-clock: training only (GS evaluations and checkpoints ex
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import torch
 
 from ials_zoo.baselines.arguments import arg, run_cli
-from ials_zoo.baselines.driver import JointActors, RunPlan, check_run_args, run
+from ials_zoo.baselines.driver import JointActors, check_run_args, gs_run_plan, run
 from ials_zoo.baselines.multiagent import (
     MultiAgentRunArgs,
     check_multi_ppo,
-    checkpoint_every_of,
     env_options_of,
     frame_stack_of,
     merge_shard_stats,
     ppo_config,
-    settings_of,
     whole_updates,
 )
-from ials_zoo.baselines.retrain import training_command
 from ials_zoo.core.domains import domain_ids, get_domain
 from ials_zoo.core.extras import study_of
 from ials_zoo.core.spaces import joint_sizes
@@ -147,19 +142,7 @@ def main(args: Args | None = None) -> dict:
     ppo = ppo_config(args, args.n_envs, frame_stack)
     per_update = args.samples_per_update
     total = whole_updates(int(args.total_timesteps or study_of(domain).multi_agent_budget), per_update)
-    eval_every = int(args.eval_every or max(per_update, total // 10))
-    out = Path(args.out_dir or f"runs/{args.env_id}__ippo__s{args.seed}")
-    training = {"simulator": "gs", "aip": None, "seeds": [args.seed], "env_steps": 0, "wall_clock_seconds": 0.0,
-                "aip_seconds": 0.0, "workers": max(processes, 1),
-                "hyperparameters": dict(dataclasses.asdict(args), agents=agents, total_timesteps=total,
-                                        eval_every=eval_every, ppo=ppo, gs_processes=processes)}
-    plan = RunPlan("ippo", args.env_id, agents, options, args.seed, total, per_update, eval_every, args.eval_episodes,
-                   args.final_eval_episodes, frame_stack, out,
-                   settings_of(args, skip=("resume", "overwrite", "progress", "out_dir", "submitter", "notes",
-                                           "gs_processes", "checkpoint_every")),
-                   training, args.resume, args.overwrite, args.progress, args.submitter, args.notes,
-                   checkpoint_every=checkpoint_every_of(args, eval_every, per_update),
-                   command=training_command("ippo", args))
+    plan = gs_run_plan("ippo", args, agents, options, total, per_update, frame_stack, processes, {"ppo": ppo})
     learner = GSCopiesLearner(args.env_id, agents, options, args.n_envs, processes, ppo, frame_stack, args.seed,
                               total // per_update, joint_sizes(domain, agents, options))
     copies = f"{args.n_envs} GS cop{'ies' if args.n_envs > 1 else 'y'}"

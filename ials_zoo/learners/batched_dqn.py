@@ -36,7 +36,7 @@ import numpy as np
 
 from ials_zoo.core.streams import agent_key, derived_seed
 from ials_zoo.errors import BadInput
-from ials_zoo.learners.rollout import FrameStack
+from ials_zoo.learners.rollout import SeededEpisodes
 
 
 @dataclass
@@ -267,45 +267,17 @@ class BatchedDQN:
                 for i in range(len(self.sizes) - 1)]
 
 
-class DQNTrainer:
+class DQNTrainer(SeededEpisodes):
     """Trains ``learner`` on a multi-agent vector env (:mod:`ials_zoo.learners.rollout`'s
-    interface), one step of every copy at a time. Episodes end by time limit, whose last
-    transition bootstraps (module docstring). As :class:`~ials_zoo.learners.rollout.RolloutTrainer`,
-    episode ``e`` starts from ``reset(seed=derived_seed(seed, "episode", e))``, so the trainer's
-    state is the episode's index and its actions so far, and :meth:`restore` replays them."""
+    interface), one step of every copy at a time, over reproducible episodes
+    (:class:`~ials_zoo.learners.rollout.SeededEpisodes`: a resume replays the episode in
+    flight). Episodes end by time limit, whose last transition bootstraps (module docstring)."""
 
     def __init__(self, learner: BatchedDQN, env, frame_stack: int = 1, seed: int = 0):
         if list(env.agents) != list(learner.agents):
             raise BadInput("the learner and the env must hold the same agents")
-        self.learner, self.env, self.seed = learner, env, int(seed)
-        self.stack = FrameStack(frame_stack)
-        self.running = np.zeros((len(env.agents), env.n_envs))
-        self.finished: list[np.ndarray] = []  # per finished episode: returns [A] (mean over copies)
-        self.episode = 0
-        self._start_episode()
-
-    def _start_episode(self) -> None:
-        self.x = self.stack.reset(self.env.reset(derived_seed(self.seed, "episode", self.episode)))
-        self.actions: list[np.ndarray] = []
-        self.running[:] = 0.0
-
-    def state(self) -> dict:
-        return {"episode": self.episode, "actions": [a.tolist() for a in self.actions],
-                "running": self.running.tolist()}
-
-    def restore(self, state: dict) -> None:
-        """Continue where :meth:`state` was taken: the same episode, replayed to the same step."""
-        self.episode = int(state["episode"])
-        self._start_episode()
-        for a in state["actions"]:
-            a = np.asarray(a, np.int64).reshape(self.running.shape)
-            obs, _, done = self.env.step(a)
-            if done:
-                raise BadInput("the saved episode ended while it was replayed: not the run that saved it")
-            self.x = self.stack.push(obs)
-            self.actions.append(a)
-        self.running = np.asarray(state["running"], float).reshape(self.running.shape)
-        self.finished = []
+        self.learner = learner
+        super().__init__(env, frame_stack, int(seed))
 
     def step(self) -> list[dict]:
         """One step of every copy: act, store, learn; returns the updates' statistics."""
@@ -315,23 +287,13 @@ class DQNTrainer:
         x2 = self.stack.push(obs)
         self.actions.append(np.asarray(a, np.int64))
         self.running += r
+        self.steps += 1
         stats = self.learner.observe(self.x, a, r, x2, terminal=False)  # a time limit: bootstrap
         if done:
-            self.finished.append(self.running.mean(axis=1))
-            self.episode += 1
-            self._start_episode()
+            self._end_episode()
         else:
             self.x = x2
         return stats
-
-    def episode_returns(self, clear: bool = True) -> np.ndarray | None:
-        """Mean over the finished episodes (and copies) of each agent's return, or None."""
-        if not self.finished:
-            return None
-        out = np.mean(self.finished, axis=0)
-        if clear:
-            self.finished = []
-        return out
 
 
 __all__ = ["BatchedDQN", "DQNConfig", "DQNTrainer", "ReplayBuffers", "check_dqn_config"]

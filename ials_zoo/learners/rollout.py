@@ -69,23 +69,20 @@ class FrameStack:
         return buf
 
 
-class RolloutTrainer:
-    """Trains ``learner`` on ``env``: ``n_steps`` steps of every copy, then one update.
+class SeededEpisodes:
+    """The episodes a trainer runs on a multi-agent vector env, each one reproducible.
 
-    Episode returns (the sum of rewards per agent and copy) are kept for the training log.
-    The env is reset by the trainer: episode ``e`` starts from ``reset(seed=derived_seed(seed,
-    "episode", e))`` (``seed=None``: unseeded), so an episode is a function of the run seed,
-    its index and the actions taken in it. That makes the trainer's state small
-    (:meth:`state`: the episode's index, its actions so far, the running returns) and a
-    resume exact: :meth:`restore` resets to the same seed and replays the actions."""
+    Episode ``e`` starts from ``reset(seed=derived_seed(seed, "episode", e))`` (``seed=None``:
+    unseeded), so an episode is a function of the run seed, its index and the actions taken in
+    it. That makes the state small (:meth:`state`: the episode's index, its actions so far, the
+    running returns) and a resume exact: :meth:`restore` resets to the same seed and replays the
+    actions. Episode returns (the sum of rewards per agent and copy) are kept for the training
+    log."""
 
-    def __init__(self, learner: BatchedPPO, env, frame_stack: int = 1, seed: int | None = None):
-        if list(env.agents) != list(learner.agents) or env.n_envs != learner.cfg.n_envs:
-            raise BadInput("the learner and the env must hold the same agents and copies")
-        self.learner, self.env, self.seed = learner, env, seed
+    def __init__(self, env, frame_stack: int = 1, seed: int | None = None):
+        self.env, self.seed = env, seed
         self.stack = FrameStack(frame_stack)
-        A, n = len(env.agents), env.n_envs
-        self.running = np.zeros((A, n))
+        self.running = np.zeros((len(env.agents), env.n_envs))
         self.finished: list[np.ndarray] = []  # per finished episode: returns [A] (mean over copies)
         self.steps = 0  # steps per agent and copy
         self.episode = 0
@@ -97,13 +94,10 @@ class RolloutTrainer:
         self.actions: list[np.ndarray] = []  # this episode's, one [A, n] array per step
         self.running[:] = 0.0
 
-    def new_episodes(self) -> None:
-        """End the running episodes here and start the next ones (after the simulators
-        changed, e.g. new AIPs: an episode then runs on one simulator throughout). The last
-        rollout bootstrapped from this state's value, as at a time limit; the cut episodes'
-        returns are not logged."""
+    def _end_episode(self) -> None:
+        """The running episode ended (by time limit): log its returns and start the next."""
+        self.finished.append(self.running.mean(axis=1))
         self.episode += 1
-        self.learner.reward_scale.returns[:] = 0.0
         self._start_episode()
 
     def state(self) -> dict:
@@ -115,7 +109,7 @@ class RolloutTrainer:
         """Continue where :meth:`state` was taken: the same episode, replayed to the same step.
         Only a seeded trainer can (an unseeded episode cannot be replayed)."""
         if self.seed is None:
-            raise BadInput("an unseeded RolloutTrainer cannot restore an episode")
+            raise BadInput("an unseeded trainer cannot restore an episode")
         self.episode, self.steps = int(state["episode"]), int(state["steps"])
         self._start_episode()
         for a in state["actions"]:
@@ -127,6 +121,35 @@ class RolloutTrainer:
             self.actions.append(a)
         self.running = np.asarray(state["running"], float).reshape(self.running.shape)
         self.finished = []
+
+    def episode_returns(self, clear: bool = True) -> np.ndarray | None:
+        """Mean over the finished episodes (and copies) of each agent's return, or None."""
+        if not self.finished:
+            return None
+        out = np.mean(self.finished, axis=0)
+        if clear:
+            self.finished = []
+        return out
+
+
+class RolloutTrainer(SeededEpisodes):
+    """Trains ``learner`` on ``env``: ``n_steps`` steps of every copy, then one update, over
+    reproducible episodes (:class:`SeededEpisodes`)."""
+
+    def __init__(self, learner: BatchedPPO, env, frame_stack: int = 1, seed: int | None = None):
+        if list(env.agents) != list(learner.agents) or env.n_envs != learner.cfg.n_envs:
+            raise BadInput("the learner and the env must hold the same agents and copies")
+        self.learner = learner
+        super().__init__(env, frame_stack, seed)
+
+    def new_episodes(self) -> None:
+        """End the running episodes here and start the next ones (after the simulators
+        changed, e.g. new AIPs: an episode then runs on one simulator throughout). The last
+        rollout bootstrapped from this state's value, as at a time limit; the cut episodes'
+        returns are not logged."""
+        self.episode += 1
+        self.learner.reward_scale.returns[:] = 0.0
+        self._start_episode()
 
     def collect_and_update(self) -> dict:
         """One rollout of ``n_steps`` and one PPO update; returns the update's statistics."""
@@ -149,9 +172,7 @@ class RolloutTrainer:
                 # time limit: bootstrap the value of the last state (SB3's TimeLimit handling)
                 terminal = self.stack.push(obs)
                 r = r + cfg.gamma * learner.values(terminal)
-                self.finished.append(self.running.mean(axis=1))
-                self.episode += 1
-                self._start_episode()
+                self._end_episode()
             else:
                 self.x = self.stack.push(obs)
             rews.append(r)
@@ -167,14 +188,5 @@ class RolloutTrainer:
         stats = learner.update(flat(xs), flat(acts), flat(logps), flat(ret), flat(adv), flat(vals))
         return stats
 
-    def episode_returns(self, clear: bool = True) -> np.ndarray | None:
-        """Mean over the finished episodes (and copies) of each agent's return, or None."""
-        if not self.finished:
-            return None
-        out = np.mean(self.finished, axis=0)
-        if clear:
-            self.finished = []
-        return out
 
-
-__all__ = ["FrameStack", "IALSVecEnv", "RolloutTrainer"]
+__all__ = ["FrameStack", "IALSVecEnv", "RolloutTrainer", "SeededEpisodes"]
