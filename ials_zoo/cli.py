@@ -30,7 +30,7 @@ SUBCOMMANDS = {
     "demo": ("ials_zoo.commands.demo", "run one episode of a GS and print what happened"),
     "collect": ("ials_zoo.commands.collect", "collect (d_t, u_t) data from a GS (Algorithm 1)"),
     "train-aip": ("ials_zoo.commands.train_aip", "train an approximate influence predictor"),
-    "train": ("ials_zoo.commands.train", "train a baseline: PPO for one agent, IPPO or DIALS for all"),
+    "train": ("ials_zoo.commands.train", "train a baseline: PPO for one agent; IPPO, IDQN or DIALS for all"),
     "evaluate": ("ials_zoo.commands.evaluate", "score a policy on the GS"),
     "leaderboard": ("ials_zoo.commands.leaderboard", "submit, show, render, verify results"),
     "reproduce": ("ials_zoo.commands.reproduce", "reproduce the paper's experiments"),
