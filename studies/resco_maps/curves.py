@@ -1,12 +1,15 @@
-"""Learning curves of IPPO on RESCO's maps (docs/sumo_net.md): the GS score (mean over lights
-of the episode return, RESCO's wait_norm reward) against steps per light and against
-wall-clock, one line per seed, from the runs of studies/resco_maps/ippo.sh (or of studies/ials_real_maps/dials.sh:
-runs/dials_net).
+"""Learning curves of the learners on RESCO's maps (docs/sumo_net.md): the GS score (mean over
+lights of the episode return, RESCO's wait_norm reward) against steps per light and against
+wall-clock, one line per seed, from the runs of studies/resco_maps/ippo.sh (runs/ippo_net),
+studies/resco_maps/idqn.sh (runs/idqn_net) or studies/ials_real_maps/dials.sh (runs/dials_net).
+The score's axis is symmetric-log: a policy of random weights scores hundreds of times lower
+than a trained one. The title names the command and the commit that drew it.
 
 Usage: python studies/resco_maps/curves.py [runs/ippo_net] [studies/resco_maps/ippo_curves.png]
 """
 
 import json
+import subprocess
 import sys
 from pathlib import Path
 
@@ -33,14 +36,18 @@ def main(runs="runs/ippo_net", out="studies/resco_maps/ippo_curves.png"):
             for ax, x in zip(row, (steps, wall)):
                 ax.plot(x, mean, marker="o", label=f"seed {seed}")
                 ax.fill_between(x, lo, hi, alpha=0.2)
+                ax.set_yscale("symlog", linthresh=10)
         row[0].set(title=f"{net}: GS score vs steps per light", xlabel="steps (decisions) per light",
                    ylabel="mean return over lights")
         row[1].set(title=f"{net}: vs wall-clock", xlabel="training minutes (2 cores)")
         row[0].legend(fontsize=8)
-    if "dials" in Path(runs).name:  # studies/ials_real_maps/dials.sh's runs (wall-clock: AIP rounds included)
-        title = f"DIALS on RESCO's maps: bash studies/ials_real_maps/dials.sh; python studies/resco_maps/curves.py {runs} {out}"
-    else:
-        title = "IPPO on RESCO's maps: bash studies/resco_maps/ippo.sh; python studies/resco_maps/curves.py"
+    name = Path(runs).name
+    script = ("studies/ials_real_maps/dials.sh" if "dials" in name else
+              "studies/resco_maps/idqn.sh" if "idqn" in name else "studies/resco_maps/ippo.sh")
+    learner = "DIALS" if "dials" in name else "IDQN" if "idqn" in name else "IPPO"
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
+    title = (f"{learner} on RESCO's maps\nbash {script}; python studies/resco_maps/curves.py {runs} {out} "
+             f"(commit {commit or 'unknown'})")
     fig.suptitle(title, fontsize=9)
     fig.tight_layout()
     fig.savefig(out, dpi=90)
