@@ -182,3 +182,25 @@ def test_a_recorded_idqn_command_is_read_back_and_costed_by_its_updates():
     _, big = parse_command(command + " --batch-size 1000000 --buffer-size 2000000 --learning-starts 1000000", 0)
     parts = run_parts(data, big)
     assert max(parts, key=lambda p: p[1])[0] == "--train-every/--batch-size"
+
+
+def test_the_policy_file_acts_as_the_learner_greedily_sampled_and_deterministic(tmp_path):
+    """What IDQN writes (Q / GREEDY_TEMPERATURE as logits, ReLU, masks of lights with fewer
+    actions) picks each agent's argmax of Q, sampled as well as deterministic, after a round
+    trip through the file."""
+    from ials_zoo.baselines.idqn import DQNCopiesLearner
+    from ials_zoo.policy import load_policy_file, save_policy
+
+    class Sizes:
+        obs_size, n_actions, action_counts = 6, 4, [4, 2, 3]
+
+    adapter = DQNCopiesLearner("warehouse_v0", ["a", "b", "c"], {}, 1, 0, DQNConfig(hidden=(16, 16)), 1, 7, 100, Sizes)
+    with torch.no_grad():  # weights far from the initial ones, so that Q-values differ by little and by much
+        for v in adapter.learner.params.values():
+            v.mul_(3.0)
+    net = load_policy_file(save_policy(adapter.policy({"algorithm": "idqn"}), tmp_path / "p.safetensors"))
+    x = np.random.default_rng(0).random((3, 500, 6), dtype=np.float32)
+    greedy = adapter.learner.greedy(x)
+    assert (net.act(x, deterministic=True) == greedy).all()
+    assert (net.act(x, np.random.default_rng(1)) == greedy).mean() > 0.99
+    assert greedy[1].max() <= 1 and greedy[2].max() <= 2
