@@ -54,6 +54,7 @@ from ials_zoo.core.extras import study_of
 from ials_zoo.errors import BadInput
 from ials_zoo.evaluation import evaluate_joint
 from ials_zoo.leaderboard import now_iso
+from ials_zoo.learners.gs_vec import GSVecEnv
 from ials_zoo.reference_speed import ReferenceLog
 from ials_zoo.utils import format_seconds
 
@@ -181,6 +182,52 @@ class JointActors:
     def policy(self, metadata: dict):
         return joint_policy(self.agents, self.actor_layers(), self.obs_size, self.n_actions, self.frame_stack,
                             metadata, self.action_counts, self.activation)
+
+
+class CopiesLearner(JointActors):
+    """The part of a learner adapter that every learner on copies of a simulator shares (IPPO,
+    IDQN, DIALS on IALS copies): the copies as a multi-agent vector env, a trainer over seeded
+    episodes (:class:`~ials_zoo.learners.rollout.SeededEpisodes`) whose episode in flight a
+    resume replays, and a checkpoint of the learner's state and the trainer's. A subclass sets
+    ``learner`` and makes the trainer (:meth:`_make_trainer`)."""
+
+    simulator, charged_seconds, reports_aip_time = "gs", 0.0, False
+
+    def _setup(self, env_id, agents, options, copies, processes, frame_stack, seed, sizes) -> None:
+        self.env_id, self.agents, self.options, self.copies, self.processes = env_id, agents, options, copies, processes
+        self.frame_stack, self.seed = frame_stack, seed
+        self.obs_size, self.n_actions, self.action_counts = sizes.obs_size, sizes.n_actions, sizes.action_counts
+        self.env = self.trainer = self.episode_state = None
+
+    def load(self, state, info):
+        if state is not None:
+            self.learner.load_state_dict(state["learner"])
+            self.episode_state = state.get("trainer")
+
+    def _make_env(self):
+        return GSVecEnv(self.env_id, self.agents, self.copies, self.processes, seed=self.seed, **self.options)
+
+    def _make_trainer(self):
+        raise NotImplementedError
+
+    def start(self, steps):
+        self.env = self._make_env()
+        self.trainer = self._make_trainer()
+        if self.episode_state is not None:  # the checkpoint's episodes, replayed to where they were
+            self.trainer.restore(self.episode_state)
+
+    def next_stop(self, steps):
+        return None
+
+    def before_training(self, steps, total, policy, note):
+        pass
+
+    def checkpoint(self, out):
+        return {"learner": self.learner.state_dict(), "trainer": self.trainer.state()}, {}
+
+    def close(self):
+        if self.env is not None:
+            self.env.close()
 
 
 def gs_run_plan(algorithm: str, args, agents: list, options: dict, total: int, per_update: int, frame_stack: int,
@@ -448,5 +495,5 @@ def check_run_args(args) -> None:
         raise BadInput(f"checkpoint_every must be >= 0 (0: at evaluations only), got {args.checkpoint_every}")
 
 
-__all__ = ["JointActors", "JointScoring", "Learner", "RunPlan", "Scoring", "check_run_args", "estimate_text",
+__all__ = ["CopiesLearner", "JointActors", "JointScoring", "Learner", "RunPlan", "Scoring", "check_run_args", "estimate_text",
            "gs_run_plan", "run"]

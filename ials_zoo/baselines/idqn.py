@@ -30,14 +30,13 @@ import numpy as np
 import torch
 
 from ials_zoo.baselines.arguments import arg, check_frame_stack, hidden_sizes, run_cli
-from ials_zoo.baselines.driver import JointActors, check_run_args, gs_run_plan, run
+from ials_zoo.baselines.driver import CopiesLearner, check_run_args, gs_run_plan, run
 from ials_zoo.baselines.multiagent import JointRunArgs, env_options_of
 from ials_zoo.core.domains import domain_ids, get_domain
 from ials_zoo.core.extras import study_of
 from ials_zoo.core.spaces import joint_sizes
 from ials_zoo.errors import BadInput
 from ials_zoo.learners.batched_dqn import BatchedDQN, DQNConfig, DQNTrainer, check_dqn_config
-from ials_zoo.learners.gs_vec import GSVecEnv
 from ials_zoo.utils import check_seed
 
 GREEDY_TEMPERATURE = 1e-3
@@ -94,43 +93,26 @@ def check_args(args: Args):
     return domain, agents, options, processes
 
 
-class DQNCopiesLearner(JointActors):
+class DQNCopiesLearner(CopiesLearner):
     """The driver's adapter for IDQN: every agent's DQN (:class:`BatchedDQN`) on ``copies`` GS
     copies in ``processes`` worker processes, one step of every copy at a time."""
 
-    simulator, charged_seconds, reports_aip_time, activation = "gs", 0.0, False, "relu"
+    activation = "relu"
     log_columns = ("steps_per_agent", "wall_clock_seconds", "mean_episode_return", "loss", "q_mean", "epsilon",
                    "updates")
 
     def __init__(self, env_id, agents, options, copies, processes, cfg: DQNConfig, frame_stack, seed, total, sizes):
-        self.env_id, self.agents, self.options, self.copies, self.processes = env_id, agents, options, copies, processes
-        self.frame_stack, self.seed = frame_stack, seed
-        self.obs_size, self.n_actions, self.action_counts = sizes.obs_size, sizes.n_actions, sizes.action_counts
+        self._setup(env_id, agents, options, copies, processes, frame_stack, seed, sizes)
         self.learner = BatchedDQN(agents, self.obs_size * frame_stack, self.n_actions, cfg, seed, total,
                                   action_counts=self.action_counts)
-        self.env = self.trainer = self.episode_state = None
 
-    def load(self, state, info):
-        if state is not None:
-            self.learner.load_state_dict(state["learner"])
-            self.episode_state = state.get("trainer")
-
-    def start(self, steps):
-        self.env = GSVecEnv(self.env_id, self.agents, self.copies, self.processes, seed=self.seed, **self.options)
-        self.trainer = DQNTrainer(self.learner, self.env, self.frame_stack, seed=self.seed)
-        if self.episode_state is not None:  # the checkpoint's episodes, replayed to where they were
-            self.trainer.restore(self.episode_state)
+    def _make_trainer(self):
+        return DQNTrainer(self.learner, self.env, self.frame_stack, seed=self.seed)
 
     def actor_layers(self):
         layers = self.learner.q_layers()
         w, b = layers[-1]
         return layers[:-1] + [(w / GREEDY_TEMPERATURE, b / GREEDY_TEMPERATURE)]
-
-    def next_stop(self, steps):
-        return None
-
-    def before_training(self, steps, total, policy, note):
-        pass
 
     def train(self, steps, target, advance):
         updates = []
@@ -147,12 +129,6 @@ class DQNCopiesLearner(JointActors):
                        q_mean=float(np.mean([u["q_mean"] for u in updates])))
         return row
 
-    def checkpoint(self, out):
-        return {"learner": self.learner.state_dict(), "trainer": self.trainer.state()}, {}
-
-    def close(self):
-        if self.env is not None:
-            self.env.close()
 
 
 def main(args: Args | None = None) -> dict:

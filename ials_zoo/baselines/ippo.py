@@ -25,7 +25,7 @@ import numpy as np
 import torch
 
 from ials_zoo.baselines.arguments import arg, run_cli
-from ials_zoo.baselines.driver import JointActors, check_run_args, gs_run_plan, run
+from ials_zoo.baselines.driver import CopiesLearner, check_run_args, gs_run_plan, run
 from ials_zoo.baselines.multiagent import (
     MultiAgentRunArgs,
     check_multi_ppo,
@@ -40,7 +40,6 @@ from ials_zoo.core.extras import study_of
 from ials_zoo.core.spaces import joint_sizes
 from ials_zoo.errors import BadInput
 from ials_zoo.learners.batched_ppo import BatchedPPO, PPOConfig
-from ials_zoo.learners.gs_vec import GSVecEnv
 from ials_zoo.learners.rollout import RolloutTrainer
 from ials_zoo.utils import check_seed
 
@@ -76,43 +75,22 @@ def check_args(args: Args):
     return domain, agents, options, processes
 
 
-class GSCopiesLearner(JointActors):
+class GSCopiesLearner(CopiesLearner):
     """The driver's adapter for IPPO: every agent's PPO (:class:`BatchedPPO`) on ``copies``
     GS copies in ``processes`` worker processes, one update of ``samples_per_update`` samples
     of each agent at a time."""
 
-    simulator, charged_seconds, reports_aip_time = "gs", 0.0, False
-
     def __init__(self, env_id, agents, options, copies, processes, ppo, frame_stack, seed, updates, sizes):
-        self.env_id, self.agents, self.options, self.copies, self.processes = env_id, agents, options, copies, processes
-        self.frame_stack, self.seed, self.per_update = frame_stack, seed, ppo["n_steps"] * ppo["n_envs"]
-        self.obs_size, self.n_actions, self.action_counts = sizes.obs_size, sizes.n_actions, sizes.action_counts
+        self._setup(env_id, agents, options, copies, processes, frame_stack, seed, sizes)
+        self.per_update = ppo["n_steps"] * ppo["n_envs"]
         self.learner = BatchedPPO(agents, self.obs_size * frame_stack, self.n_actions, PPOConfig(**ppo), seed, updates,
                                   action_counts=self.action_counts)
-        self.env = self.trainer = self.episode_state = None
 
-    def load(self, state, info):
-        if state is not None:
-            self.learner.load_state_dict(state["learner"])
-            self.episode_state = state.get("trainer")
-
-    def _make_env(self):
-        return GSVecEnv(self.env_id, self.agents, self.copies, self.processes, seed=self.seed, **self.options)
-
-    def start(self, steps):
-        self.env = self._make_env()
-        self.trainer = RolloutTrainer(self.learner, self.env, self.frame_stack, seed=self.seed)
-        if self.episode_state is not None:  # the checkpoint's episodes, replayed to where they were
-            self.trainer.restore(self.episode_state)
+    def _make_trainer(self):
+        return RolloutTrainer(self.learner, self.env, self.frame_stack, seed=self.seed)
 
     def actor_layers(self):
         return self.learner.actor_layers()
-
-    def next_stop(self, steps):
-        return None
-
-    def before_training(self, steps, total, policy, note):
-        pass
 
     def train(self, steps, target, advance):
         stats = []
@@ -125,12 +103,6 @@ class GSCopiesLearner(JointActors):
         returns = None if returns is None else [float(x) for x in returns]
         return merge_shard_stats([dict(mean, episode_returns=returns)], [len(self.agents)])
 
-    def checkpoint(self, out):
-        return {"learner": self.learner.state_dict(), "trainer": self.trainer.state()}, {}
-
-    def close(self):
-        if self.env is not None:
-            self.env.close()
 
 
 def main(args: Args | None = None) -> dict:
