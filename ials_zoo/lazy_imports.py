@@ -1,10 +1,12 @@
 """Which imports wait until a function needs them, and why: the one place that says so.
 
-``import ials_zoo`` and ``ials-zoo --help`` take about 0.3 s (0.28 and 0.30 s, median of 15 on
-2 cores). The modules below would each add far more than that to every command, every worker
-process and every test that does not use them, so only they are imported inside functions; the
-rest of the package imports at the top of its files. Measured as ``python -c "import M"``,
-median wall seconds of 5 on the same machine (which includes Python's own 0.02 s start):
+``import ials_zoo`` and ``ials-zoo --help`` take about 0.3 s (0.28 and 0.31 s: ``farm-bench -n 15
+-- python -c "import ials_zoo"``, median, at commit 72c6df4 on 2 cores). The modules below would
+each add far more than that to every command, every worker process and every test that does not
+use them, so only they are imported inside functions; the rest of the package imports at the top
+of its files. Measured as ``python -c "import M"``, median wall seconds of 5 on the same machine
+(which includes Python's own 0.02 s start), with torch 2.13.0, SB3 2.9, scipy 1.17, matplotlib
+3.11, Ray 2.60 and SUMO 1.28:
 
 ==========================  =======  ==============================================
 module                      seconds  what needs it

@@ -1,21 +1,5 @@
 #!/usr/bin/env bash
-# IPPO on RESCO's maps (docs/sumo_net.md): 100 episodes of 360 decisions per light (RESCO's
-# IDQN budget), 2 GS copies in 2 worker processes, GS evaluations every 20 episodes (5
-# episodes each; ingolstadt21, whose episodes cost ten times more: every 33 episodes, 3 each),
-# the protocol's 20-episode final score. Resumable: a finished run is skipped,
-# an interrupted one continues (--resume ends bitwise where the uninterrupted run ends).
+# IPPO on RESCO's maps (docs/sumo_net.md): the zoo's multi-agent PPO, 2 GS copies in 2 worker
+# processes; budget, evaluations and resuming as studies/resco_maps/learner.sh says.
 # Usage: bash studies/resco_maps/ippo.sh "cologne8 grid4x4 ingolstadt21" "0 1 2"
-set -euo pipefail
-maps=${1:-"cologne8 grid4x4 ingolstadt21"}
-seeds=${2:-"0 1 2"}
-for seed in $seeds; do
-  for net in $maps; do
-    out="runs/ippo_net/${net}_s${seed}"
-    if [ -f "$out/result.json" ]; then echo "done: $out"; continue; fi
-    resume=(); [ -f "$out/checkpoint.json" ] && resume=(--resume)
-    evals=(--eval-every 7200 --eval-episodes 5)
-    [ "$net" = ingolstadt21 ] && evals=(--eval-every 12000 --eval-episodes 3)
-    ials-zoo train ippo --env sumo_net_v0 --env-options "{\"net\": \"$net\"}" --total-timesteps 36000 \
-      "${evals[@]}" --seed "$seed" --out-dir "$out" --no-progress "${resume[@]}"
-  done
-done
+exec bash "$(dirname "$0")/learner.sh" ippo "${1:-cologne8 grid4x4 ingolstadt21}" "${2:-0 1 2}"
