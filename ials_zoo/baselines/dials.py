@@ -143,6 +143,9 @@ class Args(MultiAgentRunArgs):
                             + _per_domain(_fidelity_text) + "). --collect-steps, --aip-epochs, --aip-lr override either")
     n_envs: int | None = arg(None, lambda: f"IALS copies per agent (default: the domain's: "
                              f"{_per_domain(lambda d: str(dials_of(d).copies))})")
+    local: str = arg("sumo", "the agents' local simulators, where the domain has a choice: sumo (every region cut "
+                     "from the network, one SUMO simulation per copy) | arrays (every region of every copy as numpy "
+                     "arrays, one batch: ials_zoo.sumo_net.arrays)")
     learner: str = arg("batched", "batched (one torch program) | sb3 (one SB3 PPO per agent)")
     workers: int | None = arg(None, "worker processes (default: one per core; 0: this process)")
     backend: str = arg("process", "process | ray")
@@ -160,6 +163,8 @@ def check_args(args: Args):
         _check_copies_args(args)
     else:
         domain.require_ials("train dials")
+        if args.local != "sumo":
+            raise BadInput(f"--local {args.local}: {args.env_id}'s agents share one batched local simulator already")
     options = env_options_of(args, domain)
     agents = domain.check_agents(None if args.agents == "all" else args.agents, **options)
     check_seed(args.seed, "seed")
@@ -217,7 +222,12 @@ def on_copies(domain) -> bool:
     return domain.has_ials_parallel_env and not domain.has_ials
 
 
+LOCALS = ("sumo", "arrays")
+
+
 def _check_copies_args(args) -> None:
+    if args.local not in LOCALS:
+        raise BadInput(f"--local: expected one of {', '.join(LOCALS)}, got {args.local!r}")
     if args.learner != "batched":
         raise BadInput(f"--learner {args.learner}: agents with spaces of their own train with --learner batched "
                        "(one torch program, observations padded)")
@@ -301,7 +311,7 @@ def main(args: Args | None = None) -> dict:
     out = Path(args.out_dir or f"runs/{args.env_id}__dials__s{args.seed}")
     ppo = ppo_config(args, copies, frame_stack)
     how = aip_training_of(args, domain)
-    label = _label(args.aip, refresh, how.autoregressive, args.aip_training)
+    label = _label(args.aip, refresh, how.autoregressive, args.aip_training) + ("-arrays" if args.local == "arrays" else "")
     training = {"simulator": label, "aip": None, "seeds": [args.seed], "env_steps": 0,
                 "wall_clock_seconds": 0.0, "aip_seconds": 0.0, "workers": max(workers, 1), "backend": args.backend,
                 "hyperparameters": dict(settings_of(args), agents=agents, refresh_steps=refresh,
@@ -323,7 +333,8 @@ def main(args: Args | None = None) -> dict:
         n = min(workers, copies)
         holders = (f"{n} Ray actor{'s' if n != 1 else ''}" if args.backend == "ray"
                    else f"{n} worker process{'es' if n != 1 else ''}")
-        where = f"every agent's IALS side by side, {copies} cop{'ies' if copies > 1 else 'y'} in {holders}"
+        where = (f"every agent's IALS side by side, {copies} cop{'ies' if copies > 1 else 'y'} in {holders}"
+                 + (", on arrays" if args.local == "arrays" else ""))
     else:
         learner = ShardsLearner(args, domain, agents, options, refresh, copies, workers, ppo, frame_stack,
                                 total // per_update, training, out)

@@ -42,7 +42,7 @@ class IALSCopiesLearner(AIPRefreshes, GSCopiesLearner):
     def _make_env(self):
         return GSVecEnv(self.env_id, self.agents, self.copies, self.processes, seed=self.seed, simulator="ials",
                         predictor=self.aips, copies_on=self.args.backend, ray_address=self.args.ray_address,
-                        **self.options)
+                        **self.options, **({"local": self.args.local} if self.args.local != "sumo" else {}))
 
     def use_aips(self, aips: dict) -> None:
         self.env.set_predictors(aips)

@@ -88,6 +88,10 @@ class Domain:
         ials_parallel_env: a domain whose agents have their own spaces may give its own
             multi-agent IALS, ``ials_parallel_env(agents=None, predictor=..., seed=None,
             **options) -> pettingzoo.ParallelEnv`` (``make_ials_parallel_env`` returns it).
+        ials_batched_env: ``ials_batched_env(agents, predictor, seeds, **options)``: copies of
+            that multi-agent IALS stepped as one batch (``reset(seeds)``, ``step(actions [A,
+            copies])``, ``set_predictors``, ``close``, ``width``), or None where the options ask
+            for one simulation per copy; DIALS's copies use it where it gives one.
         collect_options: GS options the influence collector adds to the GS it runs (a GS that
             reports its region data only when asked, because watching regions costs).
         metrics: the physical metrics of an episode, ``{name: "lower" | "higher"}`` (which
@@ -129,6 +133,7 @@ class Domain:
     untrained_probs: tuple | None = None
     replay_agreement: float = 0.9
     ials_parallel_env: Callable | None = None
+    ials_batched_env: Callable | None = None
     collect_options: dict = field(default_factory=dict)
     metrics: dict = field(default_factory=dict)
     metric_ranges: dict = field(default_factory=dict)

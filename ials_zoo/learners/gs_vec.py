@@ -1,6 +1,7 @@
 """``n_envs`` copies of a GS with every agent learning, as a multi-agent vector env (IPPO), or
 of a domain's multi-agent IALS ParallelEnv (``simulator="ials"``: DIALS where the agents have
-spaces of their own, every region in one simulation per copy).
+spaces of their own, every region in one simulation per copy; or, where the domain batches
+its IALS copies, ``Domain.ials_batched_env``, all copies as one batch).
 
 Copies run in this process (``processes=0``) or spread over ``processes`` worker processes
 (fresh interpreters that die with this one), or Ray actors (``copies_on="ray"``, on a local Ray
@@ -29,6 +30,12 @@ class _Copies:
 
     def __init__(self, env_id, agents, options, seeds, simulator="gs", predictor=None):
         domain = get_domain(env_id)
+        self.batched = None  # a domain's IALS copies stepped as one batch (its ials_batched_env)
+        if simulator != "gs" and domain.ials_batched_env is not None:
+            self.batched = domain.ials_batched_env(agents, predictor, seeds, **options)
+        if self.batched is not None:
+            self.envs, self.agents, self.seeds, self.width = [], list(agents), list(seeds), self.batched.width
+            return
         if simulator == "gs":
             self.envs = [domain.parallel_env(learners=agents, **options) for _ in seeds]
         else:
@@ -38,6 +45,8 @@ class _Copies:
         self.width = sizes_of_env(self.envs[0], self.agents).obs_size
 
     def reset(self, seeds=None):
+        if self.batched is not None:
+            return self.batched.reset(seeds)
         if seeds is not None:
             self.seeds = list(seeds)
         obs = []
@@ -48,6 +57,8 @@ class _Copies:
         return np.stack(obs, axis=1)  # [A, copies, obs]
 
     def step(self, actions):  # actions [A, copies]
+        if self.batched is not None:
+            return self.batched.step(actions)
         obs, rew, done = [], [], False
         for j, env in enumerate(self.envs):
             o, r, _, trunc, _ = env.step({a: int(actions[i, j]) for i, a in enumerate(self.agents)})
@@ -58,10 +69,14 @@ class _Copies:
 
     def set_predictors(self, predictors) -> None:
         """Every IALS copy's AIPs (an AIP set file, ...: its ``set_predictors``)."""
+        if self.batched is not None:
+            self.batched.set_predictors(predictors)
         for env in self.envs:
             env.set_predictors(predictors)
 
     def close(self):
+        if self.batched is not None:
+            self.batched.close()
         for env in self.envs:
             env.close()
 

@@ -347,8 +347,38 @@ class SimHandle:
             pass
 
 
+class PlainHandle:
+    """A core that holds no SUMO simulation (an array local simulator, :mod:`ials_zoo.sumo_net.arrays_core`)
+    behind :class:`SimHandle`'s calls: always in this process, no lease taken, so a SUMO
+    simulation of this process stays where it is. ``backend`` and the budgets are accepted and
+    ignored."""
+
+    mode = "inprocess"
+
+    def __init__(self, core: str, config: dict, backend: str = "auto", **_budgets):
+        if backend not in BACKENDS:
+            raise BadInput(f"unknown backend {backend!r}; expected one of {BACKENDS}")
+        self.core_name = check_core_path(core)
+        self._core = _core_class(self.core_name)(**config)
+        self.closed = False
+
+    def call(self, method: str, *args):
+        if self.closed:
+            raise SimulationError("this simulation was closed")
+        return call_core(self._core, method, args)
+
+    def restart(self, spare: bool = False) -> None:
+        """Nothing to restart: the core holds no simulation."""
+
+    def close(self) -> None:
+        if not self.closed:
+            self.closed = True
+            self._core.close()
+
+
 __all__ = [
     "BACKENDS",
+    "PlainHandle",
     "SimHandle",
     "SimulationBusyError",
     "SimulationError",

@@ -47,6 +47,16 @@ def ials_parallel_env(agents=None, predictor="trained", seed=None, **options):
     return env
 
 
+def ials_batched_env(agents, predictor, seeds, **options):
+    """Copies of every junction's IALS on arrays as one batch (``local="arrays"``:
+    :class:`ials_zoo.sumo_net.arrays_vec.ArrayIALSCopies`), else None."""
+    if options.get("local", "sumo") != "arrays":
+        return None
+    from ials_zoo.sumo_net.arrays_vec import ArrayIALSCopies
+
+    return ArrayIALSCopies(agents, predictor, seeds, **options)
+
+
 def possible_agents(**options) -> list[str]:
     """Every signalised junction of the network the options name."""
     from ials_zoo.sumo_net.env import possible_agents as agents
@@ -136,6 +146,7 @@ DOMAIN = Domain(
     local_simulator=local_simulator,
     region_spec=region_spec,
     ials_parallel_env=ials_parallel_env,
+    ials_batched_env=ials_batched_env,
     default_predictor="mlp",
     null_influence=0,
     collect_options={"region_data": True},  # the GS watches its learners' regions only when asked

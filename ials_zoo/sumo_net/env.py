@@ -129,6 +129,7 @@ class SumoNetEnv(ParallelEnv):
                 "render_fps": 10}
     CORE = "ials_zoo.sumo_net.core:NetCore"  # the simulation core (``"package.module:Class"``)
     REGION_CORE = "ials_zoo.sumo_net.influence:RegionNetCore"  # the core that watches the learners' regions
+    HANDLE = SimHandle  # where the core runs (a core without SUMO: :class:`ials_zoo.sumo.lease.PlainHandle`)
 
     def __init__(self, net=None, sumocfg=None, net_file=None, route_files=None, begin=None, end=None,
                  decision_seconds=None, yellow_seconds=None, max_cycles=None, learners=None, max_distance=200.0,
@@ -178,7 +179,8 @@ class SumoNetEnv(ParallelEnv):
         self._region_rows = {a: k for k, a in enumerate(self.possible_agents)}  # the core's region data rows
         self._tmp = tempfile.mkdtemp(prefix="ials_zoo_sumo_net_")  # the episodes' tripinfo, read and removed
         s = self.scenario  # a large network loads for a while: its load is budgeted by its size
-        self._sim = SimHandle(self.CORE, self._core_config(), backend, load_seconds=load_budget(s.net_file, *s.route_files))
+        self._sim = self.HANDLE(self.CORE, self._core_config(), backend,
+                                load_seconds=load_budget(s.net_file, *s.route_files))
         self.backend = self._sim.mode
         self._seed_rng = np.random.default_rng()
         self._measures, self._phases, self._time = None, None, 0.0

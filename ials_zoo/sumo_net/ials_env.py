@@ -21,6 +21,8 @@ import numpy as np
 
 from ials_zoo.errors import BadInput, BadInputType
 from ials_zoo.influence.files import load_predictor_set
+from ials_zoo.sumo.lease import PlainHandle
+from ials_zoo.sumo_net.env import SumoNetEnv
 from ials_zoo.sumo_net.influence import region_layout
 from ials_zoo.sumo_net.island import entry_tables
 from ials_zoo.sumo_net.local import RegionsNetEnv
@@ -52,16 +54,26 @@ class IALSNetEnv(RegionsNetEnv):
     ``record_seed`` (the GS recording the entering vehicles are drawn from). Defaults to one
     simulation for the whole episode series (``fresh_process=False``: no route file is replayed),
     in this process if no other simulation holds it (``backend="auto"``), else in a worker.
-    ``infos[agent]`` holds the influence sources its AIP sampled and its d-sets.
+    ``infos[agent]`` holds the influence sources its AIP sampled and its d-sets. ``local``: the
+    regions' simulator, ``"sumo"`` (cut from the network, side by side in one SUMO simulation)
+    or ``"arrays"`` (:mod:`ials_zoo.sumo_net.arrays`: no SUMO, every region as numpy arrays, in
+    this process).
     ``episode_metrics()`` has only ``queue``: trip delays need the whole network.
     """
 
     CORE = REGION_CORE = "ials_zoo.sumo_net.island:IslandCore"
+    LOCAL_CORES = {"sumo": "ials_zoo.sumo_net.island:IslandCore", "arrays": "ials_zoo.sumo_net.arrays_core:ArrayNetCore"}
 
     def __init__(self, predictors="untrained", record_seconds: int | None = None, record_seed: int = 0,
-                 fresh_process: bool = False, backend: str = "auto", **options):
+                 fresh_process: bool = False, backend: str = "auto", local: str = "sumo", **options):
         if options.get("region_data") is not None:
             raise BadInputType("region_data: the IALS always reports its region data")
+        if local not in self.LOCAL_CORES:
+            raise BadInput(f"local: expected one of {', '.join(self.LOCAL_CORES)}, got {local!r}")
+        self.local = local
+        if local == "arrays":  # no SUMO: the regions need no cut, and the core runs in this process
+            self.CORE = self.REGION_CORE = self.LOCAL_CORES[local]
+            self.CUT, self.HANDLE = False, PlainHandle
         self._aips = (predictors, {k: options[k] for k in SCENARIO_OPTIONS if k in options})
         self._record = (record_seconds, record_seed)
         super().__init__(fresh_process=fresh_process, backend=backend, region_data=True, **options)
@@ -74,6 +86,10 @@ class IALSNetEnv(RegionsNetEnv):
         self._tables = entry_tables(scenario, list(self.regions), *self._record)
 
     def _core_config(self) -> dict:
+        if self.local == "arrays":
+            config = SumoNetEnv._core_config(self)  # the network's own ids: nothing is cut
+            config.pop("regions", None)
+            return {**config, "tables": [self._tables[x] for x in self.network.ids]}
         config = super()._core_config()
         ids = self.network.ids
         layouts = [region_layout(self.scenario.net_file, x).prefixed(f"{x}__") for x in ids]

@@ -111,14 +111,17 @@ class RegionsNetEnv(SumoNetEnv):
     subclass says how vehicles come in: what it records before SUMO starts (:meth:`_prepare`)
     and its core. ``episode_metrics()`` has only ``queue``: trip delays need the whole network."""
 
+    CUT = True  # the regions are cut from the network for SUMO (a core on arrays needs no cut)
+
     def __init__(self, **options):
         scenario = scenario_of(**{k: options[k] for k in SCENARIO_OPTIONS if k in options})
         self._folder = Path(tempfile.mkdtemp(prefix="ials_zoo_regions_"))
         try:
             agents = set(read_network(scenario.net_file).ids)  # a light of one green is no agent: no region
             self.regions = {k: r for k, r in regions_of(scenario.net_file).items() if k in agents}
-            self._merged = cut_regions(scenario.net_file, self.regions, self._folder)
-            self._vtypes = vehicle_types(scenario.route_files, self._folder / "vtypes.add.xml")
+            if self.CUT:
+                self._merged = cut_regions(scenario.net_file, self.regions, self._folder)
+                self._vtypes = vehicle_types(scenario.route_files, self._folder / "vtypes.add.xml")
             self._prepare(scenario)
             super().__init__(**options)
         except BaseException:

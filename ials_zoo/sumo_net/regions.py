@@ -175,6 +175,11 @@ def _nodes_of(tls):
     return {c[0].getEdge().getToNode() for c in tls.getConnections()}
 
 
+def read_sumolib(net_file: str):
+    """``sumolib``'s reading of ``net_file`` (programs in, internal lanes out), read once per file."""
+    return _read(str(net_file), os.path.getmtime(net_file))
+
+
 def edge_lanes(net_file: str, edge: str) -> tuple[str, ...]:
     """The lane ids of ``edge`` in ``net_file``, by index."""
     net = _read(str(net_file), os.path.getmtime(net_file))
@@ -214,4 +219,4 @@ def cut_network(net_file: str, region: NetRegion, out_file: str | os.PathLike, t
     return out_file
 
 
-__all__ = ["CHAIN_CAP_METRES", "EXIT_METRES", "SHORT_EXIT_METRES", "NetRegion", "cut_network", "edge_lanes", "netconvert", "network_size", "regions_of"]
+__all__ = ["CHAIN_CAP_METRES", "EXIT_METRES", "SHORT_EXIT_METRES", "NetRegion", "cut_network", "edge_lanes", "netconvert", "network_size", "read_sumolib", "regions_of"]

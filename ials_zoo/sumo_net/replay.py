@@ -23,14 +23,18 @@ vehicles and of halting vehicles, over the GS's mean.
 
 from __future__ import annotations
 
+import functools
 import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
 
+from ials_zoo.errors import BadInput
 from ials_zoo.sumo.command import close_any_simulation, load_budget, start_simulation, sumo_command
 from ials_zoo.sumo.lease import SimHandle, import_libsumo
+from ials_zoo.sumo_net.arrays import ArraySim
+from ials_zoo.sumo_net.arrays_layout import RegionArrays, vehicle_kinds
 from ials_zoo.sumo_net.core import _Signal
 from ials_zoo.sumo_net.mdp import wait_norm
 from ials_zoo.sumo_net.metrics import MAX_ROUTE_BYTES, iter_elements
@@ -224,24 +228,44 @@ def replay_each(sim, scenario, regions: dict, entries, folder, seed: int = 0) ->
     return out
 
 
+def replay_arrays(scenario, regions: dict, entries, observed: list, seed: int = 0) -> tuple:
+    """The array local simulator (:mod:`ials_zoo.sumo_net.arrays`) of ``regions`` (in the
+    order of ``observed``: per region, its light's lanes), every light on its own program, fed
+    ``entries`` (of :meth:`ReplayCore.record`): ``(lane states per step, the lights' measures
+    every decision, seconds per step)``."""
+    arrays = RegionArrays(scenario.net_file, regions, scenario.yellow_seconds, driven=False)
+    sim = ArraySim(arrays, vehicle_kinds(scenario.route_files), 1, observed, seed, patience=None)
+    index = {light: r for r, light in enumerate(regions)}
+    every, states, measures = scenario.decision_seconds, [], []
+    splits = np.cumsum([len(x) for x in observed])[:-1]  # the rows of each light
+    start = time.perf_counter()
+    for k, step in enumerate(entries):
+        for light, _x, edges, lane, pos, _speed, vtype, factor in step:
+            if light in index:
+                sim.enter(0, index[light], edges, lane, max(pos, 0.0), vtype, factor)
+        sim.advance()
+        states.append(sim.lane_states())
+        if (k + 1) % every == 0:
+            measures.append(np.split(sim.measures(every, MAX_DISTANCE), splits))
+    return states, measures, (time.perf_counter() - start) / max(len(entries), 1)
+
+
 def replay_regions(scenario, regions: dict, seconds: int, folder, seed: int = 0, measure_cost: bool = False,
-                   noise_floor: bool = False, each: bool = False) -> dict:
+                   noise_floor: bool = False, each: bool = False, local: str = "sumo") -> dict:
     """Record the GS's ``seconds`` and replay ``regions`` (light -> :class:`NetRegion`) fed with
     it; ``folder`` takes the cut networks. Returns ``error`` (:func:`replay_error` over the
     regions' controlled lanes), ``inserted`` (vehicles), ``local_seconds_per_step``, the lanes
     and both runs' lane states; ``measure_cost``: also ``gs_seconds_per_step`` (the GS alone);
-    ``noise_floor``: also the error between two replays of SUMO seeds ``seed`` and ``seed + 1``
-    (SUMO's own randomness, given the same entries); ``each``: also every region alone
-    (:func:`replay_each`, ``each_seconds_per_step``)."""
-
+    ``noise_floor``: also the error between two replays of seeds ``seed`` and ``seed + 1``
+    (the local simulator's own randomness, given the same entries); ``each``: also every region
+    alone (:func:`replay_each`, ``each_seconds_per_step``; SUMO only); ``local``: the local
+    simulator, ``"sumo"`` (the regions cut from the network) or ``"arrays"``
+    (:func:`replay_arrays`)."""
+    if local not in ("sumo", "arrays"):
+        raise BadInput(f"local: expected 'sumo' or 'arrays', got {local!r}")
     lights = [x for x in read_network(scenario.net_file).lights if x.id in regions]
     gs_lanes = [lane for x in lights for lane in x.lanes]
-    local_lanes = [f"{x.id}__{lane}" for x in lights for lane in x.lanes]
     gs_signals = [(x.lanes, x.lane_lengths) for x in lights]
-    local_signals = [([f"{x.id}__{lane}" for lane in x.lanes], x.lane_lengths) for x in lights]
-    every = scenario.decision_seconds
-    merged = cut_regions(scenario.net_file, regions, Path(folder))
-    vtypes = vehicle_types(scenario.route_files, Path(folder) / "vtypes.add.xml")
     sim = SimHandle("ials_zoo.sumo_net.replay:ReplayCore", {}, "auto", timeout=3600.0, loads=ReplayCore.LOADS,
                     load_seconds=load_budget(scenario.net_file, *scenario.route_files))
     out = {"lanes": gs_lanes}
@@ -251,22 +275,41 @@ def replay_regions(scenario, regions: dict, seconds: int, folder, seed: int = 0,
                                                   seconds, seed)
         edges = {light: r.edges for light, r in regions.items()}
         entries, out["gs"], gs_measures = sim.call("record", scenario.net_file, scenario.route_files,
-                                                   scenario.begin, seconds, edges, gs_lanes, gs_signals, every, seed)
-        replay = ("replay", merged, [vtypes], scenario.begin, entries, local_lanes, local_signals, every)
-        out["local"], local_measures = sim.call(*replay, seed)
-        out["local_seconds_per_step"] = sim.call("timing") / seconds
+                                                   scenario.begin, seconds, edges, gs_lanes, gs_signals,
+                                                   scenario.decision_seconds, seed)
+        if local == "arrays":
+            ordered = {x.id: regions[x.id] for x in lights}
+            replay = functools.partial(replay_arrays, scenario, ordered, entries, [x.lanes for x in lights])
+        else:
+            replay = _sumo_replay(sim, scenario, regions, lights, entries, Path(folder))
+        out["local"], local_measures, out["local_seconds_per_step"] = replay(seed)
         out["error"], out["inserted"] = replay_error(out["gs"], out["local"]), sum(map(len, entries))
         out["error"].update(measures_error(gs_measures, local_measures))
         if noise_floor:
-            again, again_measures = sim.call(*replay, seed + 1)
+            again, again_measures, _ = replay(seed + 1)
             out["noise_floor"] = replay_error(out["local"], again)
             out["noise_floor"].update(measures_error(local_measures, again_measures))
-        if each:
+        if each and local == "sumo":
             out["each_seconds_per_step"] = replay_each(sim, scenario, regions, entries, folder, seed)
     finally:
         sim.close()
     return out
 
 
-__all__ = ["MAX_DISTANCE", "ReplayCore", "cut_regions", "measures_error", "replay_each", "replay_error", "replay_regions",
+def _sumo_replay(sim, scenario, regions: dict, lights: list, entries, folder: Path):
+    """The SUMO regions' replay of ``entries`` as a function of the seed (:func:`replay_arrays`'s result)."""
+    merged = cut_regions(scenario.net_file, regions, folder)
+    vtypes = vehicle_types(scenario.route_files, folder / "vtypes.add.xml")
+    local_lanes = [f"{x.id}__{lane}" for x in lights for lane in x.lanes]
+    local_signals = [([f"{x.id}__{lane}" for lane in x.lanes], x.lane_lengths) for x in lights]
+
+    def replay(seed: int):
+        states, measures = sim.call("replay", merged, [vtypes], scenario.begin, entries, local_lanes, local_signals,
+                                    scenario.decision_seconds, seed)
+        return states, measures, sim.call("timing") / max(len(entries), 1)
+
+    return replay
+
+
+__all__ = ["MAX_DISTANCE", "ReplayCore", "cut_regions", "measures_error", "replay_arrays", "replay_each", "replay_error", "replay_regions",
            "vehicle_types"]

@@ -1,0 +1,395 @@
+"""The array local simulator of ``sumo_net_v0``: every region's vehicles as numpy arrays, all
+regions and copies stepped at once, one simulated second at a time.
+
+SUMO stays the GS and the judge; this is a local simulator of the regions
+(:mod:`ials_zoo.sumo_net.regions`), measured against SUMO (the replay contract,
+:func:`ials_zoo.sumo_net.replay.replay_regions` with ``local="arrays"``). Its model, chosen to be
+SUMO's where that costs nothing and simpler where it would cost a loop per vehicle:
+
+* **vehicles** in a pool of arrays (lane, position of the front, speed, route step, kind, speed
+  factor, waiting time); each second they are sorted by lane and position, so that every
+  vehicle's leader is its neighbour in the order;
+* **car following** is SUMO's default, Krauss, without a loop: each vehicle's speed is the
+  least of its last speed plus its acceleration, its lane's limit times its speed factor (or its
+  kind's top speed), and the safe speed behind its leader (``-b + sqrt(b^2 + v_l^2 + 2 b gap)``,
+  SUMO's ``tau`` of 1 s), less the dawdle (``sigma * min(speed, accel) * U[0, 1)``); it never passes its
+  leader's back as it was at the start of the second (a queue starts one vehicle per second);
+* **at a lane's end** the front vehicle takes the link onto its next edge: on red it stops at
+  the line, on yellow it stops unless it cannot any more (SUMO's rule), on a minor green
+  (``g``) it waits until it could cross the junction before a vehicle with the right of way
+  on a link it must yield to (SUMO's ``response``) gets there, :data:`GAP_SECONDS` to spare; on
+  green it drives across the junction (the straight line from
+  lane end to lane start) onto the next lane, behind that lane's last vehicle, one vehicle per
+  lane and second. On entering an edge a vehicle takes, among the lanes that lead on to its next
+  edge, the one with the fewest vehicles: lane changes happen at junctions only;
+* **signals**: the region's own light driven by actions as RESCO drives it (its greens and
+  yellows, :class:`~ials_zoo.sumo_net.core.NetCore`), or its own program (the replay), every
+  other light on its own program; a phase longer than its duration moves on, as in SUMO;
+* **entries** (the influence sources) are inserted where the GS had them, at the highest safe
+  speed, when their place is free; one that cannot be inserted waits ``patience`` seconds and is
+  then dropped (None: it waits, as SUMO's insertion queue does);
+* **exits**: a vehicle leaves where its way through the region ends; a blocked exit's lanes get
+  a speed limit of :data:`ials_zoo.sumo_net.island.BLOCKED_SPEED`.
+
+RESCO's measures (approach, total wait, queue, speed sum, max wait per incoming lane of the
+light, :class:`ials_zoo.sumo_net.core._Signal`) come from the same arrays with ``bincount``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ials_zoo.sumo_net.arrays_layout import GREEN, MINOR, YELLOW, RegionArrays
+
+HALTING_SPEED = 0.1  # m/s: SUMO's halting vehicle
+POSITION_KEY, POSITION_SHIFT = 1e5, 1e3  # lane * KEY + position + SHIFT sorts vehicles by lane, then position
+GAP_SECONDS = 1.0  # a minor link's vehicle goes if the foes come this long after it has crossed
+FIELDS = {"alive": bool, "lane": np.int64, "pos": np.float64, "speed": np.float64, "step": np.int64,
+          "cand": np.int64, "next_cand": np.int64, "length": np.float64, "gap": np.float64, "accel": np.float64,
+          "decel": np.float64, "top": np.float64, "sigma": np.float64, "factor": np.float64,
+          "waiting": np.float64, "resco_wait": np.float64, "came": np.int64}
+
+
+class VehiclePool:
+    """Every vehicle's fields as arrays (:data:`FIELDS`), slots reused as vehicles leave."""
+
+    def __init__(self, capacity: int = 256):
+        for name, dtype in FIELDS.items():
+            setattr(self, name, np.zeros(capacity, dtype))
+
+    def free_slots(self, n: int) -> np.ndarray:
+        free = np.flatnonzero(~self.alive)
+        if len(free) < n:
+            old = len(self.alive)
+            for name in FIELDS:
+                a = getattr(self, name)
+                setattr(self, name, np.concatenate([a, np.zeros(max(old, n), a.dtype)]))
+            free = np.flatnonzero(~self.alive)
+        return free[:n]
+
+
+class ArraySim:
+    """``copies`` copies of ``arrays``' regions (module docstring); lanes are numbered
+    ``copy * arrays.n_lanes + lane``. ``observed``: per region, the light's incoming lanes (ids
+    in the network), the rows of :meth:`measures` and :meth:`lane_states`."""
+
+    def __init__(self, arrays: RegionArrays, kinds: dict, copies: int, observed: list, seed: int = 0,
+                 patience: int | None = 2):
+        self.a, self.kinds, self.copies = arrays, kinds, int(copies)
+        self._kind_row, self._kind_rows = {"DEFAULT_VEHTYPE": 0}, [kinds["DEFAULT_VEHTYPE"]]
+        self._lane_choice: dict = {}  # (route step, lane index) -> (lane, candidate)
+        self.patience = patience
+        s = arrays.signals
+        self.n_signals = len(s.names)
+        self.n_phases = np.diff(s.phase_start)
+        self.width = s.shows.shape[1]
+        rows = [arrays.lane_of[r][x] for r, lanes in enumerate(observed) for x in lanes]
+        self.observed_lanes = np.array(rows, np.int64)
+        self.n_rows = len(rows)
+        per_copy = np.full(arrays.n_lanes, -1, np.int64)
+        per_copy[self.observed_lanes] = np.arange(self.n_rows)
+        # global lane -> observation row (copy-major), -1 where the lane is not observed
+        self.row_of = np.concatenate([np.where(per_copy >= 0, per_copy + c * self.n_rows, -1) for c in range(self.copies)])
+        self.length = np.tile(arrays.lane_length, self.copies)
+        self.reset(seed)
+
+    def reset(self, seed: int) -> None:
+        """No vehicles, every signal at its first phase, a new random stream."""
+        self.rng = np.random.default_rng(seed)
+        self.v = VehiclePool()
+        self.phase = np.zeros((self.copies, self.n_signals), np.int64)
+        self.elapsed = np.full((self.copies, self.n_signals), -1.0)  # SUMO counts a phase from the next step
+        self.limit = np.tile(self.a.lane_speed, self.copies)
+        # entries not inserted yet: [lane, candidate, route step, position, kind row, factor, seconds waited]
+        self.pending = np.zeros((0, 7))
+        self._new: list[tuple] = []  # entered since the last second
+        self.inserted = self.dropped = 0
+
+    # -- signals -------------------------------------------------------------------------------
+    def set_phase(self, copy: int, row: int, phase: int) -> None:
+        """Signal row ``row`` of ``copy`` to ``phase`` (its timer restarts, as SUMO's setPhase)."""
+        self.phase[copy, row] = phase
+        self.elapsed[copy, row] = -1.0
+
+    def _tick_signals(self) -> None:
+        self.elapsed += 1.0
+        start = self.a.signals.phase_start[:-1]
+        over = self.elapsed >= self.a.signals.durations[start + self.phase]
+        self.phase = np.where(over, (self.phase + 1) % self.n_phases, self.phase)
+        self.elapsed[over] = 0.0
+
+    def _shows(self, copy: np.ndarray, code: np.ndarray) -> np.ndarray:
+        """What link ``code`` shows in ``copy`` (GREEN where no light controls it)."""
+        out = np.full(len(code), GREEN, np.int8)
+        ruled = code >= 0
+        row, link = np.divmod(code[ruled], self.width)
+        phase = self.a.signals.phase_start[row] + self.phase[copy[ruled], row]
+        out[ruled] = self.a.signals.shows[phase, link]
+        return out
+
+    # -- one second ------------------------------------------------------------------------------
+    def advance(self) -> None:
+        """One simulated second: signals, every vehicle moves, then the entries are inserted
+        (as SUMO's step does)."""
+        self._tick_signals()
+        v = self.v
+        idx = np.flatnonzero(v.alive)
+        if len(idx):
+            self._move(idx[np.lexsort((-v.pos[idx], v.lane[idx]))])
+        self._insert_pending()
+
+    def _move(self, idx: np.ndarray) -> None:
+        """Move the vehicles ``idx`` (sorted by lane, front first) by one second."""
+        v, r = self.v, self.a.routes
+        lane, pos, speed = v.lane[idx], v.pos[idx], v.speed[idx]
+        front = np.ones(len(idx), bool)
+        front[1:] = lane[1:] != lane[:-1]
+        back = pos - v.length[idx]
+        # the leader: the vehicle ahead on the lane, or for a front vehicle the stop line or the
+        # last vehicle of its next lane
+        lead_back = np.empty(len(idx))
+        lead_speed = np.empty(len(idx))
+        lead_back[1:], lead_speed[1:] = back[:-1], speed[:-1]
+        tail_back, tail_speed = self._tails(lane, back, speed, front)
+        f = np.flatnonzero(front)
+        fv = idx[f]
+        nxt = r.next[v.step[fv]]
+        going_on = nxt >= 0
+        copy = lane[f] // self.a.n_lanes
+        next_lane = np.where(going_on, r.lanes[np.maximum(nxt, 0), v.next_cand[fv]] + copy * self.a.n_lanes, -1)
+        junction = r.junction[v.step[fv], v.cand[fv]]
+        to_line = self.length[lane[f]] - pos[f]
+        way, shows, coming = self._right_of_way(idx, lane, pos, speed)
+        stopping = speed[f] ** 2 / (2 * v.decel[fv])
+        major = going_on & ((shows[f] == GREEN) | ((shows[f] == YELLOW) & (to_line < stopping)))
+        passes = major | (going_on & (shows[f] == MINOR) & ~self._foe_coming(fv, way[f], coming, to_line, junction))
+        # the next lane's position p is lane end + junction + p here
+        beyond = np.where(passes, tail_back[np.maximum(next_lane, 0)] + junction, np.inf)
+        lead_back[f] = np.where(going_on, np.where(passes, pos[f] + to_line + beyond, pos[f] + to_line + v.gap[fv]),
+                                np.inf)
+        lead_speed[f] = np.where(passes, tail_speed[np.maximum(next_lane, 0)], 0.0)
+        new_speed = self._speeds(idx, lead_back - pos - v.gap[idx], lead_speed)
+        limit = lead_back - v.gap[idx]  # never past the leader's back as it was
+        new_pos = np.minimum(pos + new_speed, np.maximum(limit, pos))
+        won = self._crossing(f, fv, passes, next_lane, new_pos)
+        v.speed[idx] = new_pos - pos
+        v.pos[idx] = new_pos
+        v.waiting[idx] = np.where(v.speed[idx] < HALTING_SPEED, v.waiting[idx] + 1.0, 0.0)
+        v.came[fv[won]] = way[f[won]]
+        self._switch(fv[won], next_lane[won], new_pos[f[won]] - self.length[lane[f[won]]] - junction[won])
+        self._leave(idx)
+
+    def _tails(self, lane, back, speed, front):
+        """Per lane (all copies): its last vehicle's back (+inf if empty) and speed."""
+        n = self.copies * self.a.n_lanes
+        tail_back, tail_speed = np.full(n, np.inf), np.zeros(n)
+        last = np.ones(len(lane), bool)
+        last[:-1] = front[1:]
+        tail_back[lane[last]], tail_speed[lane[last]] = back[last], speed[last]
+        return tail_back, tail_speed
+
+    def _speeds(self, idx, gap, lead_speed) -> np.ndarray:
+        """Krauss's next speed of vehicles ``idx`` behind a leader ``gap`` m ahead (module docstring)."""
+        v = self.v
+        b = v.decel[idx]
+        with np.errstate(invalid="ignore"):
+            safe = -b + np.sqrt(b * b + lead_speed ** 2 + 2 * b * np.maximum(gap, 0.0))  # tau = 1 s
+        safe = np.where(np.isnan(safe), np.inf, safe)
+        top = np.minimum(self.limit[v.lane[idx]] * v.factor[idx], v.top[idx])
+        want = np.minimum(np.minimum(v.speed[idx] + v.accel[idx], top), safe)
+        # SUMO's dawdle (MSCFModel_Krauss::dawdle2): in proportion to the speed below one
+        # second's acceleration, so that a vehicle closing a small gap does not creep for long
+        dawdle = v.sigma[idx] * np.minimum(want, v.accel[idx]) * self.rng.random(len(idx))
+        return np.maximum(0.0, want - dawdle)
+
+    def _right_of_way(self, idx, lane, pos, speed):
+        """Per vehicle ``idx``: its link (index over all copies, -1 on its last edge) and what
+        the link shows; per link, when the first vehicle with the right of way reaches the
+        junction (s; 0 for one that crossed by it and is still in the junction)."""
+        v, r = self.v, self.a.routes
+        step, cand = v.step[idx], v.cand[idx]
+        copy = lane // self.a.n_lanes
+        way = np.where(r.next[step] >= 0, r.way[step, cand] + copy * self.a.n_links, -1)
+        shows = self._shows(copy, r.link[step, cand])
+        arrives = np.full(self.copies * self.a.n_links + 1, np.inf)  # the last: no link
+        on = (way >= 0) & (shows == GREEN)
+        np.minimum.at(arrives, way[on], (self.length[lane[on]] - pos[on]) / np.maximum(speed[on], 0.5))
+        crossing = v.came[idx]
+        arrives[crossing[(crossing >= 0) & (pos < 0)]] = 0.0
+        return way, shows, arrives
+
+    def _foe_coming(self, fv, way, arrives, to_line, junction) -> np.ndarray:
+        """Per front vehicle ``fv`` on link ``way``: whether a vehicle on a link it yields to
+        reaches the junction before it could have crossed it, with :data:`GAP_SECONDS` to spare
+        (SUMO's gap acceptance, simplified)."""
+        v, n = self.v, self.a.n_links
+        base = np.maximum(way, 0)
+        foes = self.a.foes[base % n]
+        first = arrives[np.where(foes >= 0, foes + (base // n * n)[:, None], -1)].min(axis=1)
+        u, a = v.speed[fv], v.accel[fv]
+        clear = (-u + np.sqrt(u * u + 2 * a * (to_line + junction + v.length[fv]))) / a
+        return (first < clear + GAP_SECONDS) & (way >= 0)
+
+    def _crossing(self, f, fv, passes, next_lane, new_pos) -> np.ndarray:
+        """Which front vehicles ``f`` cross onto their next lane this second (one per lane; the
+        others wait at their line: ``new_pos`` is cut there)."""
+        length = self.length[self.v.lane[fv]]
+        over = passes & (new_pos[f] > length)
+        won = np.zeros(len(f), bool)
+        cand = np.flatnonzero(over)
+        if len(cand):
+            _, first = np.unique(next_lane[cand], return_index=True)
+            won[cand[first]] = True
+        held = over & ~won
+        new_pos[f[held]] = length[held]
+        return won
+
+    def _switch(self, w, lanes, positions) -> None:
+        """Vehicles ``w`` onto ``lanes`` at ``positions``: their route's next step."""
+        v = self.v
+        v.step[w] = self.a.routes.next[v.step[w]]
+        v.cand[w] = v.next_cand[w]
+        v.lane[w] = lanes
+        v.pos[w] = positions
+        self._choose_next(w)
+
+    def _choose_next(self, w: np.ndarray) -> None:
+        """For vehicles ``w`` just on an edge: among the lanes of their next edge that lead on,
+        one their link leads to, else the least used (module docstring)."""
+        v, r = self.v, self.a.routes
+        nxt = r.next[v.step[w]]
+        on = nxt >= 0
+        v.next_cand[w[~on]] = 0
+        if not on.any():
+            return
+        w, nxt = w[on], nxt[on]
+        counts = np.bincount(v.lane[v.alive], minlength=self.copies * self.a.n_lanes)
+        lanes = r.lanes[nxt]  # [vehicles, candidates]
+        copy = v.lane[w] // self.a.n_lanes
+        load = np.where(lanes >= 0, counts[np.maximum(lanes, 0) + copy[:, None] * self.a.n_lanes], 1 << 40)
+        targets = r.targets[v.step[w], v.cand[w]]  # [vehicles, targets]
+        led = (lanes[:, :, None] == targets[:, None, :]).any(axis=2) & (lanes >= 0)
+        v.next_cand[w] = np.argmin(load + np.where(led, 0, 1 << 20), axis=1)
+
+    def _leave(self, idx) -> None:
+        v, r = self.v, self.a.routes
+        gone = (r.next[v.step[idx]] < 0) & (v.pos[idx] >= r.leave[v.step[idx]])
+        v.alive[idx[gone]] = False
+
+    # -- entries ---------------------------------------------------------------------------------
+    def enter(self, copy: int, region: int, edges, lane_index: int, position: float, kind: str, factor: float) -> None:
+        """A vehicle that enters region ``region`` of ``copy`` now (inserted with the next second):
+        on the lane ``lane_index`` of its first edge if that lane leads on, else the first that does."""
+        step = self.a.routes.step_of(region, edges)
+        key = (step, int(lane_index))
+        if key not in self._lane_choice:
+            lanes = self.a.routes.lanes[step]
+            options = np.flatnonzero(lanes >= 0)
+            mine = [j for j in options if self.a.lane_index[lanes[j]] == lane_index]
+            j = int(mine[0] if mine else options[0])
+            self._lane_choice[key] = (int(lanes[j]), j)
+        lane, j = self._lane_choice[key]
+        if kind not in self._kind_row:
+            self._kind_row[kind] = self._kind_row["DEFAULT_VEHTYPE"] if kind not in self.kinds else len(self._kind_rows)
+            if kind in self.kinds:
+                self._kind_rows.append(self.kinds[kind])
+        self._new.append((lane + copy * self.a.n_lanes, j, step, float(position), self._kind_row[kind], float(factor)))
+
+    def _insert_pending(self) -> None:
+        """Insert every waiting entry whose place is free (one per lane and second); drop those
+        that waited ``patience`` seconds."""
+        if self._new:
+            new = np.array(self._new, np.float64).reshape(-1, 6)
+            self.pending = np.concatenate([self.pending, np.column_stack([new, np.zeros(len(new))])])
+            self._new = []
+        p = self.pending
+        if not len(p):
+            return
+        lane, kind = p[:, 0].astype(np.int64), p[:, 4].astype(np.int64)
+        k = np.asarray(self._kind_rows)[kind]
+        ok, lead_back, lead_speed = self._room(lane, p[:, 3], k[:, 0], k[:, 1])
+        cand = np.flatnonzero(ok)
+        _, first = np.unique(lane[cand], return_index=True)
+        go = np.zeros(len(p), bool)
+        go[cand[first]] = True
+        self._place(p[go], k[go], lead_back[go], lead_speed[go])
+        self.inserted += int(go.sum())
+        left = p[~go]
+        left[:, 6] += 1
+        late = left[:, 6] > self.patience if self.patience is not None else np.zeros(len(left), bool)
+        self.dropped += int(late.sum())
+        self.pending = left[~late]
+
+    def _room(self, lane, position, length, gap):
+        """Per entry: whether its place is free of the vehicles on its lane, and the back and
+        speed of the vehicle ahead of it (+inf and 0 if none)."""
+        v = self.v
+        alive = np.flatnonzero(v.alive)
+        order = alive[np.lexsort((v.pos[alive], v.lane[alive]))]
+        keys = v.lane[order] * POSITION_KEY + (v.pos[order] + POSITION_SHIFT)
+        i = np.searchsorted(keys, lane * POSITION_KEY + (position + POSITION_SHIFT))
+        ahead = order[np.minimum(i, len(order) - 1)] if len(order) else np.zeros(len(lane), np.int64)
+        has_ahead = (i < len(order)) & (v.lane[ahead] == lane) if len(order) else np.zeros(len(lane), bool)
+        behind = order[np.maximum(i - 1, 0)] if len(order) else np.zeros(len(lane), np.int64)
+        has_behind = (i > 0) & (v.lane[behind] == lane) if len(order) else np.zeros(len(lane), bool)
+        lead_back = np.where(has_ahead, v.pos[ahead] - v.length[ahead], np.inf)
+        lead_speed = np.where(has_ahead, v.speed[ahead], 0.0)
+        ok = (lead_back - position >= gap) & (~has_behind | (position - length - v.pos[behind] >= v.gap[behind]))
+        return ok, lead_back, lead_speed
+
+    def _place(self, p, k, lead_back, lead_speed) -> None:
+        """New vehicles from pending rows ``p`` (kinds ``k``) at the highest safe speed."""
+        if not len(p):
+            return
+        v = self.v
+        slots = v.free_slots(len(p))
+        lane, position, factor = p[:, 0].astype(np.int64), p[:, 3], p[:, 5]
+        b = k[:, 3]
+        room = np.maximum(lead_back - position - k[:, 1], 0.0)
+        with np.errstate(invalid="ignore"):
+            safe = np.where(np.isfinite(room), -b + np.sqrt(b * b + lead_speed ** 2 + 2 * b * room), np.inf)
+        top = np.minimum(self.a.lane_speed[lane % self.a.n_lanes] * factor, k[:, 4])
+        values = {"alive": True, "lane": lane, "pos": position, "speed": np.minimum(top, safe),
+                  "step": p[:, 2].astype(np.int64), "cand": p[:, 1].astype(np.int64), "length": k[:, 0],
+                  "gap": k[:, 1], "accel": k[:, 2], "decel": k[:, 3], "top": k[:, 4], "sigma": k[:, 5],
+                  "factor": factor, "waiting": 0.0, "resco_wait": 0.0, "came": -1}
+        for name, x in values.items():
+            getattr(v, name)[slots] = x
+        self._choose_next(slots)
+
+    # -- what the lights see -----------------------------------------------------------------------
+    def lane_states(self) -> np.ndarray:
+        """Per observed lane (copy-major rows): ``[vehicles, halting]`` on it now."""
+        v = self.v
+        on = v.alive & (v.pos >= 0)
+        rows = self.row_of[v.lane[on]]
+        mine = rows >= 0
+        n = self.copies * self.n_rows
+        count = np.bincount(rows[mine], minlength=n)
+        halting = np.bincount(rows[mine], weights=(v.speed[on][mine] < HALTING_SPEED), minlength=n)
+        return np.stack([count, halting], axis=1).astype(np.float64)
+
+    def measures(self, interval: int, max_distance: float) -> np.ndarray:
+        """RESCO's measures ``[rows, 5]`` (approach, total wait, queue, speed sum, max wait) of
+        the observed lanes; a vehicle's wait is SUMO's waiting time when first seen stopped,
+        then grows by ``interval`` each observation while it stays detected (RESCO's)."""
+        v = self.v
+        idx = np.flatnonzero(v.alive & (v.pos >= 0))
+        rows = self.row_of[v.lane[idx]]
+        seen = (rows >= 0) & (self.length[v.lane[idx]] - v.pos[idx] <= max_distance)
+        v.resco_wait[idx[~seen]] = 0.0
+        idx, rows = idx[seen], rows[seen]
+        wait = np.where(v.resco_wait[idx] > 0, v.resco_wait[idx] + interval, v.waiting[idx])
+        v.resco_wait[idx] = np.where(wait > 0, wait, 0.0)
+        n = self.copies * self.n_rows
+        queued = wait > 0
+        out = np.zeros((n, 5))
+        out[:, 0] = np.bincount(rows, weights=~queued, minlength=n)
+        out[:, 1] = np.bincount(rows, weights=np.where(queued, wait, 0.0), minlength=n)
+        out[:, 2] = np.bincount(rows, weights=queued, minlength=n)
+        out[:, 3] = np.bincount(rows, weights=v.speed[idx], minlength=n)
+        np.maximum.at(out[:, 4], rows, np.where(queued, wait, 0.0))
+        return out
+
+
+__all__ = ["ArraySim", "HALTING_SPEED", "VehiclePool"]

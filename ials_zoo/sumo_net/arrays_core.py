@@ -1,0 +1,220 @@
+"""The IALS's core on arrays: :class:`~ials_zoo.sumo_net.island.IslandCore`'s contract (RESCO's
+signal loop fed influence sources, with the region data) on the array local simulator
+(:mod:`ials_zoo.sumo_net.arrays`) instead of SUMO regions.
+
+Rows are ``(copy, light)``, copy-major: every light's region once per copy. Each decision it
+takes per row an action and the influence sources (:mod:`ials_zoo.sumo_net.influence`): per
+entry point and second how many vehicles come in, each drawn from the GS's entries there
+(:func:`~ials_zoo.sumo_net.island.entry_tables`) with the row's own random stream, as the island
+draws them; per exit whether it is blocked (its lanes held at
+:data:`~ials_zoo.sumo_net.island.BLOCKED_SPEED`; blocked :data:`~ials_zoo.sumo_net.island.GRIDLOCK_DECISIONS`
+decisions in a row, it stays blocked). It returns RESCO's measures, the lights' phases, the time
+and ``(influences, d-sets)``, the d-sets read from the arrays as the
+:class:`~ials_zoo.sumo_net.influence.EntryWatcher` reads them from SUMO.
+
+Holds no SUMO simulation: it runs in the caller's process (:class:`ials_zoo.sumo.lease.PlainHandle`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ials_zoo.core.streams import agent_key
+from ials_zoo.sumo_net.arrays import HALTING_SPEED, ArraySim
+from ials_zoo.sumo_net.arrays_layout import RegionArrays, vehicle_kinds
+from ials_zoo.sumo_net.influence import CELL_METRES, CELLS, HELD_DECISIONS, region_layout
+from ials_zoo.sumo_net.regions import regions_of
+
+INSERT_PATIENCE = 2  # as the island's: a vehicle that cannot enter within 2 s is dropped
+BLOCKED_SPEED = 0.01  # as the island's (m/s)
+GRIDLOCK_DECISIONS = 10  # as the island's
+
+
+class ArrayNetCore:
+    """The core (module docstring). Config: ``net_file``, ``route_files``, ``begin``, ``decision``,
+    ``yellow``, ``lights`` (every region's light, in row order), ``lanes`` (their incoming lanes),
+    ``controlled`` (the lights actions drive, per copy in this order; the others run their own
+    program), ``max_distance``, ``tables`` (per light, per entry point: the GS's entries),
+    ``copies``."""
+
+    def __init__(self, net_file, route_files, begin, decision, yellow, lights, lanes, tables, controlled=None,
+                 copies=1, max_distance=200.0, **_ignored):
+        self.begin, self.decision, self.yellow = int(begin), int(decision), int(yellow)
+        self.lights, self.copies = list(lights), int(copies)
+        self.max_distance = float(max_distance)
+        regions = regions_of(net_file)
+        self.controlled = list(self.lights if controlled is None else controlled)
+        self.arrays = RegionArrays(net_file, {x: regions[x] for x in self.lights}, self.yellow, driven=self.controlled)
+        self.sim = ArraySim(self.arrays, vehicle_kinds(route_files), self.copies, [list(x) for x in lanes],
+                            patience=INSERT_PATIENCE)
+        self.tables = list(tables) if isinstance(tables, list) else [tables[x] for x in self.lights]
+        names = self.arrays.signals.names
+        self.own_row = np.array([names.index((r, x)) for r, x in enumerate(self.lights)], np.int64)
+        self.driven_row = self.own_row[[self.lights.index(x) for x in self.controlled]]
+        self.data = RegionData(self.arrays, [region_layout(net_file, x) for x in self.lights], self.decision,
+                               self.copies)
+        self.held = np.zeros((self.copies, self.data.n_exits), np.int64)
+        self.time, self.rngs, self.queues = self.begin, [], []
+
+    # -- the episode -----------------------------------------------------------------------------
+    def reset(self, seed: int, tripinfo=None):
+        """A new episode: no vehicles, every light at its first green, the rows' random streams
+        from ``seed`` (the island's: one per ``(light, copy)``)."""
+        self.sim.reset(seed)
+        self.rngs = [np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(agent_key(x), c)))
+                     for c in range(self.copies) for x in self.lights]
+        self.held[:] = 0
+        self.time, self.queues = self.begin, []
+        self.plan = np.zeros(self.data.plan_start[-1], np.int64)
+        return self._observe()
+
+    def step(self, actions, influences):
+        """One decision: the actions (green indices) of the controlled lights, copy-major, and
+        every row's influence sources."""
+        d = self.data
+        self.plan = np.concatenate([np.asarray(u, np.int64) for u in influences])
+        if len(self.plan) != d.plan_start[-1]:
+            raise ValueError(f"influences: {len(self.plan)} sources in all, expected {d.plan_start[-1]}")
+        blocked = (self.plan[d.exit_pos] > 0) | (self.held >= GRIDLOCK_DECISIONS)
+        self.plan[d.exit_pos] = blocked  # a gridlock is what the sources say too
+        lanes = d.exit_lane[None, :] + np.arange(self.copies)[:, None] * self.arrays.n_lanes
+        self.sim.limit[lanes] = np.where(blocked[:, d.exit_of_pair], BLOCKED_SPEED,
+                                         self.arrays.lane_speed[d.exit_lane][None, :])
+        self._due = self._entries_due()
+        self._set_greens([int(x) for x in actions])
+        self._advance(self.yellow, self.decision, self._due)
+        self.held = np.where(blocked, self.held + 1, 0)
+        return self._observe()
+
+    def _set_greens(self, actions: list[int]) -> None:
+        """RESCO's switch (:meth:`ials_zoo.sumo_net.core.NetCore.step`): a light whose action is
+        another green shows the yellow between them for ``yellow`` seconds, then every driven
+        light is set to its action (its timer restarts)."""
+        signals, m = self.arrays.signals, len(self.controlled)
+        for k, a in enumerate(actions):
+            c, row = k // m, self.driven_row[k % m]
+            current = int(self.sim.phase[c, row])
+            yellow = signals.yellow_of[row].get((current, a)) if current != a else None
+            if yellow is not None:
+                self.sim.set_phase(c, row, yellow)
+        self._advance(0, self.yellow, self._due)
+        for k, a in enumerate(actions):
+            self.sim.set_phase(k // m, self.driven_row[k % m], a)
+
+    def _entries_due(self) -> dict[int, list]:
+        """second -> ``(copy, region, entry)`` drawn for this decision, each from its entry
+        point's table with its row's stream."""
+        d, due, n = self.data, {}, len(self.lights)
+        counts = self.plan[d.entry_pos]
+        for i in np.flatnonzero(counts):
+            k, second, j = int(d.entry_row[i]), int(d.entry_second[i]), int(d.entry_point[i])
+            table = self.tables[k % n][j]
+            for _ in range(int(counts[i]) if table else 0):
+                due.setdefault(second, []).append((k // n, k % n, table[int(self.rngs[k].integers(len(table)))]))
+        return due
+
+    def _advance(self, start: int, stop: int, due: dict) -> None:
+        for second in range(start, stop):
+            for c, r, (edges, lane, pos, vtype, factor) in due.get(second, ()):
+                self.sim.enter(c, r, edges, lane, max(pos, 0.0), vtype, factor)
+            self.sim.advance()
+            self.time += 1
+
+    # -- what the lights and the AIPs see ------------------------------------------------------------
+    def _observe(self):
+        measures = self.sim.measures(self.decision, self.max_distance)
+        self.queues.append(float(measures[:, 2].sum()) / (self.copies * len(self.lights)))
+        phases = self.sim.phase[:, self.own_row].reshape(-1)
+        told = np.split(self.plan, self.data.plan_start[1:-1])
+        return measures, phases, float(self.time), (told, self._dsets())
+
+    def _dsets(self) -> list[np.ndarray]:
+        """Per row: the occupancy cells of its entry lanes, its exits blocked now (a vehicle
+        halting before where it would leave, or its source says so) and how long each lasted."""
+        d, v, n = self.data, self.sim.v, self.arrays.n_lanes
+        flat = np.zeros(d.dset_start[-1], np.uint8)
+        alive = np.flatnonzero(v.alive)
+        copy, lane, pos = v.lane[alive] // n, v.lane[alive] % n, v.pos[alive]
+        cell = ((pos - d.cell_offset[lane]) // CELL_METRES).astype(np.int64)
+        on = (d.cell_base[lane] >= 0) & (cell >= 0) & (cell < CELLS)
+        flat[d.dset_start[:-1][copy[on] * len(self.lights) + d.region_of_lane[lane[on]]] + d.cell_base[lane[on]]
+             + cell[on]] = 1
+        exit_ = d.exit_of_lane[lane]
+        halted = (exit_ >= 0) & (v.speed[alive] < HALTING_SPEED) & (pos <= d.exit_leave[np.maximum(exit_, 0)])
+        now = self.plan[d.exit_pos] > 0
+        now[copy[halted], exit_[halted]] = True
+        flat[d.now_pos] = now
+        flat[d.held_pos] = self.held[:, :, None] >= np.asarray(HELD_DECISIONS)
+        return np.split(flat, d.dset_start[1:-1])
+
+    # -- the core's other calls -------------------------------------------------------------------------
+    def finish(self) -> dict:
+        """The episode's mean queue per light (as :meth:`ials_zoo.sumo_net.core.NetCore.finish`)."""
+        return {"queue": float(np.mean(self.queues[1:])) if len(self.queues) > 1 else 0.0}
+
+    def timing(self) -> float:
+        return 0.0
+
+    def close(self) -> None:
+        pass
+
+
+class RegionData:
+    """Where each row's influence sources and d-set bits lie in flat arrays over every row
+    (rows ``copy * regions + region``), so that one numpy pass reads or writes them all."""
+
+    def __init__(self, arrays, layouts: list, decision: int, copies: int):
+        points = [len(x.points) for x in layouts]
+        exits = [len(x.exits) for x in layouts]
+        sources = [len(x.source_lanes) for x in layouts]
+        rows = [r for _ in range(copies) for r in range(len(layouts))]
+        self.plan_start = np.concatenate([[0], np.cumsum([decision * points[r] + exits[r] for r in rows])])
+        dset = [sources[r] * CELLS + exits[r] * (1 + len(HELD_DECISIONS)) for r in rows]
+        self.dset_start = np.concatenate([[0], np.cumsum(dset)])
+        first_exit = np.concatenate([[0], np.cumsum(exits)])
+        self.n_exits = int(first_exit[-1])
+        region_of_exit = np.repeat(np.arange(len(layouts)), exits)
+        local = np.arange(self.n_exits) - first_exit[region_of_exit]
+        c = np.arange(copies)[:, None]
+        row = c * len(layouts) + region_of_exit[None, :]
+        self.exit_pos = self.plan_start[row] + decision * np.asarray(points)[region_of_exit] + local
+        base = self.dset_start[row] + np.asarray(sources)[region_of_exit] * CELLS
+        self.now_pos = base + local
+        self.held_pos = (base + np.asarray(exits)[region_of_exit] + local * len(HELD_DECISIONS))[:, :, None] + \
+            np.arange(len(HELD_DECISIONS))
+        self._entries(rows, points, decision)
+        self._lanes(arrays, layouts, first_exit)
+
+    def _entries(self, rows: list, points: list, decision: int) -> None:
+        """Every entry source's row, second and entry point, and its place in the flat plan."""
+        k = [np.full(decision * points[r], i) for i, r in enumerate(rows)]
+        self.entry_row = np.concatenate(k)
+        self.entry_second = np.concatenate([np.repeat(np.arange(decision), points[r]) for r in rows])
+        self.entry_point = np.concatenate([np.tile(np.arange(points[r]), decision) for r in rows])
+        self.entry_pos = np.concatenate([self.plan_start[i] + np.arange(decision * points[r]) for i, r in enumerate(rows)])
+
+    def _lanes(self, arrays, layouts: list, first_exit) -> None:
+        """Per lane of a copy: its region, its first d-set cell within the region's d-set (-1: no
+        entry lane) and where its region begins on it, the exit it belongs to (-1: none)."""
+        n = arrays.n_lanes
+        self.region_of_lane = np.zeros(n, np.int64)
+        self.cell_base, self.cell_offset = np.full(n, -1, np.int64), np.zeros(n)
+        self.exit_of_lane = np.full(n, -1, np.int64)
+        pairs, leave = [], []
+        for r, x in enumerate(layouts):
+            self.region_of_lane[list(arrays.lane_of[r].values())] = r
+            offsets = x.lane_offsets or (0.0,) * len(x.source_lanes)
+            for i, (lane, offset) in enumerate(zip(x.source_lanes, offsets)):
+                self.cell_base[arrays.lane_of[r][lane]] = i * CELLS
+                self.cell_offset[arrays.lane_of[r][lane]] = offset
+            for e, (edge, metres) in enumerate(x.exits):
+                leave.append(metres)
+                for lane in arrays.edge_lanes[r][edge]:
+                    self.exit_of_lane[lane] = first_exit[r] + e
+                    pairs.append((first_exit[r] + e, lane))
+        self.exit_leave = np.array(leave + [0.0])
+        pairs = np.array(pairs, np.int64).reshape(-1, 2)
+        self.exit_of_pair, self.exit_lane = pairs[:, 0], pairs[:, 1]
+
+
+__all__ = ["ArrayNetCore", "RegionData"]
