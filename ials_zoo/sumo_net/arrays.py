@@ -21,7 +21,9 @@ SUMO's where that costs nothing and simpler where it would cost a loop per vehic
   green it drives across the junction (the straight line from
   lane end to lane start) onto the next lane, behind that lane's last vehicle, one vehicle per
   lane and second. On entering an edge a vehicle takes, among the lanes that lead on to its next
-  edge, the one with the fewest vehicles: lane changes happen at junctions only;
+  edge, the one with the fewest vehicles for its share of the edge's vehicles in the GS
+  (:mod:`ials_zoo.sumo_net.arrays_calibration`), preferring those its link leads to: lane changes
+  happen at junctions only;
 * **signals**: the region's own light driven by actions as RESCO drives it (its greens and
   yellows, :class:`~ials_zoo.sumo_net.core.NetCore`), or its own program (the replay), every
   other light on its own program; a phase longer than its duration moves on, as in SUMO;
@@ -43,6 +45,7 @@ from ials_zoo.sumo_net.arrays_layout import GREEN, MINOR, YELLOW, RegionArrays
 
 HALTING_SPEED = 0.1  # m/s: SUMO's halting vehicle
 POSITION_KEY, POSITION_SHIFT = 1e5, 1e3  # lane * KEY + position + SHIFT sorts vehicles by lane, then position
+OFF_LINK_PENALTY = 4.0  # vehicles per share: how much emptier a lane their link does not lead to must be
 GAP_SECONDS = 1.0  # a minor link's vehicle goes if the foes come this long after it has crossed
 FIELDS = {"alive": bool, "lane": np.int64, "pos": np.float64, "speed": np.float64, "step": np.int64,
           "cand": np.int64, "next_cand": np.int64, "length": np.float64, "gap": np.float64, "accel": np.float64,
@@ -255,7 +258,8 @@ class ArraySim:
 
     def _choose_next(self, w: np.ndarray) -> None:
         """For vehicles ``w`` just on an edge: among the lanes of their next edge that lead on,
-        one their link leads to, else the least used (module docstring)."""
+        the one with the fewest vehicles for its share (:meth:`RegionArrays.calibrate`), one
+        their link leads to unless another is much emptier (module docstring)."""
         v, r = self.v, self.a.routes
         nxt = r.next[v.step[w]]
         on = nxt >= 0
@@ -266,10 +270,12 @@ class ArraySim:
         counts = np.bincount(v.lane[v.alive], minlength=self.copies * self.a.n_lanes)
         lanes = r.lanes[nxt]  # [vehicles, candidates]
         copy = v.lane[w] // self.a.n_lanes
-        load = np.where(lanes >= 0, counts[np.maximum(lanes, 0) + copy[:, None] * self.a.n_lanes], 1 << 40)
+        load = counts[np.maximum(lanes, 0) + copy[:, None] * self.a.n_lanes] + 1.0
+        share = self.a.lane_share[np.maximum(lanes, 0)]
         targets = r.targets[v.step[w], v.cand[w]]  # [vehicles, targets]
-        led = (lanes[:, :, None] == targets[:, None, :]).any(axis=2) & (lanes >= 0)
-        v.next_cand[w] = np.argmin(load + np.where(led, 0, 1 << 20), axis=1)
+        led = (lanes[:, :, None] == targets[:, None, :]).any(axis=2)
+        score = load / share + np.where(led, 0.0, OFF_LINK_PENALTY)
+        v.next_cand[w] = np.argmin(np.where(lanes >= 0, score, np.inf), axis=1)
 
     def _leave(self, idx) -> None:
         v, r = self.v, self.a.routes

@@ -35,16 +35,17 @@ class ArrayNetCore:
     ``yellow``, ``lights`` (every region's light, in row order), ``lanes`` (their incoming lanes),
     ``controlled`` (the lights actions drive, per copy in this order; the others run their own
     program), ``max_distance``, ``tables`` (per light, per entry point: the GS's entries),
-    ``copies``."""
+    ``copies``, ``lane_shares`` (the lane calibration, :mod:`ials_zoo.sumo_net.arrays_calibration`)."""
 
     def __init__(self, net_file, route_files, begin, decision, yellow, lights, lanes, tables, controlled=None,
-                 copies=1, max_distance=200.0, **_ignored):
+                 copies=1, max_distance=200.0, lane_shares=None, **_ignored):
         self.begin, self.decision, self.yellow = int(begin), int(decision), int(yellow)
         self.lights, self.copies = list(lights), int(copies)
         self.max_distance = float(max_distance)
         regions = regions_of(net_file)
         self.controlled = list(self.lights if controlled is None else controlled)
         self.arrays = RegionArrays(net_file, {x: regions[x] for x in self.lights}, self.yellow, driven=self.controlled)
+        self.arrays.calibrate(lane_shares or {})
         self.sim = ArraySim(self.arrays, vehicle_kinds(route_files), self.copies, [list(x) for x in lanes],
                             patience=INSERT_PATIENCE)
         self.tables = list(tables) if isinstance(tables, list) else [tables[x] for x in self.lights]
@@ -173,7 +174,7 @@ class RegionData:
         self.dset_start = np.concatenate([[0], np.cumsum(dset)])
         first_exit = np.concatenate([[0], np.cumsum(exits)])
         self.n_exits = int(first_exit[-1])
-        region_of_exit = np.repeat(np.arange(len(layouts)), exits)
+        self.region_of_exit = region_of_exit = np.repeat(np.arange(len(layouts)), exits)
         local = np.arange(self.n_exits) - first_exit[region_of_exit]
         c = np.arange(copies)[:, None]
         row = c * len(layouts) + region_of_exit[None, :]

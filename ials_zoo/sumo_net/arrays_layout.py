@@ -43,6 +43,7 @@ GREEN, MINOR, YELLOW, RED = 2, 3, 1, 0  # MINOR: green, yielding to the links it
 MAX_CANDIDATES = 8  # lanes of one edge a vehicle may choose between
 MAX_TARGETS = 4  # lanes of the next edge one lane's links lead to
 MAX_FOES = 24  # links one link yields to
+MIN_SHARE = 0.02  # a lane the GS hardly used still takes a vehicle when the others are full
 
 
 def vehicle_kinds(route_files) -> dict[str, np.ndarray]:
@@ -138,10 +139,23 @@ class RegionArrays:
             raise BadInput("the regions have no lanes: nothing to simulate")
         self.lane_length = np.array(lengths, np.float64)
         self.lane_index = np.array([int(x.rsplit("_", 1)[1]) for x in self.lane_ids], np.int64)  # on its edge
+        # each lane's share of its edge's vehicles (:mod:`ials_zoo.sumo_net.arrays_calibration`): equal until calibrated
+        self.lane_share = np.ones(len(self.lane_ids))
+        for per in self.edge_lanes:
+            for lanes in per.values():
+                self.lane_share[lanes] = 1.0 / len(lanes)
         self.lane_speed = np.array(speeds, np.float64)
         self.n_lanes = len(self.lane_ids)
         self.signals, self.links = self._signals(net, regions, yellow_seconds, driven)
         self.routes = RouteTable(self)
+
+    def calibrate(self, shares: dict[str, float]) -> None:
+        """Lane shares measured in the GS (:func:`ials_zoo.sumo_net.arrays_calibration.lane_shares`),
+        by the network's lane id; lanes not named keep theirs."""
+        for k, x in enumerate(self.lane_ids):
+            share = shares.get(x.split("__", 1)[1])
+            if share is not None:
+                self.lane_share[k] = min(max(float(share), MIN_SHARE), 1.0)
 
     def _signals(self, net, regions: dict, yellow_seconds: int, driven: set):
         """The signal rows and, per region, ``(lane, next edge) ->`` :class:`Link` (its code

@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from ials_zoo.errors import BadInput
+from ials_zoo.sumo_net.arrays_calibration import lane_shares
 from ials_zoo.sumo_net.arrays_core import ArrayNetCore
 from ials_zoo.sumo_net.ials_env import resolve_predictors
 from ials_zoo.sumo_net.island import entry_tables
@@ -52,7 +53,7 @@ class ArrayIALSCopies:
         self.copies, self.ids = len(seeds), ids
         self.core = ArrayNetCore(s.net_file, s.route_files, s.begin, s.decision_seconds, s.yellow_seconds, ids,
                                  [x.lanes for x in lights], [tables[x] for x in ids], controlled=self.agents,
-                                 copies=self.copies, max_distance=max_distance)
+                                 copies=self.copies, max_distance=max_distance, lane_shares=lane_shares(s))
         counts = [len(x.lanes) for x in lights]
         self.starts = np.concatenate([[0], np.cumsum(counts * self.copies)])  # every (copy, light)'s rows
         self.width = N_FEATURES * max(counts[ids.index(a)] for a in self.agents)

@@ -228,12 +228,14 @@ def replay_each(sim, scenario, regions: dict, entries, folder, seed: int = 0) ->
     return out
 
 
-def replay_arrays(scenario, regions: dict, entries, observed: list, seed: int = 0) -> tuple:
+def replay_arrays(scenario, regions: dict, entries, observed: list, seed: int = 0, shares: dict | None = None) -> tuple:
     """The array local simulator (:mod:`ials_zoo.sumo_net.arrays`) of ``regions`` (in the
     order of ``observed``: per region, its light's lanes), every light on its own program, fed
     ``entries`` (of :meth:`ReplayCore.record`): ``(lane states per step, the lights' measures
-    every decision, seconds per step)``."""
+    every decision, seconds per step)``; ``shares``: its lane calibration
+    (:func:`~ials_zoo.sumo_net.arrays_calibration.lane_shares`), none if None."""
     arrays = RegionArrays(scenario.net_file, regions, scenario.yellow_seconds, driven=False)
+    arrays.calibrate(shares or {})
     sim = ArraySim(arrays, vehicle_kinds(scenario.route_files), 1, observed, seed, patience=None)
     index = {light: r for r, light in enumerate(regions)}
     every, states, measures = scenario.decision_seconds, [], []
@@ -251,7 +253,8 @@ def replay_arrays(scenario, regions: dict, entries, observed: list, seed: int = 
 
 
 def replay_regions(scenario, regions: dict, seconds: int, folder, seed: int = 0, measure_cost: bool = False,
-                   noise_floor: bool = False, each: bool = False, local: str = "sumo") -> dict:
+                   noise_floor: bool = False, each: bool = False, local: str = "sumo",
+                   calibration: dict | None = None) -> dict:
     """Record the GS's ``seconds`` and replay ``regions`` (light -> :class:`NetRegion`) fed with
     it; ``folder`` takes the cut networks. Returns ``error`` (:func:`replay_error` over the
     regions' controlled lanes), ``inserted`` (vehicles), ``local_seconds_per_step``, the lanes
@@ -260,7 +263,7 @@ def replay_regions(scenario, regions: dict, seconds: int, folder, seed: int = 0,
     (the local simulator's own randomness, given the same entries); ``each``: also every region
     alone (:func:`replay_each`, ``each_seconds_per_step``; SUMO only); ``local``: the local
     simulator, ``"sumo"`` (the regions cut from the network) or ``"arrays"``
-    (:func:`replay_arrays`)."""
+    (:func:`replay_arrays`, with the lane shares ``calibration``)."""
     if local not in ("sumo", "arrays"):
         raise BadInput(f"local: expected 'sumo' or 'arrays', got {local!r}")
     lights = [x for x in read_network(scenario.net_file).lights if x.id in regions]
@@ -279,7 +282,8 @@ def replay_regions(scenario, regions: dict, seconds: int, folder, seed: int = 0,
                                                    scenario.decision_seconds, seed)
         if local == "arrays":
             ordered = {x.id: regions[x.id] for x in lights}
-            replay = functools.partial(replay_arrays, scenario, ordered, entries, [x.lanes for x in lights])
+            replay = functools.partial(replay_arrays, scenario, ordered, entries, [x.lanes for x in lights],
+                                       shares=calibration)
         else:
             replay = _sumo_replay(sim, scenario, regions, lights, entries, Path(folder))
         out["local"], local_measures, out["local_seconds_per_step"] = replay(seed)
