@@ -304,7 +304,7 @@ class SimHandle:
         if self.mode == "inprocess":
             return call_core(self._local_core(), method, args)
         if self._worker is None:
-            if method not in ("reset",):
+            if method != "reset" and method not in self.loads:  # a call that starts SUMO starts its worker
                 raise WorkerDiedError(
                     "no live SUMO worker (it died or was never started); call reset() first"
                 )

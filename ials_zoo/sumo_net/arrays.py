@@ -105,7 +105,8 @@ class ArraySim:
         self.limit = np.tile(self.a.lane_speed, self.copies)
         # entries not inserted yet: [lane, candidate, route step, position, kind row, factor, seconds waited]
         self.pending = np.zeros((0, 7))
-        self._new: list[tuple] = []  # entered since the last second
+        self._new: list[tuple] = []  # entered since the last second, one by one
+        self._batches: list[np.ndarray] = []  # and as rows
         self.inserted = self.dropped = 0
 
     # -- signals -------------------------------------------------------------------------------
@@ -138,7 +139,7 @@ class ArraySim:
         v = self.v
         idx = np.flatnonzero(v.alive)
         if len(idx):
-            self._move(idx[np.lexsort((-v.pos[idx], v.lane[idx]))])
+            self._move(idx[np.argsort(v.lane[idx] * POSITION_KEY + (POSITION_SHIFT - v.pos[idx]))])
         self._insert_pending()
 
     def _move(self, idx: np.ndarray) -> None:
@@ -283,9 +284,10 @@ class ArraySim:
         v.alive[idx[gone]] = False
 
     # -- entries ---------------------------------------------------------------------------------
-    def enter(self, copy: int, region: int, edges, lane_index: int, position: float, kind: str, factor: float) -> None:
-        """A vehicle that enters region ``region`` of ``copy`` now (inserted with the next second):
-        on the lane ``lane_index`` of its first edge if that lane leads on, else the first that does."""
+    def entry_row(self, region: int, edges, lane_index: int, position: float, kind: str, factor: float) -> tuple:
+        """An entry into region ``region`` as a pending row ``(lane of copy 0, candidate, route
+        step, position, kind row, factor)``: on the lane ``lane_index`` of its first edge if that
+        lane leads on, else the first that does."""
         step = self.a.routes.step_of(region, edges)
         key = (step, int(lane_index))
         if key not in self._lane_choice:
@@ -299,15 +301,27 @@ class ArraySim:
             self._kind_row[kind] = self._kind_row["DEFAULT_VEHTYPE"] if kind not in self.kinds else len(self._kind_rows)
             if kind in self.kinds:
                 self._kind_rows.append(self.kinds[kind])
-        self._new.append((lane + copy * self.a.n_lanes, j, step, float(position), self._kind_row[kind], float(factor)))
+        return (lane, j, step, float(position), self._kind_row[kind], float(factor))
+
+    def enter(self, copy: int, region: int, edges, lane_index: int, position: float, kind: str, factor: float) -> None:
+        """A vehicle that enters region ``region`` of ``copy`` now (inserted with the next second)."""
+        lane, *rest = self.entry_row(region, edges, lane_index, position, kind, factor)
+        self._new.append((lane + copy * self.a.n_lanes, *rest))
+
+    def enter_rows(self, rows: np.ndarray) -> None:
+        """Entries as :meth:`entry_row`'s rows ``[m, 6]``, their lanes already of their copy."""
+        self._batches.append(np.asarray(rows, np.float64).reshape(-1, 6))
 
     def _insert_pending(self) -> None:
         """Insert every waiting entry whose place is free (one per lane and second); drop those
         that waited ``patience`` seconds."""
         if self._new:
-            new = np.array(self._new, np.float64).reshape(-1, 6)
-            self.pending = np.concatenate([self.pending, np.column_stack([new, np.zeros(len(new))])])
+            self._batches.append(np.array(self._new, np.float64).reshape(-1, 6))
             self._new = []
+        if self._batches:
+            new = np.concatenate(self._batches)
+            self.pending = np.concatenate([self.pending, np.column_stack([new, np.zeros(len(new))])])
+            self._batches = []
         p = self.pending
         if not len(p):
             return
@@ -331,7 +345,7 @@ class ArraySim:
         speed of the vehicle ahead of it (+inf and 0 if none)."""
         v = self.v
         alive = np.flatnonzero(v.alive)
-        order = alive[np.lexsort((v.pos[alive], v.lane[alive]))]
+        order = alive[np.argsort(v.lane[alive] * POSITION_KEY + (v.pos[alive] + POSITION_SHIFT))]
         keys = v.lane[order] * POSITION_KEY + (v.pos[order] + POSITION_SHIFT)
         i = np.searchsorted(keys, lane * POSITION_KEY + (position + POSITION_SHIFT))
         ahead = order[np.minimum(i, len(order) - 1)] if len(order) else np.zeros(len(lane), np.int64)

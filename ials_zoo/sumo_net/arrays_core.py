@@ -5,8 +5,8 @@ signal loop fed influence sources, with the region data) on the array local simu
 Rows are ``(copy, light)``, copy-major: every light's region once per copy. Each decision it
 takes per row an action and the influence sources (:mod:`ials_zoo.sumo_net.influence`): per
 entry point and second how many vehicles come in, each drawn from the GS's entries there
-(:func:`~ials_zoo.sumo_net.island.entry_tables`) with the row's own random stream, as the island
-draws them; per exit whether it is blocked (its lanes held at
+(:func:`~ials_zoo.sumo_net.island.entry_tables`), as the island
+draws them (one stream for every row: the batch draws them at once); per exit whether it is blocked (its lanes held at
 :data:`~ials_zoo.sumo_net.island.BLOCKED_SPEED`; blocked :data:`~ials_zoo.sumo_net.island.GRIDLOCK_DECISIONS`
 decisions in a row, it stays blocked). It returns RESCO's measures, the lights' phases, the time
 and ``(influences, d-sets)``, the d-sets read from the arrays as the
@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ials_zoo.core.streams import agent_key
 from ials_zoo.sumo_net.arrays import HALTING_SPEED, ArraySim
 from ials_zoo.sumo_net.arrays_layout import RegionArrays, vehicle_kinds
 from ials_zoo.sumo_net.influence import CELL_METRES, CELLS, HELD_DECISIONS, region_layout
@@ -28,6 +27,7 @@ from ials_zoo.sumo_net.regions import regions_of
 INSERT_PATIENCE = 2  # as the island's: a vehicle that cannot enter within 2 s is dropped
 BLOCKED_SPEED = 0.01  # as the island's (m/s)
 GRIDLOCK_DECISIONS = 10  # as the island's
+ENTRY_STREAM = 1  # the entries' draws: a stream of the episode's seed apart from the simulator's
 
 
 class ArrayNetCore:
@@ -52,18 +52,24 @@ class ArrayNetCore:
         names = self.arrays.signals.names
         self.own_row = np.array([names.index((r, x)) for r, x in enumerate(self.lights)], np.int64)
         self.driven_row = self.own_row[[self.lights.index(x) for x in self.controlled]]
+        self._yellows()
         self.data = RegionData(self.arrays, [region_layout(net_file, x) for x in self.lights], self.decision,
                                self.copies)
         self.held = np.zeros((self.copies, self.data.n_exits), np.int64)
-        self.time, self.rngs, self.queues = self.begin, [], []
+        # the contract's row k = copy * lights + light is the region-major row q = light * copies + copy
+        n, c = len(self.lights), self.copies
+        self.row_order = [r * c + j for j in range(c) for r in range(n)]  # contract row k -> q
+        self.contract_row = [(q % c) * n + q // c for q in range(n * c)]  # q -> contract row k
+        self.as_blocks = False  # step_blocks' callers read the d-sets as blocks
+        self.time, self.rng, self.queues = self.begin, None, []
+        self._entry_tables()
 
     # -- the episode -----------------------------------------------------------------------------
     def reset(self, seed: int, tripinfo=None):
-        """A new episode: no vehicles, every light at its first green, the rows' random streams
-        from ``seed`` (the island's: one per ``(light, copy)``)."""
+        """A new episode: no vehicles, every light at its first green, the entries' random
+        stream from ``seed``."""
         self.sim.reset(seed)
-        self.rngs = [np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(agent_key(x), c)))
-                     for c in range(self.copies) for x in self.lights]
+        self.rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(ENTRY_STREAM,)))
         self.held[:] = 0
         self.time, self.queues = self.begin, []
         self.plan = np.zeros(self.data.plan_start[-1], np.int64)
@@ -71,9 +77,17 @@ class ArrayNetCore:
 
     def step(self, actions, influences):
         """One decision: the actions (green indices) of the controlled lights, copy-major, and
-        every row's influence sources."""
+        every row's influence sources (rows ``copy * lights + light``)."""
+        return self._step(actions, np.concatenate([np.asarray(influences[k], np.int64) for k in self.contract_row]))
+
+    def step_blocks(self, actions, blocks) -> tuple:
+        """:meth:`step` with each region's sources as one block ``[copies, its sources]``;
+        returns the measures, phases and time (the d-sets: :meth:`dset_blocks`)."""
+        return self._step(actions, np.concatenate([np.asarray(b, np.int64).reshape(-1) for b in blocks]))
+
+    def _step(self, actions, plan: np.ndarray):
         d = self.data
-        self.plan = np.concatenate([np.asarray(u, np.int64) for u in influences])
+        self.plan = plan
         if len(self.plan) != d.plan_start[-1]:
             raise ValueError(f"influences: {len(self.plan)} sources in all, expected {d.plan_start[-1]}")
         blocked = (self.plan[d.exit_pos] > 0) | (self.held >= GRIDLOCK_DECISIONS)
@@ -91,33 +105,62 @@ class ArrayNetCore:
         """RESCO's switch (:meth:`ials_zoo.sumo_net.core.NetCore.step`): a light whose action is
         another green shows the yellow between them for ``yellow`` seconds, then every driven
         light is set to its action (its timer restarts)."""
-        signals, m = self.arrays.signals, len(self.controlled)
-        for k, a in enumerate(actions):
-            c, row = k // m, self.driven_row[k % m]
-            current = int(self.sim.phase[c, row])
-            yellow = signals.yellow_of[row].get((current, a)) if current != a else None
-            if yellow is not None:
-                self.sim.set_phase(c, row, yellow)
+        a = np.asarray(actions, np.int64).reshape(self.copies, len(self.controlled))
+        rows = np.broadcast_to(self.driven_row, a.shape)
+        copies = np.broadcast_to(np.arange(self.copies)[:, None], a.shape)
+        current = self.sim.phase[copies, rows]
+        yellow = self.yellow_table[np.arange(len(self.controlled))[None, :], np.minimum(current, self._width - 1), a]
+        switch = (current != a) & (current < self._width) & (yellow >= 0)
+        self.sim.phase[copies[switch], rows[switch]] = yellow[switch]
+        self.sim.elapsed[copies[switch], rows[switch]] = -1.0
         self._advance(0, self.yellow, self._due)
-        for k, a in enumerate(actions):
-            self.sim.set_phase(k // m, self.driven_row[k % m], a)
+        self.sim.phase[copies, rows] = a
+        self.sim.elapsed[copies, rows] = -1.0
 
-    def _entries_due(self) -> dict[int, list]:
-        """second -> ``(copy, region, entry)`` drawn for this decision, each from its entry
-        point's table with its row's stream."""
-        d, due, n = self.data, {}, len(self.lights)
+    def _yellows(self) -> None:
+        """``[driven light, from green, to green]``: RESCO's yellow phase between the two, -1 if none."""
+        signals = self.arrays.signals
+        self._width = int(max(signals.phase_start[row + 1] - signals.phase_start[row] for row in self.driven_row))
+        self.yellow_table = np.full((len(self.driven_row), self._width, self._width), -1, np.int64)
+        for i, row in enumerate(self.driven_row):
+            for (x, y), phase in signals.yellow_of[row].items():
+                self.yellow_table[i, x, y] = phase
+
+    def _entry_tables(self) -> None:
+        """Every region's entry tables as rows of the simulator's pending entries, one array:
+        table ``(region, point)`` is rows ``table_start[t]`` to ``table_start[t] + table_size[t]``."""
+        rows, starts, sizes = [], [], []
+        for r, tables in enumerate(self.tables):
+            for table in tables:
+                starts.append(len(rows))
+                sizes.append(len(table))
+                rows += [self.sim.entry_row(r, edges, lane, max(pos, 0.0), vtype, factor)
+                         for edges, lane, pos, vtype, factor in table]
+        self.entry_rows = np.array(rows, np.float64).reshape(-1, 6)
+        self.table_start, self.table_size = np.array(starts, np.int64), np.array(sizes, np.int64)
+        self.point_base = np.concatenate([[0], np.cumsum([len(t) for t in self.tables])])
+
+    def _entries_due(self) -> list[np.ndarray]:
+        """Per second of this decision, the entries the sources name, each drawn from its entry
+        point's table (the rows' stream), as the simulator's pending rows."""
+        d = self.data
         counts = self.plan[d.entry_pos]
-        for i in np.flatnonzero(counts):
-            k, second, j = int(d.entry_row[i]), int(d.entry_second[i]), int(d.entry_point[i])
-            table = self.tables[k % n][j]
-            for _ in range(int(counts[i]) if table else 0):
-                due.setdefault(second, []).append((k // n, k % n, table[int(self.rngs[k].integers(len(table)))]))
-        return due
+        nz = np.flatnonzero(counts)
+        which = np.repeat(nz, counts[nz])
+        row = d.entry_row[which]
+        table = self.point_base[row // self.copies] + d.entry_point[which]
+        size = self.table_size[table]
+        keep = size > 0
+        which, row, table, size = which[keep], row[keep], table[keep], size[keep]
+        drawn = self.entry_rows[self.table_start[table] + (self.rng.random(len(table)) * size).astype(np.int64)]
+        drawn[:, 0] += (row % self.copies) * self.arrays.n_lanes
+        second = d.entry_second[which]
+        return [drawn[second == s] for s in range(self.decision)]
 
-    def _advance(self, start: int, stop: int, due: dict) -> None:
+    def _advance(self, start: int, stop: int, due: list) -> None:
         for second in range(start, stop):
-            for c, r, (edges, lane, pos, vtype, factor) in due.get(second, ()):
-                self.sim.enter(c, r, edges, lane, max(pos, 0.0), vtype, factor)
+            if len(due[second]):
+                self.sim.enter_rows(due[second])
             self.sim.advance()
             self.time += 1
 
@@ -126,8 +169,18 @@ class ArrayNetCore:
         measures = self.sim.measures(self.decision, self.max_distance)
         self.queues.append(float(measures[:, 2].sum()) / (self.copies * len(self.lights)))
         phases = self.sim.phase[:, self.own_row].reshape(-1)
-        told = np.split(self.plan, self.data.plan_start[1:-1])
-        return measures, phases, float(self.time), (told, self._dsets())
+        self.flat_dsets = self._dsets()
+        if self.as_blocks:
+            return measures, phases, float(self.time)
+        d, order = self.data, self.row_order
+        told = [self.plan[d.plan_start[q]:d.plan_start[q + 1]] for q in order]
+        dsets = [self.flat_dsets[d.dset_start[q]:d.dset_start[q + 1]] for q in order]
+        return measures, phases, float(self.time), (told, dsets)
+
+    def dset_blocks(self) -> list[np.ndarray]:
+        """The last d-sets as one block per region, ``[copies, its d-set]``."""
+        s, c = self.data.dset_start, self.copies
+        return [self.flat_dsets[s[r * c]:s[(r + 1) * c]].reshape(c, -1) for r in range(len(self.lights))]
 
     def _dsets(self) -> list[np.ndarray]:
         """Per row: the occupancy cells of its entry lanes, its exits blocked now (a vehicle
@@ -138,7 +191,7 @@ class ArrayNetCore:
         copy, lane, pos = v.lane[alive] // n, v.lane[alive] % n, v.pos[alive]
         cell = ((pos - d.cell_offset[lane]) // CELL_METRES).astype(np.int64)
         on = (d.cell_base[lane] >= 0) & (cell >= 0) & (cell < CELLS)
-        flat[d.dset_start[:-1][copy[on] * len(self.lights) + d.region_of_lane[lane[on]]] + d.cell_base[lane[on]]
+        flat[d.dset_start[:-1][d.region_of_lane[lane[on]] * self.copies + copy[on]] + d.cell_base[lane[on]]
              + cell[on]] = 1
         exit_ = d.exit_of_lane[lane]
         halted = (exit_ >= 0) & (v.speed[alive] < HALTING_SPEED) & (pos <= d.exit_leave[np.maximum(exit_, 0)])
@@ -146,7 +199,7 @@ class ArrayNetCore:
         now[copy[halted], exit_[halted]] = True
         flat[d.now_pos] = now
         flat[d.held_pos] = self.held[:, :, None] >= np.asarray(HELD_DECISIONS)
-        return np.split(flat, d.dset_start[1:-1])
+        return flat
 
     # -- the core's other calls -------------------------------------------------------------------------
     def finish(self) -> dict:
@@ -161,14 +214,16 @@ class ArrayNetCore:
 
 
 class RegionData:
-    """Where each row's influence sources and d-set bits lie in flat arrays over every row
-    (rows ``copy * regions + region``), so that one numpy pass reads or writes them all."""
+    """Where each row's influence sources and d-set bits lie in flat arrays over every row, so
+    that one numpy pass reads or writes them all. Inside, rows are region-major (``region *
+    copies + copy``): a region's rows of every copy are one block ``[copies, its sources]``,
+    what its AIP reads and draws for all copies at once."""
 
     def __init__(self, arrays, layouts: list, decision: int, copies: int):
         points = [len(x.points) for x in layouts]
         exits = [len(x.exits) for x in layouts]
         sources = [len(x.source_lanes) for x in layouts]
-        rows = [r for _ in range(copies) for r in range(len(layouts))]
+        rows = [r for r in range(len(layouts)) for _ in range(copies)]
         self.plan_start = np.concatenate([[0], np.cumsum([decision * points[r] + exits[r] for r in rows])])
         dset = [sources[r] * CELLS + exits[r] * (1 + len(HELD_DECISIONS)) for r in rows]
         self.dset_start = np.concatenate([[0], np.cumsum(dset)])
@@ -177,12 +232,13 @@ class RegionData:
         self.region_of_exit = region_of_exit = np.repeat(np.arange(len(layouts)), exits)
         local = np.arange(self.n_exits) - first_exit[region_of_exit]
         c = np.arange(copies)[:, None]
-        row = c * len(layouts) + region_of_exit[None, :]
+        row = region_of_exit[None, :] * copies + c
         self.exit_pos = self.plan_start[row] + decision * np.asarray(points)[region_of_exit] + local
         base = self.dset_start[row] + np.asarray(sources)[region_of_exit] * CELLS
         self.now_pos = base + local
         self.held_pos = (base + np.asarray(exits)[region_of_exit] + local * len(HELD_DECISIONS))[:, :, None] + \
             np.arange(len(HELD_DECISIONS))
+        self.copies = copies
         self._entries(rows, points, decision)
         self._lanes(arrays, layouts, first_exit)
 

@@ -218,7 +218,8 @@ def _foes(links: list[dict]) -> np.ndarray:
             for x in these:
                 theirs = [y.index for y in these if y is not x and node.forbids(y.connection, x.connection)]
                 foes[x.index, :len(theirs[:MAX_FOES])] = theirs[:MAX_FOES]
-    return foes
+    used = int((foes >= 0).sum(axis=1).max()) if n else 0
+    return foes[:, :max(used, 1)]  # as wide as the most foes of one link: every vehicle reads a row
 
 
 def _junction_metres(lane, to_lane) -> float:

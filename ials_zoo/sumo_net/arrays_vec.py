@@ -17,7 +17,7 @@ from ials_zoo.sumo_net.arrays_calibration import lane_shares
 from ials_zoo.sumo_net.arrays_core import ArrayNetCore
 from ials_zoo.sumo_net.ials_env import resolve_predictors
 from ials_zoo.sumo_net.island import entry_tables
-from ials_zoo.sumo_net.mdp import BATCHED_OBSERVATIONS, N_FEATURES, lanes_tables, observation_fn, reward_fn
+from ials_zoo.sumo_net.mdp import BATCHED_OBSERVATIONS, N_FEATURES, lanes_tables, observation_fn, reward_fn, wait_norm
 from ials_zoo.sumo_net.names import SCENARIO_OPTIONS
 from ials_zoo.sumo_net.network import read_network
 from ials_zoo.sumo_net.scenario import scenario_of
@@ -54,8 +54,9 @@ class ArrayIALSCopies:
         self.core = ArrayNetCore(s.net_file, s.route_files, s.begin, s.decision_seconds, s.yellow_seconds, ids,
                                  [x.lanes for x in lights], [tables[x] for x in ids], controlled=self.agents,
                                  copies=self.copies, max_distance=max_distance, lane_shares=lane_shares(s))
+        self.core.as_blocks = True
         counts = [len(x.lanes) for x in lights]
-        self.starts = np.concatenate([[0], np.cumsum(counts * self.copies)])  # every (copy, light)'s rows
+        self.lane_start = np.concatenate([[0], np.cumsum(counts)])  # every light's rows in a copy's measures
         self.width = N_FEATURES * max(counts[ids.index(a)] for a in self.agents)
         self.agent_rows = [ids.index(a) for a in self.agents]
         self.seeds = list(seeds)
@@ -67,6 +68,8 @@ class ArrayIALSCopies:
         own stream continues."""
         if seeds is not None:
             self.seeds = [check_seed(x) for x in seeds]
+            if len(self.seeds) != self.copies:
+                raise BadInput(f"reset: {len(self.seeds)} seeds for {self.copies} copies")
         if self.seeds[0] is not None:
             self._rng = np.random.default_rng(np.random.SeedSequence([int(x) for x in self.seeds]))
         self.seeds = [None] * self.copies
@@ -80,32 +83,31 @@ class ArrayIALSCopies:
         actions = np.asarray(actions)
         if actions.shape != (len(self.agents), self.copies):
             raise BadInput(f"actions must have shape ({len(self.agents)}, {self.copies}), got {actions.shape}")
-        n = len(self.ids)
-        dsets = self._dsets
-        influences = [None] * (n * self.copies)
-        for r, x in enumerate(self.ids):
-            drawn = self.predictors[x].sample(np.stack([dsets[c * n + r] for c in range(self.copies)]), self._rng)
-            for c in range(self.copies):
-                influences[c * n + r] = drawn[c]
-        obs, rewards = self._outputs(self.core.step(actions.T.reshape(-1).tolist(), influences))
+        blocks = [self.predictors[x].sample(d, self._rng) for x, d in zip(self.ids, self.core.dset_blocks())]
+        obs, rewards = self._outputs(self.core.step_blocks(actions.T.reshape(-1).tolist(), blocks))
         self.decision += 1
         return obs, rewards, self.decision >= self.decisions
 
     def _outputs(self, result):
-        measures, phases, _time, (_told, self._dsets) = result
-        n = len(self.ids)
-        if self._observe in BATCHED_OBSERVATIONS:
-            table = lanes_tables(measures, phases, self.starts, BATCHED_OBSERVATIONS[self._observe])
-            per = [table[self.starts[k]:self.starts[k + 1]].reshape(-1) for k in range(len(phases))]
-        else:
-            per = [self._observe(measures[self.starts[k]:self.starts[k + 1]], int(phases[k])) for k in range(len(phases))]
+        """Every learner's observation and reward in every copy, one light's copies at a time."""
+        measures, phases, _time = result
+        blocks = measures.reshape(self.copies, -1, measures.shape[1])
+        phases = phases.reshape(self.copies, -1)
         obs = np.zeros((len(self.agents), self.copies, self.width), np.float32)
         rewards = np.zeros((len(self.agents), self.copies))
         for i, r in enumerate(self.agent_rows):
-            for c in range(self.copies):
-                k = c * n + r
-                obs[i, c, :len(per[k])] = per[k]
-                rewards[i, c] = self._reward(measures[self.starts[k]:self.starts[k + 1]], int(phases[k]))
+            block = blocks[:, self.lane_start[r]:self.lane_start[r + 1]]  # [copies, its lanes, 5]
+            lanes = block.shape[1]
+            if self._observe in BATCHED_OBSERVATIONS:
+                table = lanes_tables(block.reshape(-1, block.shape[2]), phases[:, r], np.arange(self.copies + 1) * lanes,
+                                     BATCHED_OBSERVATIONS[self._observe])
+                obs[i, :, :lanes * N_FEATURES] = table.reshape(self.copies, -1)
+            else:
+                obs[i, :, :lanes * N_FEATURES] = [self._observe(b, int(p)) for b, p in zip(block, phases[:, r])]
+            if self._reward is wait_norm:
+                rewards[i] = np.clip(-block[:, :, 1].sum(axis=1) / 224.0, -4.0, 4.0)
+            else:
+                rewards[i] = [self._reward(b, int(p)) for b, p in zip(block, phases[:, r])]
         return obs, rewards
 
     def set_predictors(self, predictors) -> None:

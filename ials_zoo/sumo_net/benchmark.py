@@ -14,7 +14,9 @@ Reading the episode's tripinfo for its metrics (RESCO's delay) is timed apart: o
 evaluation asks for it, a training loop never does.
 
 Then the IALS against the GS: every light's at once, per agent-decision, both ParallelEnvs in a
-worker (:func:`bench_local`), and each light's own, decisions per second (:func:`bench_single`).
+worker (:func:`bench_local`), and each light's own, decisions per second (:func:`bench_single`);
+and every light's IALS on SUMO regions against the same on arrays, 1 and 64 copies in a batch
+(:func:`bench_arrays`).
 """
 
 from __future__ import annotations
@@ -202,6 +204,83 @@ def bench_single(net: str, repeats: int = 3, max_cycles: int | None = None) -> d
             "ials_decisions_per_s": _stat(rates), "speedup": _stat([r / gs_rate for r in rates])}
 
 
+ARRAY_COPIES = (1, 64)
+
+
+def _ials_episode(env, decisions: int, seed: int) -> float:
+    """Seconds per decision of every light's IALS (``ArrayIALSCopies`` or a ``GSVecEnv``-like
+    batch) over ``decisions`` decisions, every light at random (drawn before the clock)."""
+    rng = np.random.default_rng(seed)
+    draws = rng.integers(0, 2**31, size=(decisions, len(env.agents), env.copies))
+    counts = np.array([[n] for n in env.action_counts])
+    start = time.perf_counter()
+    env.reset([seed + j for j in range(env.copies)])
+    for n in range(decisions):
+        env.step(draws[n] % counts)
+    return (time.perf_counter() - start) / decisions
+
+
+def bench_arrays(net: str, repeats: int = 3, decisions: int = 60, copies=ARRAY_COPIES) -> dict:
+    """µs per agent-decision of the GS, every light's IALS on SUMO regions, and on arrays
+    (:mod:`ials_zoo.sumo_net.arrays`) with each of ``copies`` copies in one batch; every light at
+    random, AIPs of the GS's recorded entry frequencies, the first ``decisions`` decisions of the
+    map's hour, all in this process, interleaved ``repeats`` times: one ratio to the GS per turn.
+    Also the arrays' memory per copy (the vehicle pool's bytes)."""
+    from ials_zoo.sumo_net.arrays_vec import ArrayIALSCopies
+
+    options = {"net": net, "backend": "inprocess", "fresh_process": False, "max_cycles": decisions}
+    lights = read_network(scenario_of(net=net).net_file).ids
+    aips = gs_marginal_predictors(lights, net=net)  # recorded before the GS holds this process's SUMO
+    gs = SumoNetEnv(**options)
+    arrays = {c: ArrayIALSCopies(None, aips, list(range(c)), net=net, max_cycles=decisions) for c in copies}
+    for env in arrays.values():
+        env.action_counts = [gs.action_space(a).n for a in env.agents]
+    turns = []
+    try:
+        for seed in range(repeats):
+            g = _random_episode(gs, seed)
+            gs.close()  # one SUMO simulation per process: the regions' IALS takes its turn
+            local = IALSNetEnv(predictors=aips, **options)
+            try:
+                x = _random_episode(local, seed)
+            finally:
+                local.close()
+            turns.append((g, x, {c: _ials_episode(env, decisions, seed) / c for c, env in arrays.items()}))
+    finally:
+        gs.close()
+        memory = {c: sum(getattr(env.core.sim.v, f).nbytes for f in vars(env.core.sim.v)) / c
+                  for c, env in arrays.items()}
+        for env in arrays.values():
+            env.close()
+    n = len(lights)
+    out = {"net": net, "agents": n, "repeats": repeats, "decisions": decisions,
+           "gs_us": _stat([g / n * 1e6 for g, _, _ in turns]), "sumo_regions_us": _stat([x / n * 1e6 for _, x, _ in turns]),
+           "sumo_regions_over_gs": _stat([x / g for g, x, _ in turns]), "bytes_per_copy": memory}
+    for c in copies:
+        out[f"arrays_{c}_us"] = _stat([a[c] / n * 1e6 for _, _, a in turns])
+        out[f"arrays_{c}_over_gs"] = _stat([a[c] / g for g, _, a in turns])
+    return out
+
+
+def print_array_rows(rows) -> None:
+    rows = [r for r in rows if "sumo_regions_over_gs" in r]
+    if not rows:
+        return
+    copies = sorted(int(k.split("_")[1]) for k in rows[0] if k.startswith("arrays_") and k.endswith("_us"))
+    print(f"\n{'map':<14}{'lights':>7}{'GS µs':>9}{'SUMO regions / GS':>22}"
+          + "".join(f"{f'arrays x{c} / GS':>22}" for c in copies) + f"{'KiB per copy':>14}")
+    for r in rows:
+        def f(key):
+            m, lo, hi = r[key]
+            return f"{m:.3f} [{lo:.3f}, {hi:.3f}]"
+        print(f"{r['net']:<14}{r['agents']:>7}{r['gs_us'][0]:>9,.0f}{f('sumo_regions_over_gs'):>22}"
+              + "".join(f"{f(f'arrays_{c}_over_gs'):>22}" for c in copies)
+              + f"{r['bytes_per_copy'][copies[-1]] / 1024:>14,.0f}")
+    print("µs per agent-decision over the GS's, every light's IALS at once (AIPs of the GS's entry frequencies, every "
+          "light random), the first decisions of the map's hour, all in this process; median [min, max] over "
+          "interleaved turns. Arrays xN: N copies in one batch, per copy.")
+
+
 def print_local_rows(rows) -> None:
     multi = [r for r in rows if "local_over_gs" in r]
     print(f"\n{'map':<14}{'lights':>7}{'GS µs/agent-decision':>22}{'IALS µs/agent-decision':>24}"
@@ -242,11 +321,15 @@ def run_bench(nets=DEFAULT_MAPS, repeats: int = 3, max_cycles: int | None = None
                   flush=True)
             local_rows.append(bench_single(net, repeats, max_cycles))
             print(f"{net}, one light's IALS: {local_rows[-1]['speedup'][0]:.1f}x the GS's decisions/s", flush=True)
+            local_rows.append(bench_arrays(net, repeats))
+            print(f"{net}, every light's IALS on arrays x{ARRAY_COPIES[-1]}: "
+                  f"{local_rows[-1][f'arrays_{ARRAY_COPIES[-1]}_over_gs'][0]:.3f} of the GS per agent-decision", flush=True)
     print_rows(rows)
     if local_rows:
         print_local_rows(local_rows)
+        print_array_rows(local_rows)
     return rows + local_rows
 
 
-__all__ = ["DEFAULT_MAPS", "MODES", "bench_local", "bench_map", "bench_single", "print_local_rows", "print_rows",
+__all__ = ["ARRAY_COPIES", "DEFAULT_MAPS", "MODES", "bench_arrays", "bench_local", "bench_map", "bench_single", "print_local_rows", "print_rows",
            "run_bench"]
