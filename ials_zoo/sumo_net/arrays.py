@@ -17,8 +17,8 @@ SUMO's where that costs nothing and simpler where it would cost a loop per vehic
 * **at a lane's end** the front vehicle takes the link onto its next edge: on red it stops at
   the line, on yellow it stops unless it cannot any more (SUMO's rule), on a minor green
   (``g``) it waits until it could cross the junction before a vehicle with the right of way
-  on a link it must yield to (SUMO's ``response``) gets there, :data:`GAP_SECONDS` to spare; on
-  green it drives across the junction (the straight line from
+  on a link it must yield to (SUMO's ``response``) gets there, :data:`GAP_SECONDS` to spare, and
+  while one comes it approaches ready to stop (:meth:`ArraySim._may_go`); on green it drives across the junction (the straight line from
   lane end to lane start) onto the next lane, behind that lane's last vehicle, one vehicle per
   lane and second. On entering an edge a vehicle takes, among the lanes that lead on to its next
   edge, the one with the fewest vehicles for its share of the edge's vehicles in the GS
@@ -46,7 +46,9 @@ from ials_zoo.sumo_net.arrays_layout import GREEN, MINOR, YELLOW, RegionArrays
 HALTING_SPEED = 0.1  # m/s: SUMO's halting vehicle
 POSITION_KEY, POSITION_SHIFT = 1e5, 1e3  # lane * KEY + position + SHIFT sorts vehicles by lane, then position
 OFF_LINK_PENALTY = 4.0  # vehicles per share: how much emptier a lane their link does not lead to must be
-GAP_SECONDS = 1.0  # a minor link's vehicle goes if the foes come this long after it has crossed
+MINOR_VISIBILITY = 4.5  # m: SUMO's default foe visibility of a minor link: closer than that a vehicle may go
+GAP_SECONDS = 1.0
+FREE_SECONDS = 4.0  # no foe within this much more: a minor link's vehicle need not slow to its line  # a minor link's vehicle goes if the foes come this long after it has crossed
 FIELDS = {"alive": bool, "lane": np.int64, "pos": np.float64, "speed": np.float64, "step": np.int64,
           "cand": np.int64, "next_cand": np.int64, "length": np.float64, "gap": np.float64, "accel": np.float64,
           "decel": np.float64, "top": np.float64, "sigma": np.float64, "factor": np.float64,
@@ -166,7 +168,7 @@ class ArraySim:
         way, shows, coming = self._right_of_way(idx, lane, pos, speed)
         stopping = speed[f] ** 2 / (2 * v.decel[fv])
         major = going_on & ((shows[f] == GREEN) | ((shows[f] == YELLOW) & (to_line < stopping)))
-        passes = major | (going_on & (shows[f] == MINOR) & ~self._foe_coming(fv, way[f], coming, to_line, junction))
+        passes = major | (going_on & (shows[f] == MINOR) & self._may_go(fv, way[f], coming, to_line, junction))
         # the next lane's position p is lane end + junction + p here
         beyond = np.where(passes, tail_back[np.maximum(next_lane, 0)] + junction, np.inf)
         lead_back[f] = np.where(going_on, np.where(passes, pos[f] + to_line + beyond, pos[f] + to_line + v.gap[fv]),
@@ -222,17 +224,19 @@ class ArraySim:
         arrives[crossing[(crossing >= 0) & (pos < 0)]] = 0.0
         return way, shows, arrives
 
-    def _foe_coming(self, fv, way, arrives, to_line, junction) -> np.ndarray:
-        """Per front vehicle ``fv`` on link ``way``: whether a vehicle on a link it yields to
-        reaches the junction before it could have crossed it, with :data:`GAP_SECONDS` to spare
-        (SUMO's gap acceptance, simplified)."""
+    def _may_go(self, fv, way, arrives, to_line, junction) -> np.ndarray:
+        """Per front vehicle ``fv`` on minor link ``way``: whether it may cross now (SUMO's gap
+        acceptance, simplified): the first vehicle on a link it yields to must reach the junction
+        at least :data:`GAP_SECONDS` after it could have crossed, and while one comes within
+        :data:`FREE_SECONDS` more it crosses only from :data:`MINOR_VISIBILITY` of its line (it
+        approaches ready to stop, as SUMO's drivers on a minor link do)."""
         v, n = self.v, self.a.n_links
         base = np.maximum(way, 0)
         foes = self.a.foes[base % n]
         first = arrives[np.where(foes >= 0, foes + (base // n * n)[:, None], -1)].min(axis=1)
         u, a = v.speed[fv], v.accel[fv]
-        clear = (-u + np.sqrt(u * u + 2 * a * (to_line + junction + v.length[fv]))) / a
-        return (first < clear + GAP_SECONDS) & (way >= 0)
+        clear = (-u + np.sqrt(u * u + 2 * a * (to_line + junction + v.length[fv]))) / a + GAP_SECONDS
+        return (first >= clear) & ((to_line <= MINOR_VISIBILITY) | (first >= clear + FREE_SECONDS))
 
     def _crossing(self, f, fv, passes, next_lane, new_pos) -> np.ndarray:
         """Which front vehicles ``f`` cross onto their next lane this second (one per lane; the

@@ -27,6 +27,7 @@ import numpy as np
 
 from ials_zoo.errors import BadInput
 from ials_zoo.learners.gs_vec import GSVecEnv
+from ials_zoo.sumo_net.arrays_vec import ArrayIALSCopies
 from ials_zoo.sumo_net.env import SumoNetEnv
 from ials_zoo.sumo_net.ials_env import IALSNetEnv
 from ials_zoo.sumo_net.island import gs_marginal_predictors
@@ -224,33 +225,26 @@ def bench_arrays(net: str, repeats: int = 3, decisions: int = 60, copies=ARRAY_C
     """µs per agent-decision of the GS, every light's IALS on SUMO regions, and on arrays
     (:mod:`ials_zoo.sumo_net.arrays`) with each of ``copies`` copies in one batch; every light at
     random, AIPs of the GS's recorded entry frequencies, the first ``decisions`` decisions of the
-    map's hour, all in this process, interleaved ``repeats`` times: one ratio to the GS per turn.
-    Also the arrays' memory per copy (the vehicle pool's bytes)."""
-    from ials_zoo.sumo_net.arrays_vec import ArrayIALSCopies
-
-    options = {"net": net, "backend": "inprocess", "fresh_process": False, "max_cycles": decisions}
+    map's hour, interleaved ``repeats`` times: one ratio to the GS per turn. The GS and the
+    arrays run in this process, the SUMO regions in a worker (one SUMO simulation per process:
+    a pipe round trip per decision). Also the arrays' memory per copy (the vehicle pool's bytes)."""
+    options = {"net": net, "fresh_process": False, "max_cycles": decisions}
     lights = read_network(scenario_of(net=net).net_file).ids
     aips = gs_marginal_predictors(lights, net=net)  # recorded before the GS holds this process's SUMO
-    gs = SumoNetEnv(**options)
+    gs = SumoNetEnv(backend="inprocess", **options)
+    local = IALSNetEnv(predictors=aips, backend="worker", **options)  # SUMO's one simulation per process
     arrays = {c: ArrayIALSCopies(None, aips, list(range(c)), net=net, max_cycles=decisions) for c in copies}
     for env in arrays.values():
         env.action_counts = [gs.action_space(a).n for a in env.agents]
     turns = []
     try:
         for seed in range(repeats):
-            g = _random_episode(gs, seed)
-            gs.close()  # one SUMO simulation per process: the regions' IALS takes its turn
-            local = IALSNetEnv(predictors=aips, **options)
-            try:
-                x = _random_episode(local, seed)
-            finally:
-                local.close()
-            turns.append((g, x, {c: _ials_episode(env, decisions, seed) / c for c, env in arrays.items()}))
+            turns.append((_random_episode(gs, seed), _random_episode(local, seed),
+                          {c: _ials_episode(env, decisions, seed) / c for c, env in arrays.items()}))
     finally:
-        gs.close()
         memory = {c: sum(getattr(env.core.sim.v, f).nbytes for f in vars(env.core.sim.v)) / c
                   for c, env in arrays.items()}
-        for env in arrays.values():
+        for env in (gs, local, *arrays.values()):
             env.close()
     n = len(lights)
     out = {"net": net, "agents": n, "repeats": repeats, "decisions": decisions,
@@ -277,8 +271,8 @@ def print_array_rows(rows) -> None:
               + "".join(f"{f(f'arrays_{c}_over_gs'):>22}" for c in copies)
               + f"{r['bytes_per_copy'][copies[-1]] / 1024:>14,.0f}")
     print("µs per agent-decision over the GS's, every light's IALS at once (AIPs of the GS's entry frequencies, every "
-          "light random), the first decisions of the map's hour, all in this process; median [min, max] over "
-          "interleaved turns. Arrays xN: N copies in one batch, per copy.")
+          "light random), the first decisions of the map's hour; the GS and the arrays in this process, the SUMO "
+          "regions in a worker; median [min, max] over interleaved turns. Arrays xN: N copies in one batch, per copy.")
 
 
 def print_local_rows(rows) -> None:

@@ -1,0 +1,126 @@
+"""The array local simulator (ials_zoo.sumo_net.arrays) against SUMO regions and the GS:
+fidelity (the replay contract) and cost as the number of lights grows (issue 50).
+
+  replay   fed the GS's own entries for the map's hour, every light on its own program: the
+           lights' lanes, RESCO observation and reward, per lane and step, for the SUMO regions,
+           the arrays as they are and the arrays with their lane calibration; with each one's
+           noise floor (two runs of its own seeds 0 and 1) -> results/replay_<net>.json
+  cost     ials_zoo.sumo_net.benchmark.bench_arrays: µs per agent-decision of the GS, every
+           light's IALS on SUMO regions, on arrays with 1 and with 64 copies in one batch, the
+           first DECISIONS decisions of the hour, interleaved turns -> results/cost_<net>.json
+  plot     results/cost_*.json as µs per agent-decision against lights, log-log -> cost.png
+
+Each result file is written whole when its part ends; a part whose file exists is skipped
+(resumable). Each names the commit it ran at.
+
+Usage: python studies/arrays_local/run.py replay|cost|plot [--nets cologne8,ingolstadt21]
+       [--seconds 3600] [--decisions 120] [--repeats 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+RESULTS = HERE / "results"
+
+
+def commit() -> str:
+    return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                          cwd=HERE).stdout.strip() or "unknown"
+
+
+def _write(path: Path, data: dict) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(data, indent=1))
+    tmp.replace(path)  # never half-written
+
+
+def replay(net: str, seconds: int) -> dict:
+    from ials_zoo.sumo_net.arrays_calibration import lane_shares
+    from ials_zoo.sumo_net.regions import regions_of
+    from ials_zoo.sumo_net.replay import replay_regions
+    from ials_zoo.sumo_net.scenario import make_scenario
+
+    scenario = make_scenario(net=net)
+    regions = regions_of(scenario.net_file)
+    out = {"net": net, "seconds": seconds, "commit": commit()}
+    for name, local, calibration in (("sumo", "sumo", None), ("arrays", "arrays", None),
+                                     ("arrays_calibrated", "arrays", lane_shares(scenario))):
+        start = time.perf_counter()
+        with tempfile.TemporaryDirectory() as tmp:
+            r = replay_regions(scenario, regions, seconds, tmp, local=local, noise_floor=True, calibration=calibration,
+                               measure_cost=name == "sumo")
+        out[name] = {"error": r["error"], "noise_floor": r["noise_floor"], "inserted": r["inserted"],
+                     "local_seconds_per_step": r["local_seconds_per_step"], "wall_s": time.perf_counter() - start}
+        out.setdefault("gs_seconds_per_step", r.get("gs_seconds_per_step"))
+        print(net, name, {k: round(v, 3) for k, v in r["error"].items()}, flush=True)
+    return out
+
+
+def cost(net: str, decisions: int, repeats: int) -> dict:
+    from ials_zoo.sumo_net.benchmark import bench_arrays, print_array_rows
+
+    row = bench_arrays(net, repeats, decisions)
+    print_array_rows([row])
+    return dict(row, commit=commit(), bytes_per_copy={str(k): v for k, v in row["bytes_per_copy"].items()})
+
+
+def plot(out: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = sorted((json.loads(p.read_text()) for p in RESULTS.glob("cost_*.json")), key=lambda r: r["agents"])
+    if not rows:
+        raise SystemExit(f"no cost_*.json under {RESULTS}: run `cost` first")
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    series = [("GS (SUMO, whole network)", "gs_us"), ("every light's IALS, SUMO regions", "sumo_regions_us"),
+              ("IALS on arrays, 1 copy", "arrays_1_us"), ("IALS on arrays, 64 copies (per copy)", "arrays_64_us")]
+    for label, key in series:
+        x = [r["agents"] for r in rows]
+        y = [r[key][0] for r in rows]
+        lo = [r[key][0] - r[key][1] for r in rows]
+        hi = [r[key][2] - r[key][0] for r in rows]
+        ax.errorbar(x, y, yerr=[lo, hi], marker="o", capsize=3, label=label)
+    for r in rows:
+        ax.annotate(r["net"], (r["agents"], r["gs_us"][0]), textcoords="offset points", xytext=(4, 4), fontsize=8)
+    ax.set(xscale="log", yscale="log", xlabel="lights (agents)", ylabel="µs per agent-decision",
+           title="Cost per agent-decision as the network grows\n"
+                 f"python studies/arrays_local/run.py cost; commit {', '.join(sorted({r['commit'] for r in rows}))}")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out, dpi=120)
+    print(f"wrote {out}")
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("part", choices=("replay", "cost", "plot"))
+    parser.add_argument("--nets", default="cologne8,ingolstadt21")
+    parser.add_argument("--seconds", type=int, default=3600)
+    parser.add_argument("--decisions", type=int, default=120)
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args(argv)
+    if args.part == "plot":
+        plot(HERE / "cost.png")
+        return
+    for net in [x.strip() for x in args.nets.split(",") if x.strip()]:
+        path = RESULTS / f"{args.part}_{net}.json"
+        if path.is_file():
+            print(f"done: {path}")
+            continue
+        data = replay(net, args.seconds) if args.part == "replay" else cost(net, args.decisions, args.repeats)
+        _write(path, data)
+
+
+if __name__ == "__main__":
+    main()
