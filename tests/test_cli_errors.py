@@ -65,6 +65,8 @@ CASES = [
     (["train", "ppo_single", "--env", "warehouse_v0", "--out-dir", "{d}/afile"], "is a file"),
     (["train", "dials", "--env", "warehouse_v0", "--refresh", "0", "--out-dir", "{d}/r"], "--refresh"),
     (["train", "dials", "--env", "warehouse_v0", "--agents", "robot_99", "--out-dir", "{d}/r"], "robot_99"),
+    (["train", "dials", "--env", "warehouse_v0", "--local", "arrays", "--out-dir", "{d}/r"], "--local"),
+    (["train", "dials", "--env", "sumo_net_v0", "--local", "cells", "--out-dir", "{d}/r"], "--local"),
     (["train", "ippo", "--env", "nowhere_v0", "--out-dir", "{d}/r"], "nowhere_v0"),
     (["train", "idqn", "--env", "warehouse_v0", "--eps-end", "1.5", "--out-dir", "{d}/r"], "--eps-end"),
     (["train", "idqn", "--env", "warehouse_v0", "--buffer-size", "0", "--out-dir", "{d}/r"], "--buffer-size"),

@@ -13,7 +13,6 @@ from __future__ import annotations
 import numpy as np
 
 from ials_zoo.errors import BadInput
-from ials_zoo.sumo_net.arrays_calibration import lane_shares
 from ials_zoo.sumo_net.arrays_core import ArrayNetCore
 from ials_zoo.sumo_net.ials_env import resolve_predictors
 from ials_zoo.sumo_net.island import entry_tables
@@ -53,7 +52,7 @@ class ArrayIALSCopies:
         self.copies, self.ids = len(seeds), ids
         self.core = ArrayNetCore(s.net_file, s.route_files, s.begin, s.decision_seconds, s.yellow_seconds, ids,
                                  [x.lanes for x in lights], [tables[x] for x in ids], controlled=self.agents,
-                                 copies=self.copies, max_distance=max_distance, lane_shares=lane_shares(s))
+                                 copies=self.copies, max_distance=max_distance)
         self.core.as_blocks = True
         counts = [len(x.lanes) for x in lights]
         self.lane_start = np.concatenate([[0], np.cumsum(counts)])  # every light's rows in a copy's measures

@@ -22,7 +22,6 @@ import numpy as np
 from ials_zoo.errors import BadInput, BadInputType
 from ials_zoo.influence.files import load_predictor_set
 from ials_zoo.sumo.lease import PlainHandle
-from ials_zoo.sumo_net.arrays_calibration import lane_shares
 from ials_zoo.sumo_net.env import SumoNetEnv
 from ials_zoo.sumo_net.influence import region_layout
 from ials_zoo.sumo_net.island import entry_tables
@@ -58,7 +57,7 @@ class IALSNetEnv(RegionsNetEnv):
     ``infos[agent]`` holds the influence sources its AIP sampled and its d-sets. ``local``: the
     regions' simulator, ``"sumo"`` (cut from the network, side by side in one SUMO simulation)
     or ``"arrays"`` (:mod:`ials_zoo.sumo_net.arrays`: no SUMO, every region as numpy arrays, in
-    this process; its lanes calibrated by a GS run, once per network: :mod:`ials_zoo.sumo_net.arrays_calibration`).
+    this process).
     ``episode_metrics()`` has only ``queue``: trip delays need the whole network.
     """
 
@@ -90,8 +89,7 @@ class IALSNetEnv(RegionsNetEnv):
         if self.local == "arrays":
             config = SumoNetEnv._core_config(self)  # the network's own ids: nothing is cut
             config.pop("regions", None)
-            return {**config, "tables": [self._tables[x] for x in self.network.ids],
-                    "lane_shares": lane_shares(self.scenario)}
+            return {**config, "tables": [self._tables[x] for x in self.network.ids]}
         config = super()._core_config()
         ids = self.network.ids
         layouts = [region_layout(self.scenario.net_file, x).prefixed(f"{x}__") for x in ids]
