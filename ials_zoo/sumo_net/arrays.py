@@ -235,7 +235,8 @@ class ArraySim:
         foes = self.a.foes[base % n]
         first = arrives[np.where(foes >= 0, foes + (base // n * n)[:, None], -1)].min(axis=1)
         u, a = v.speed[fv], v.accel[fv]
-        clear = (-u + np.sqrt(u * u + 2 * a * (to_line + junction + v.length[fv]))) / a + GAP_SECONDS
+        way_across = np.maximum(to_line + junction + v.length[fv], 0.0)
+        clear = (-u + np.sqrt(u * u + 2 * a * way_across)) / a + GAP_SECONDS
         return (first >= clear) & ((to_line <= MINOR_VISIBILITY) | (first >= clear + FREE_SECONDS))
 
     def _crossing(self, f, fv, passes, next_lane, new_pos) -> np.ndarray:

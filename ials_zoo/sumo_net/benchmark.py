@@ -230,7 +230,8 @@ def bench_arrays(net: str, repeats: int = 3, decisions: int = 60, copies=ARRAY_C
     a pipe round trip per decision). Also the arrays' memory per copy (the vehicle pool's bytes)."""
     options = {"net": net, "fresh_process": False, "max_cycles": decisions}
     lights = read_network(scenario_of(net=net).net_file).ids
-    aips = gs_marginal_predictors(lights, net=net)  # recorded before the GS holds this process's SUMO
+    # the entries of the measured decisions, recorded before the GS holds this process's SUMO
+    aips = gs_marginal_predictors(lights, net=net, max_cycles=decisions)
     gs = SumoNetEnv(backend="inprocess", **options)
     local = IALSNetEnv(predictors=aips, backend="worker", **options)  # SUMO's one simulation per process
     arrays = {c: ArrayIALSCopies(None, aips, list(range(c)), net=net, max_cycles=decisions) for c in copies}

@@ -1,7 +1,8 @@
 """What one ``sumo_net_v0`` episode simulates: the files, the hour, and RESCO's timing.
 
 A :class:`Scenario` comes from one of RESCO's eight maps by name (read from the ``sumo-rl``
-wheel, a dependency: the map files are not ours to copy), from a ``.sumocfg``, or from a
+wheel, a dependency: the map files are not ours to copy), from a grid of any size by name
+(``gridRxC``, generated at first use: :func:`generated_grid`), from a ``.sumocfg``, or from a
 ``net_file`` with its ``route_files``. Every path and time is checked here, before SUMO starts.
 
 RESCO's settings (Pi-Star-Lab/RESCO ``config/map_config.py`` and each map's ``.sumocfg``): one
@@ -19,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 import importlib.util
 import os
+import re
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -71,6 +73,28 @@ RESCO_MAPS = {
     "ingolstadt7": (57600, 61200, 10, 3, "ingolstadt7.rou.xml"),
     "ingolstadt21": (57600, 61200, 10, 3, "ingolstadt21.rou.xml"),
 }
+
+
+GRID_NAME = re.compile(r"grid(\d+)x(\d+)")
+GRID_SIDES = (2, 30)  # rows and columns of a generated grid
+
+
+def generated_grid(net: str) -> tuple[str, list[str]] | None:
+    """``gridRxC`` (not one of RESCO's maps): a grid of R x C lights, built at first use and
+    cached (:func:`ials_zoo.traffic.network.build_grid`: DIALS's grid, 100 m single-lane roads,
+    a vehicle entering at every fringe road with probability 0.1 each second, routes of fewest
+    turns), as ``(net file, [route file])``; None for another name."""
+    match = GRID_NAME.fullmatch(str(net))
+    if match is None or net in RESCO_MAPS:
+        return None
+    rows, cols = int(match[1]), int(match[2])
+    low, high = GRID_SIDES
+    if not (low <= rows <= high and low <= cols <= high):
+        raise BadInput(f"net {net!r}: a generated grid has {low} to {high} rows and columns")
+    from ials_zoo.traffic.network import build_grid  # lazy: netconvert builds it once, at first use
+
+    files = build_grid((rows, cols))
+    return files.net, [files.routes]
 
 
 def resco_map_folder(name: str) -> Path:
@@ -150,10 +174,13 @@ def make_scenario(net=None, sumocfg=None, net_file=None, route_files=None, begin
     if route_files is not None and net_file is None:
         raise BadInput("route_files go with net_file= (a map or a sumocfg names its own)")
     decision, yellow = 10, 3
-    if net is not None:
+    grid = generated_grid(net) if net is not None else None
+    if grid is not None:
+        name, (net_path, route_paths), b, e = net, grid, 0, 3600
+    elif net is not None:
         if net not in RESCO_MAPS:
-            raise BadInput(f"unknown map {net!r}; expected one of {', '.join(RESCO_MAPS)} "
-                           "(or sumocfg=PATH / net_file=PATH for a network of your own: --env-options "
+            raise BadInput(f"unknown map {net!r}; expected one of {', '.join(RESCO_MAPS)}, or a generated grid "
+                           "gridRxC (or sumocfg=PATH / net_file=PATH for a network of your own: --env-options "
                            "'{\"sumocfg\": PATH}' on the command line, demo --sumocfg PATH)")
         b, e, decision, yellow, routes = RESCO_MAPS[net]
         folder = resco_map_folder(net)
@@ -180,7 +207,7 @@ def make_scenario(net=None, sumocfg=None, net_file=None, route_files=None, begin
     return Scenario(name, net_path, tuple(route_paths), begin, end, decision, yellow)
 
 
-__all__ = ["RESCO_MAPS", "Scenario", "make_scenario", "resco_map_folder"]
+__all__ = ["GRID_NAME", "RESCO_MAPS", "Scenario", "generated_grid", "make_scenario", "resco_map_folder"]
 
 
 def scenario_of(net=None, sumocfg=None, net_file=None, route_files=None, begin=None, end=None,
