@@ -256,3 +256,34 @@ def test_sources_as_blocks_are_the_same_decisions_as_rows(cologne8):
         assert all(np.array_equal(dsets[c * len(ids) + r], b[c]) for r, b in enumerate(blocks.dset_blocks())
                    for c in range(3))
     assert rows.sim.inserted > 50
+
+
+def test_a_grid_of_any_size_by_name_runs_on_the_gs_and_on_arrays():
+    """sumo_net_v0(net="grid3x3"): nine lights of two greens, built at first use; the GS and the
+    IALS on arrays step it; a size out of range is refused by name."""
+    from ials_zoo.sumo_net.arrays_vec import ArrayIALSCopies
+    from ials_zoo.sumo_net.env import SumoNetEnv
+
+    scenario = make_scenario(net="grid3x3")
+    lights = read_network(scenario.net_file).lights
+    assert len(lights) == 9 and all(x.n_actions == 2 for x in lights)
+    gs = SumoNetEnv(net="grid3x3", backend="auto", fresh_process=False, max_cycles=30)
+    try:
+        gs.reset(seed=0)
+        while gs.agents:
+            _, rewards, *_ = gs.step({a: 0 for a in gs.agents})
+        assert min(rewards.values()) < 0  # one green only for 300 s: queues on the other roads
+    finally:
+        gs.close()
+    ials = ArrayIALSCopies(None, "uniform", [0, 1], net="grid3x3", max_cycles=5)
+    try:
+        obs = ials.reset([0, 1])
+        assert obs.shape == (9, 2, 20)
+        for _ in range(5):
+            obs, rewards, done = ials.step(np.zeros((9, 2), np.int64))
+        assert done and rewards.shape == (9, 2)
+    finally:
+        ials.close()
+    for bad in ("grid1x5", "grid21x2"):
+        with pytest.raises(BadInput, match=bad):
+            make_scenario(net=bad)

@@ -26,6 +26,7 @@ import time
 import numpy as np
 
 from ials_zoo.errors import BadInput
+from ials_zoo.sumo.lease import SimulationError
 from ials_zoo.learners.gs_vec import GSVecEnv
 from ials_zoo.sumo_net.arrays_vec import ArrayIALSCopies
 from ials_zoo.sumo_net.env import SumoNetEnv
@@ -221,6 +222,15 @@ def _ials_episode(env, decisions: int, seed: int) -> float:
     return (time.perf_counter() - start) / decisions
 
 
+def _regions_episode(env, seed: int):
+    """:func:`_random_episode` of the SUMO regions' IALS, or the SUMO error that stopped it
+    (its cut renames some networks' roads: a generated grid's)."""
+    try:
+        return _random_episode(env, seed)
+    except SimulationError as exc:
+        return f"the SUMO regions failed: {str(exc).splitlines()[0][:200]}"
+
+
 def bench_arrays(net: str, repeats: int = 3, decisions: int = 60, copies=ARRAY_COPIES) -> dict:
     """µs per agent-decision of the GS, every light's IALS on SUMO regions, and on arrays
     (:mod:`ials_zoo.sumo_net.arrays`) with each of ``copies`` copies in one batch; every light at
@@ -237,10 +247,10 @@ def bench_arrays(net: str, repeats: int = 3, decisions: int = 60, copies=ARRAY_C
     arrays = {c: ArrayIALSCopies(None, aips, list(range(c)), net=net, max_cycles=decisions) for c in copies}
     for env in arrays.values():
         env.action_counts = [gs.action_space(a).n for a in env.agents]
-    turns = []
+    turns, regions_failed = [], None
     try:
         for seed in range(repeats):
-            turns.append((_random_episode(gs, seed), _random_episode(local, seed),
+            turns.append((_random_episode(gs, seed), _regions_episode(local, seed),
                           {c: _ials_episode(env, decisions, seed) / c for c, env in arrays.items()}))
     finally:
         memory = {c: sum(getattr(env.core.sim.v, f).nbytes for f in vars(env.core.sim.v)) / c
@@ -248,9 +258,14 @@ def bench_arrays(net: str, repeats: int = 3, decisions: int = 60, copies=ARRAY_C
         for env in (gs, local, *arrays.values()):
             env.close()
     n = len(lights)
+    regions = [(g, x) for g, x, _ in turns if not isinstance(x, str)]
+    if len(regions) < len(turns):
+        regions_failed = next(x for _, x, _ in turns if isinstance(x, str))
     out = {"net": net, "agents": n, "repeats": repeats, "decisions": decisions,
-           "gs_us": _stat([g / n * 1e6 for g, _, _ in turns]), "sumo_regions_us": _stat([x / n * 1e6 for _, x, _ in turns]),
-           "sumo_regions_over_gs": _stat([x / g for g, x, _ in turns]), "bytes_per_copy": memory}
+           "gs_us": _stat([g / n * 1e6 for g, _, _ in turns]), "bytes_per_copy": memory,
+           "sumo_regions_us": _stat([x / n * 1e6 for _, x in regions]) if regions else None,
+           "sumo_regions_over_gs": _stat([x / g for g, x in regions]) if regions else None,
+           "sumo_regions_failed": regions_failed}
     for c in copies:
         out[f"arrays_{c}_us"] = _stat([a[c] / n * 1e6 for _, _, a in turns])
         out[f"arrays_{c}_over_gs"] = _stat([a[c] / g for g, _, a in turns])
@@ -268,7 +283,8 @@ def print_array_rows(rows) -> None:
         def f(key):
             m, lo, hi = r[key]
             return f"{m:.3f} [{lo:.3f}, {hi:.3f}]"
-        print(f"{r['net']:<14}{r['agents']:>7}{r['gs_us'][0]:>9,.0f}{f('sumo_regions_over_gs'):>22}"
+        regions = f("sumo_regions_over_gs") if r["sumo_regions_over_gs"] else "failed"
+        print(f"{r['net']:<14}{r['agents']:>7}{r['gs_us'][0]:>9,.0f}{regions:>22}"
               + "".join(f"{f(f'arrays_{c}_over_gs'):>22}" for c in copies)
               + f"{r['bytes_per_copy'][copies[-1]] / 1024:>14,.0f}")
     print("µs per agent-decision over the GS's, every light's IALS at once (AIPs of the GS's entry frequencies, every "

@@ -76,7 +76,7 @@ RESCO_MAPS = {
 
 
 GRID_NAME = re.compile(r"grid(\d+)x(\d+)")
-GRID_SIDES = (2, 30)  # rows and columns of a generated grid
+GRID_SIDES = (2, 20)  # rows and columns of a generated grid: up to 400 lights
 
 
 def generated_grid(net: str) -> tuple[str, list[str]] | None:
@@ -93,7 +93,7 @@ def generated_grid(net: str) -> tuple[str, list[str]] | None:
         raise BadInput(f"net {net!r}: a generated grid has {low} to {high} rows and columns")
     from ials_zoo.traffic.network import build_grid  # lazy: netconvert builds it once, at first use
 
-    files = build_grid((rows, cols))
+    files = build_grid((rows, cols), max_side=high)
     return files.net, [files.routes]
 
 

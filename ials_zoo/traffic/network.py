@@ -84,17 +84,17 @@ def cache_root() -> Path:
     return root / "traffic"
 
 
-def check_grid(grid) -> tuple[int, int]:
-    """Validate a grid size: a pair of ints, each in ``[2, 10]``."""
+def check_grid(grid, max_side: int = MAX_GRID) -> tuple[int, int]:
+    """Validate a grid size: a pair of ints, each in ``[2, max_side]`` (the env's: 10)."""
     if isinstance(grid, (str, bytes)) or not hasattr(grid, "__len__") or len(grid) != 2:
         raise BadInput(f"grid must be a pair (rows, cols), got {grid!r}")
     out = []
     for g in grid:
         if isinstance(g, bool) or not isinstance(g, (int, np.integer)):
             raise BadInputType(f"grid sizes must be ints, got {grid!r}")
-        if not MIN_GRID <= int(g) <= MAX_GRID:
+        if not MIN_GRID <= int(g) <= max_side:
             raise BadInput(
-                f"grid sizes must be in [{MIN_GRID}, {MAX_GRID}], got {grid!r}"
+                f"grid sizes must be in [{MIN_GRID}, {max_side}], got {grid!r}"
             )
         out.append(int(g))
     return out[0], out[1]
@@ -433,15 +433,16 @@ class NetworkFiles:
 
 
 def build_grid(
-    grid=(5, 5), inflow_probability: float = 0.1, internal_links: bool = True
+    grid=(5, 5), inflow_probability: float = 0.1, internal_links: bool = True, max_side: int = MAX_GRID
 ) -> NetworkFiles:
     """Build (or fetch from the cache) the grid network, its demand and its actuated lights.
 
     ``internal_links=False`` builds the network without junction-internal lanes (vehicles
     jump from an incoming lane to the outgoing one): SUMO runs faster, but crossing a
-    junction then takes no time and space.
+    junction then takes no time and space. ``max_side``: the largest side allowed (the env's
+    10; ``sumo_net_v0``'s grids by name go further).
     """
-    rows, cols = check_grid(grid)
+    rows, cols = check_grid(grid, max_side)
     p = check_probability(inflow_probability)
     internal_links = check_bool("internal_links", internal_links)
 

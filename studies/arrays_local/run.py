@@ -85,10 +85,11 @@ def plot(out: Path) -> None:
     series = [("GS (SUMO, whole network)", "gs_us"), ("every light's IALS, SUMO regions", "sumo_regions_us"),
               ("IALS on arrays, 1 copy", "arrays_1_us"), ("IALS on arrays, 64 copies (per copy)", "arrays_64_us")]
     for label, key in series:
-        x = [r["agents"] for r in rows]
-        y = [r[key][0] for r in rows]
-        lo = [r[key][0] - r[key][1] for r in rows]
-        hi = [r[key][2] - r[key][0] for r in rows]
+        have = [r for r in rows if r.get(key)]
+        x = [r["agents"] for r in have]
+        y = [r[key][0] for r in have]
+        lo = [r[key][0] - r[key][1] for r in have]
+        hi = [r[key][2] - r[key][0] for r in have]
         ax.errorbar(x, y, yerr=[lo, hi], marker="o", capsize=3, label=label)
     for r in rows:
         ax.annotate(r["net"], (r["agents"], r["gs_us"][0]), textcoords="offset points", xytext=(4, 4), fontsize=8)
