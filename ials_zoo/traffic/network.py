@@ -66,6 +66,7 @@ APPROACHES = ("N", "E", "S", "W")
 _HEADING = {"N": (1, 0), "E": (0, -1), "S": (-1, 0), "W": (0, 1)}
 TURNS = ("right", "straight", "left")
 MIN_GRID, MAX_GRID = 2, 10
+MAX_BUILT_GRID = 20  # what the builders take (sumo_net_v0's grids by name); the env's own option stays within MAX_GRID
 
 GREEN_DUR, GREEN_MIN, GREEN_MAX = 31, 8, 45
 YELLOW_DUR, YELLOW_MIN, YELLOW_MAX = 6, 3, 6
@@ -141,7 +142,7 @@ def _neighbour(r: int, c: int, approach: str) -> tuple[int, int]:
 
 def incoming_edges(grid, index: int) -> tuple[str, ...]:
     """The 4 incoming edges of intersection ``index``, in N, E, S, W order."""
-    rows, cols = check_grid(grid)
+    rows, cols = check_grid(grid, MAX_BUILT_GRID)
     r, c = divmod(index, cols)
     me = tls_id(index)
     return tuple(
@@ -151,7 +152,7 @@ def incoming_edges(grid, index: int) -> tuple[str, ...]:
 
 def outgoing_edges(grid, index: int) -> tuple[str, ...]:
     """The 4 outgoing edges of intersection ``index``, towards N, E, S, W."""
-    rows, cols = check_grid(grid)
+    rows, cols = check_grid(grid, MAX_BUILT_GRID)
     r, c = divmod(index, cols)
     me = tls_id(index)
     return tuple(
@@ -228,7 +229,7 @@ class GridRoutes:
 
 def grid_routes(grid) -> GridRoutes:
     """Every entry's route distribution (see the module docstring)."""
-    rows, cols = check_grid(grid)
+    rows, cols = check_grid(grid, MAX_BUILT_GRID)
     fringe = _fringe(rows, cols)
     out: dict[str, list[tuple[list[str], float]]] = {}
     for src in fringe:
@@ -267,7 +268,7 @@ def turn_probabilities(grid, index: int, inflow_probability: float = 0.1) -> np.
     distributions (every entry inserts at the same rate, so congestion aside this is the
     fraction of the cars crossing the intersection). Rows with no traffic are uniform.
     """
-    rows, cols = check_grid(grid)
+    rows, cols = check_grid(grid, MAX_BUILT_GRID)
     check_index(grid, index)
     ins = incoming_edges(grid, index)
     outs = outgoing_edges(grid, index)
@@ -286,7 +287,7 @@ def turn_probabilities(grid, index: int, inflow_probability: float = 0.1) -> np.
 
 
 def check_index(grid, index) -> int:
-    rows, cols = check_grid(grid)
+    rows, cols = check_grid(grid, MAX_BUILT_GRID)
     if isinstance(index, bool) or not isinstance(index, (int, np.integer)):
         raise BadInputType(f"intersection index must be an int, got {index!r}")
     if not 0 <= int(index) < rows * cols:
