@@ -146,7 +146,13 @@ def regions_of(net_file: str, cap: float = CHAIN_CAP_METRES, short_exit: float =
         raise BadInput(f"the exits' distance must be > 0 m, got {exit_metres!r}")
     if not reach >= 0:
         raise BadInput(f"the regions' reach through junctions must be >= 0 m, got {reach!r}")
-    net = _read(str(net_file), os.path.getmtime(net_file))
+    return dict(_regions(str(net_file), os.path.getmtime(net_file), cap, short_exit, exit_metres, reach))
+
+
+@functools.lru_cache(maxsize=16)
+def _regions(path: str, mtime: float, cap: float, short_exit: float, exit_metres: float, reach: float) -> dict:
+    """:func:`regions_of`, once per file and settings (callers ask for one light's region often)."""
+    net = _read(path, mtime)
     lights = {t.getID() for t in net.getTrafficLights()}
     # a light's nodes (a joint light controls several): their edges end chains too
     stops = lights | {n.getID() for t in net.getTrafficLights() for n in _nodes_of(t)}
