@@ -287,3 +287,17 @@ def test_a_grid_of_any_size_by_name_runs_on_the_gs_and_on_arrays():
     for bad in ("grid1x5", "grid21x2"):
         with pytest.raises(BadInput, match=bad):
             make_scenario(net=bad)
+
+
+def test_copies_that_could_outgrow_memory_are_refused_before_any_work(cologne8):
+    """The bound counts every lane jammed; a million copies of cologne8 exceed any machine
+    here, and the error names the estimate and what to change."""
+    from ials_zoo.sumo_net.arrays_core import memory_bound
+
+    lights = read_network(cologne8.net_file).lights
+    ids = [x.id for x in lights]
+    arrays = RegionArrays(cologne8.net_file, {x: regions_of(cologne8.net_file)[x] for x in ids}, 3)
+    assert memory_bound(arrays, 2) == 2 * memory_bound(arrays, 1) > 0
+    with pytest.raises(BadInput, match="GiB.*fewer copies"):
+        ArrayNetCore(cologne8.net_file, cologne8.route_files, cologne8.begin, 10, 3, ids, [x.lanes for x in lights],
+                     [[] for _ in ids], copies=1_000_000)

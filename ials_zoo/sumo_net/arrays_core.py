@@ -17,9 +17,13 @@ Holds no SUMO simulation: it runs in the caller's process (:class:`ials_zoo.sumo
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 
-from ials_zoo.sumo_net.arrays import HALTING_SPEED, ArraySim
+from ials_zoo.errors import BadInput
+
+from ials_zoo.sumo_net.arrays import FIELDS, HALTING_SPEED, ArraySim
 from ials_zoo.sumo_net.arrays_layout import RegionArrays, vehicle_kinds
 from ials_zoo.sumo_net.influence import CELL_METRES, CELLS, HELD_DECISIONS, region_layout
 from ials_zoo.sumo_net.regions import regions_of
@@ -27,6 +31,8 @@ from ials_zoo.sumo_net.regions import regions_of
 INSERT_PATIENCE = 2  # as the island's: a vehicle that cannot enter within 2 s is dropped
 BLOCKED_SPEED = 0.01  # as the island's (m/s)
 GRIDLOCK_DECISIONS = 10  # as the island's
+PACKED_METRES = 7.5  # a jammed lane's metres per vehicle (SUMO's default length and gap)
+WORKING_COPIES = 6  # the per-second arrays (sorting, speeds, positions) alongside the pool
 ENTRY_STREAM = 1  # the entries' draws: a stream of the episode's seed apart from the simulator's
 
 
@@ -46,6 +52,7 @@ class ArrayNetCore:
         self.controlled = list(self.lights if controlled is None else controlled)
         self.arrays = RegionArrays(net_file, {x: regions[x] for x in self.lights}, self.yellow, driven=self.controlled)
         self.arrays.calibrate(lane_shares or {})
+        check_memory(self.arrays, self.copies)
         self.sim = ArraySim(self.arrays, vehicle_kinds(route_files), self.copies, [list(x) for x in lanes],
                             patience=INSERT_PATIENCE)
         self.tables = list(tables) if isinstance(tables, list) else [tables[x] for x in self.lights]
@@ -213,6 +220,26 @@ class ArrayNetCore:
         pass
 
 
+def memory_bound(arrays: RegionArrays, copies: int) -> int:
+    """Bytes the copies could need at most: every lane packed with vehicles (one per
+    :data:`PACKED_METRES`), each vehicle's fields and a few arrays of the same size per second."""
+    vehicles = copies * float(np.sum(np.maximum(arrays.lane_length, PACKED_METRES) // PACKED_METRES))
+    return int(vehicles * len(FIELDS) * 8 * WORKING_COPIES + copies * arrays.n_lanes * 8 * 8)
+
+
+def check_memory(arrays: RegionArrays, copies: int) -> None:
+    """A clear error, before any work, where the copies could outgrow half this machine's memory."""
+    need = memory_bound(arrays, copies)
+    try:
+        have = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return  # no way to know here: the pool grows as it needs
+    if need > have // 2:
+        raise BadInput(f"{copies} copies of {len(arrays.lights)} regions ({arrays.n_lanes:,} lanes each) could need "
+                       f"{need / 2**30:.1f} GiB with every lane jammed, more than half of this machine's "
+                       f"{have / 2**30:.1f} GiB: use fewer copies")
+
+
 class RegionData:
     """Where each row's influence sources and d-set bits lie in flat arrays over every row, so
     that one numpy pass reads or writes them all. Inside, rows are region-major (``region *
@@ -274,4 +301,4 @@ class RegionData:
         self.exit_of_pair, self.exit_lane = pairs[:, 0], pairs[:, 1]
 
 
-__all__ = ["ArrayNetCore", "RegionData"]
+__all__ = ["ArrayNetCore", "RegionData", "check_memory", "memory_bound"]
