@@ -22,7 +22,6 @@ import os
 import numpy as np
 
 from ials_zoo.errors import BadInput
-
 from ials_zoo.sumo_net.arrays import FIELDS, HALTING_SPEED, ArraySim
 from ials_zoo.sumo_net.arrays_layout import RegionArrays, vehicle_kinds
 from ials_zoo.sumo_net.influence import CELL_METRES, CELLS, HELD_DECISIONS, region_layout

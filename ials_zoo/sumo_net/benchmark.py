@@ -26,8 +26,8 @@ import time
 import numpy as np
 
 from ials_zoo.errors import BadInput
-from ials_zoo.sumo.lease import SimulationError
 from ials_zoo.learners.gs_vec import GSVecEnv
+from ials_zoo.sumo.lease import SimulationError
 from ials_zoo.sumo_net.arrays_vec import ArrayIALSCopies
 from ials_zoo.sumo_net.env import SumoNetEnv
 from ials_zoo.sumo_net.ials_env import IALSNetEnv

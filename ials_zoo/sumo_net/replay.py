@@ -89,6 +89,14 @@ def measures_error(gs_measures, local_measures) -> dict[str, float]:
     return out
 
 
+def contract_errors(error: dict) -> dict[str, float]:
+    """The replay contract's four figures from :func:`replay_regions`' ``error``: lanes'
+    vehicles and halting, the observation's worst quantity, the reward."""
+    observation = max(error["approach"], error["total_wait"], error["queue"], error["speed_sum"])
+    return {"vehicles": error["vehicles"], "halting": error["halting"], "observation": observation,
+            "reward": error["reward"]}
+
+
 def _inside(route, index: int, edges: set) -> tuple:
     out = []
     for e in route[max(index, 0):]:
@@ -315,5 +323,5 @@ def _sumo_replay(sim, scenario, regions: dict, lights: list, entries, folder: Pa
     return replay
 
 
-__all__ = ["MAX_DISTANCE", "ReplayCore", "cut_regions", "measures_error", "replay_arrays", "replay_each", "replay_error", "replay_regions",
+__all__ = ["MAX_DISTANCE", "ReplayCore", "contract_errors", "cut_regions", "measures_error", "replay_arrays", "replay_each", "replay_error", "replay_regions",
            "vehicle_types"]
