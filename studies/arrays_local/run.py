@@ -82,7 +82,8 @@ def plot(out: Path) -> None:
     if not rows:
         raise SystemExit(f"no cost_*.json under {RESULTS}: run `cost` first")
     fig, ax = plt.subplots(figsize=(7, 4.5))
-    series = [("GS (SUMO, whole network)", "gs_us"), ("every light's IALS, SUMO regions", "sumo_regions_us"),
+    series = [("GS (SUMO, whole network)", "gs_us"),
+              ("every light's IALS, SUMO regions (they fail on the generated grids)", "sumo_regions_us"),
               ("IALS on arrays, 1 copy", "arrays_1_us"), ("IALS on arrays, 64 copies (per copy)", "arrays_64_us")]
     for label, key in series:
         have = [r for r in rows if r.get(key)]
@@ -93,9 +94,9 @@ def plot(out: Path) -> None:
         ax.errorbar(x, y, yerr=[lo, hi], marker="o", capsize=3, label=label)
     for r in rows:
         ax.annotate(r["net"], (r["agents"], r["gs_us"][0]), textcoords="offset points", xytext=(4, 4), fontsize=8)
-    ax.set(xscale="log", yscale="log", xlabel="lights (agents)", ylabel="µs per agent-decision",
-           title="Cost per agent-decision as the network grows\n"
-                 f"python studies/arrays_local/run.py cost; commit {', '.join(sorted({r['commit'] for r in rows}))}")
+    ax.set(xscale="log", yscale="log", xlabel="lights (agents)", ylabel="µs per agent-decision")
+    ax.set_title("Cost per agent-decision as the network grows\npython studies/arrays_local/run.py cost; commits "
+                 + ", ".join(sorted({r["commit"] for r in rows})), fontsize=9)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
