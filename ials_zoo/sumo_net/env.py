@@ -60,8 +60,10 @@ class SumoNetEnv(ParallelEnv):
     """Traffic-signal control on any SUMO network (``sumo_net_v0``), RESCO's MDP by default.
 
     **Networks**: ``net=`` (default ``"cologne8"``) one of RESCO's maps (grid4x4, arterial4x4, cologne1, cologne3,
-    cologne8, ingolstadt1, ingolstadt7, ingolstadt21; files from the ``sumo-rl`` wheel),
-    ``sumocfg=PATH``, or ``net_file=PATH`` with ``route_files=``; ``begin``/``end`` (s) override
+    cologne8, ingolstadt1, ingolstadt7, ingolstadt21; files from the ``sumo-rl`` wheel), a grid
+    of any size ``"gridRxC"`` (2 to 20 rows and columns, built at first use and cached: DIALS's
+    grid of single-lane 100 m roads, a vehicle entering each fringe road with probability 0.1 a
+    second), ``sumocfg=PATH``, or ``net_file=PATH`` with ``route_files=``; ``begin``/``end`` (s) override
     the map's hour (Cologne 25,200-28,800, Ingolstadt 57,600-61,200, the grids 0-3,600). Known
     differences of the wheel's files from RESCO's (Ault & Sharon, NeurIPS 2021 Datasets and
     Benchmarks; github Pi-Star-Lab/RESCO): ingolstadt7 and ingolstadt21 lack one 25 s green of
@@ -121,6 +123,11 @@ class SumoNetEnv(ParallelEnv):
     ``learners=[]`` to run every light on its own program, or see
     :mod:`ials_zoo.sumo_net.controllers`). Any other keyword (``**unknown`` in the signature) is
     refused, naming the valid options.
+
+    **IALS**: every light's IALS is :class:`ials_zoo.sumo_net.ials_env.IALSNetEnv` (and
+    ``make_ials_parallel_env``); its regions run in SUMO (``local="sumo"``) or as numpy arrays,
+    every copy in one batch, without SUMO (``local="arrays"``: :mod:`ials_zoo.sumo_net.arrays`;
+    ``ials-zoo train dials --local arrays``). Their fidelity and cost: ``docs/local_simulators.md``.
 
     Version history: v0 -- first version.
     """
