@@ -42,8 +42,8 @@ from __future__ import annotations
 import numpy as np
 
 from ials_zoo.sumo_net.arrays_layout import GREEN, MINOR, YELLOW, RegionArrays
+from ials_zoo.sumo_net.influence import HALTING_SPEED
 
-HALTING_SPEED = 0.1  # m/s: SUMO's halting vehicle
 POSITION_KEY, POSITION_SHIFT = 1e5, 1e3  # lane * KEY + position + SHIFT sorts vehicles by lane, then position
 OFF_LINK_PENALTY = 4.0  # vehicles per share: how much emptier a lane their link does not lead to must be
 MINOR_VISIBILITY = 4.5  # m: SUMO's default foe visibility of a minor link: closer than that a vehicle may go
@@ -417,4 +417,4 @@ class ArraySim:
         return out
 
 
-__all__ = ["ArraySim", "HALTING_SPEED", "VehiclePool"]
+__all__ = ["ArraySim", "VehiclePool"]

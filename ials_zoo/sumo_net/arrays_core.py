@@ -22,14 +22,12 @@ import os
 import numpy as np
 
 from ials_zoo.errors import BadInput
-from ials_zoo.sumo_net.arrays import FIELDS, HALTING_SPEED, ArraySim
+from ials_zoo.sumo_net.arrays import FIELDS, ArraySim
 from ials_zoo.sumo_net.arrays_layout import RegionArrays, vehicle_kinds
-from ials_zoo.sumo_net.influence import CELL_METRES, CELLS, HELD_DECISIONS, region_layout
+from ials_zoo.sumo_net.influence import CELL_METRES, CELLS, HALTING_SPEED, HELD_DECISIONS, region_layout
+from ials_zoo.sumo_net.island import BLOCKED_SPEED, GRIDLOCK_DECISIONS, INSERT_PATIENCE
 from ials_zoo.sumo_net.regions import regions_of
 
-INSERT_PATIENCE = 2  # as the island's: a vehicle that cannot enter within 2 s is dropped
-BLOCKED_SPEED = 0.01  # as the island's (m/s)
-GRIDLOCK_DECISIONS = 10  # as the island's
 PACKED_METRES = 7.5  # a jammed lane's metres per vehicle (SUMO's default length and gap)
 WORKING_COPIES = 6  # the per-second arrays (sorting, speeds, positions) alongside the pool
 ENTRY_STREAM = 1  # the entries' draws: a stream of the episode's seed apart from the simulator's
@@ -101,16 +99,20 @@ class ArrayNetCore:
         lanes = d.exit_lane[None, :] + np.arange(self.copies)[:, None] * self.arrays.n_lanes
         self.sim.limit[lanes] = np.where(blocked[:, d.exit_of_pair], BLOCKED_SPEED,
                                          self.arrays.lane_speed[d.exit_lane][None, :])
-        self._due = self._entries_due()
-        self._set_greens([int(x) for x in actions])
-        self._advance(self.yellow, self.decision, self._due)
+        due = self._entries_due()
+        rows, copies, greens = self._show_yellows(actions)
+        self._advance(0, self.yellow, due)
+        self.sim.phase[copies, rows] = greens  # every driven light to its action, its timer restarted
+        self.sim.elapsed[copies, rows] = -1.0
+        self._advance(self.yellow, self.decision, due)
         self.held = np.where(blocked, self.held + 1, 0)
         return self._observe()
 
-    def _set_greens(self, actions: list[int]) -> None:
-        """RESCO's switch (:meth:`ials_zoo.sumo_net.core.NetCore.step`): a light whose action is
-        another green shows the yellow between them for ``yellow`` seconds, then every driven
-        light is set to its action (its timer restarts)."""
+    def _show_yellows(self, actions) -> tuple:
+        """RESCO's switch (:meth:`ials_zoo.sumo_net.core.NetCore.step`), its first half: a light
+        whose action is another green shows the yellow between them. Returns the driven lights'
+        ``(signal rows, copies, actions)``, ``[copies, driven]`` each: the greens set after the
+        yellow seconds."""
         a = np.asarray(actions, np.int64).reshape(self.copies, len(self.controlled))
         rows = np.broadcast_to(self.driven_row, a.shape)
         copies = np.broadcast_to(np.arange(self.copies)[:, None], a.shape)
@@ -119,9 +121,7 @@ class ArrayNetCore:
         switch = (current != a) & (current < self._width) & (yellow >= 0)
         self.sim.phase[copies[switch], rows[switch]] = yellow[switch]
         self.sim.elapsed[copies[switch], rows[switch]] = -1.0
-        self._advance(0, self.yellow, self._due)
-        self.sim.phase[copies, rows] = a
-        self.sim.elapsed[copies, rows] = -1.0
+        return rows, copies, a
 
     def _yellows(self) -> None:
         """``[driven light, from green, to green]``: RESCO's yellow phase between the two, -1 if none."""

@@ -58,6 +58,7 @@ class ArrayIALSCopies:
         self.lane_start = np.concatenate([[0], np.cumsum(counts)])  # every light's rows in a copy's measures
         self.width = N_FEATURES * max(counts[ids.index(a)] for a in self.agents)
         self.agent_rows = [ids.index(a) for a in self.agents]
+        self.action_counts = [lights[r].n_actions for r in self.agent_rows]
         self.seeds = list(seeds)
         self._rng = np.random.default_rng(self.seeds[0])
         self.decisions, self.decision = s.decisions, 0

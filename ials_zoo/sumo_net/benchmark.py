@@ -245,8 +245,6 @@ def bench_arrays(net: str, repeats: int = 3, decisions: int = 60, copies=ARRAY_C
     gs = SumoNetEnv(backend="inprocess", **options)
     local = IALSNetEnv(predictors=aips, backend="worker", **options)  # SUMO's one simulation per process
     arrays = {c: ArrayIALSCopies(None, aips, list(range(c)), net=net, max_cycles=decisions) for c in copies}
-    for env in arrays.values():
-        env.action_counts = [gs.action_space(a).n for a in env.agents]
     turns, regions_failed = [], None
     try:
         for seed in range(repeats):
