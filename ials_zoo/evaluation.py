@@ -20,6 +20,9 @@ Policies (:func:`load_policy`):
 * ``"random"``: uniform random actions (reference);
 * ``"scripted"``: the domain's own scripted controller drives the agent(s) (reference; the GS
   is built with ``scripted_learners=True`` so they are still observed and rewarded);
+* ``"rule:NAME"``: a rule-based controller of the domain driving every agent (reference,
+  multi-agent track only; :attr:`ials_zoo.core.domains.Domain.rules`, e.g. ``sumo_net_v0``'s
+  ``fixed``, ``actuated``, ``greedy`` and ``max_pressure``);
 * a policy file (``.safetensors``, :mod:`ials_zoo.policy`) -- weights and JSON, never code;
 * an SB3 PPO model zip with its metadata sidecar (``<name>.meta.json``, written by the
   baselines), read safely (weights only, serialized fields ignored);
@@ -69,6 +72,8 @@ PROTOCOL_EPISODES = 20
 """Episodes of the official protocol (seeds ``EVAL_SEED_BASE .. EVAL_SEED_BASE + 19``)."""
 
 REFERENCE_POLICIES = ("random", "scripted")
+RULE_PREFIX = "rule:"
+"""A policy spec ``rule:NAME`` is the domain's rule ``NAME`` (:attr:`Domain.rules`)."""
 META_SUFFIX = ".meta.json"
 
 
@@ -139,7 +144,7 @@ class Policy:
 
     Attributes:
         name: short description (``"random"``, a file name, ``"module:fn"``).
-        kind: ``"random"``, ``"scripted"``, ``"model"`` or ``"callable"``.
+        kind: ``"random"``, ``"scripted"``, ``"rule"``, ``"model"`` or ``"callable"``.
         frame_stack: how many observations the policy reads.
         file, sha256: the file the policy was loaded from and its hash (None otherwise).
         agents: the agents the policy has weights for (None: any agent).
@@ -183,6 +188,43 @@ class ScriptedPolicy(Policy):
 
     def act(self, obs, action_space):
         return 0
+
+
+class RulePolicy(Policy):
+    """One of the domain's rules (:class:`ials_zoo.core.domains.Rule`) driving every agent; it
+    reads the GS, not the observations, so it scores on the multi-agent track only."""
+
+    kind = "rule"
+
+    def __init__(self, name: str, rule):
+        self.name = name
+        self.rule = rule
+
+    def joint_actor(self, env, agents):
+        """``act() -> actions`` in ``agents``' order on the GS ``env`` (zeros where the GS's own
+        controller drives them)."""
+        if self.rule.make is None:
+            zeros = np.zeros(len(agents), np.int64)
+            return lambda: zeros
+        controller = self.rule.make(env)
+
+        def act():
+            chosen = controller(env)
+            return np.array([chosen[a] for a in agents], np.int64)
+
+        return act
+
+
+def load_rule(spec: str, env_id: str | None) -> RulePolicy:
+    """``"rule:NAME"``: the domain's rule ``NAME`` (:attr:`Domain.rules`)."""
+    name = spec[len(RULE_PREFIX):]
+    if env_id is None:
+        raise BadInput(f"policy {spec!r} is a rule of a domain: name the domain (--env)")
+    rules = get_domain(env_id).rules
+    if name not in rules:
+        known = ", ".join(f"rule:{k}" for k in rules) or "none"
+        raise BadInput(f"{env_id} has no rule {name!r}; its rules: {known}")
+    return RulePolicy(name, rules[name])
 
 
 class CallablePolicy(Policy):
@@ -332,8 +374,9 @@ def _import_callable(spec: str, frame_stack: int | None) -> CallablePolicy:
 
 def load_policy(spec, env_id: str | None = None, agent: str | None = None,
                 deterministic: bool = False, frame_stack: int | None = None) -> Policy:
-    """Resolve a policy spec: a :class:`Policy`, ``"random"``, ``"scripted"``, a policy file,
-    an SB3 model zip or ``"module:function"`` (see module doc).
+    """Resolve a policy spec: a :class:`Policy`, ``"random"``, ``"scripted"``, ``"rule:NAME"``
+    (a rule of ``env_id``'s domain), a policy file, an SB3 model zip or ``"module:function"``
+    (see module doc).
 
     A model is checked against ``env_id`` and ``agent``: a policy is scored on the domain and
     the agent it was trained for (a ValueError says so otherwise). ``frame_stack`` may only
@@ -358,6 +401,8 @@ def load_policy(spec, env_id: str | None = None, agent: str | None = None,
             pol = RandomPolicy()
         elif spec == "scripted":
             pol = ScriptedPolicy()
+        elif spec.startswith(RULE_PREFIX):
+            pol = load_rule(spec, env_id)
         elif os.path.exists(spec) or spec.endswith((".zip", ".safetensors")):
             pol = load_model(spec, agent)
             pol.deterministic = bool(deterministic)
@@ -490,6 +535,8 @@ def evaluate(env_id: str, agent: str, policy, episodes: int = PROTOCOL_EPISODES,
     domain = get_domain(env_id)
     domain.check_agent(agent, **options)
     pol = load_policy(policy, env_id, agent, deterministic=deterministic, frame_stack=frame_stack)
+    if pol.kind == "rule":
+        raise BadInput(f"rule:{pol.name} drives every agent: it scores on the multi-agent track (--joint)")
     if isinstance(pol, NetworkPolicy) and pol.agents != (agent,):
         pol = pol.for_agents([agent])
     seeds = _check_seeds(seeds, episodes)
@@ -547,11 +594,11 @@ def evaluate_joint(env_id: str, policy, agents=None, episodes: int = PROTOCOL_EP
     once, each with its own policy (multi-agent track; module docstring).
 
     ``policy``: a joint policy file (weights for every agent), a :class:`NetworkPolicy`,
-    ``"random"`` or ``"scripted"``."""
+    ``"random"``, ``"scripted"`` or ``"rule:NAME"`` (a rule of the domain)."""
     domain = get_domain(env_id)
     pol = load_policy(policy, env_id, deterministic=deterministic)
     if pol.kind == "callable":
-        raise BadInput("the multi-agent track scores joint policy files, 'random' or 'scripted'")
+        raise BadInput("the multi-agent track scores joint policy files, 'random', 'scripted' or 'rule:NAME'")
     if agents is None:
         agents = list(pol.agents) if pol.kind == "model" else domain.agents(**options)
     agents = domain.check_agents(agents, **options)
@@ -563,11 +610,14 @@ def evaluate_joint(env_id: str, policy, agents=None, episodes: int = PROTOCOL_EP
             pol = pol.for_agents(agents)
     seeds = _check_seeds(seeds, episodes)
     scripted = {"scripted_learners": True} if pol.kind == "scripted" else {}
+    if pol.kind == "rule":  # the rule's own GS options: a part of the policy, not of the protocol
+        scripted = dict(pol.rule.env_options)
     env = domain.parallel_env(learners=agents, **scripted, **options)
     try:
         sizes = sizes_of_env(env, agents)  # agents with spaces of their own: padded, each its own actions
         if isinstance(pol, NetworkPolicy):
             _check_fits(pol, sizes, agents)
+        rule_act = pol.joint_actor(env, agents) if pol.kind == "rule" else None
     except BaseException:
         env.close()
         raise
@@ -594,6 +644,8 @@ def evaluate_joint(env_id: str, policy, agents=None, episodes: int = PROTOCOL_EP
                     acts = pol.act_all(x)
                 elif pol.kind == "random":
                     acts = pol._rng.integers(counts, size=len(agents))
+                elif rule_act is not None:
+                    acts = rule_act()
                 else:
                     acts = np.zeros(len(agents), np.int64)
                 obs, rewards, _, _, _ = env.step({a: int(u) for a, u in zip(agents, acts)})
@@ -637,6 +689,7 @@ __all__ = [
     "NetworkPolicy",
     "Policy",
     "RandomPolicy",
+    "RulePolicy",
     "ScriptedPolicy",
     "eval_seeds",
     "evaluate",

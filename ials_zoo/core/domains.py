@@ -42,6 +42,25 @@ EXTRA_KINDS = ("study", "dials", "viewer", "bench", "tools")
 
 
 @dataclass(frozen=True)
+class Rule:
+    """A rule-based controller of every agent: a reference on the multi-agent track (the
+    evaluator's ``rule:NAME`` policy; :attr:`Domain.rules`).
+
+    Attributes:
+        description: one line for listings and the board.
+        make: ``make(env) -> act``, where ``act(env) -> {agent: action}`` reads the GS it drives
+            (its queues, say); None: the GS's own controller drives the agents under
+            :attr:`env_options` and their actions are ignored.
+        env_options: GS options the rule runs under (e.g. ``{"scripted_learners": "actuated"}``);
+            they are the rule's, not the protocol's: its entry stays on its network's track.
+    """
+
+    description: str
+    make: Callable | None = None
+    env_options: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
 class Domain:
     """What a domain provides to the rest of the zoo.
 
@@ -108,6 +127,8 @@ class Domain:
         episode_steps: the steps of an episode under GS options (a network's hour of
             decisions, say), or None: ``max_cycles`` if given, else :attr:`episode_length`
             (:meth:`steps_of_episode`; what an evaluation's cost is estimated from).
+        rules: ``{name: Rule}``, the domain's rule-based controllers of every agent (the
+            multi-agent track's references beside ``random``; :class:`Rule`).
         description: one line for listings.
         extras: what one subsystem alone reads, keyed by it (:mod:`ials_zoo.core.extras`:
             ``"study"``, ``"dials"``, ``"viewer"``, ``"bench"``, ``"tools"``); a domain
@@ -140,6 +161,7 @@ class Domain:
     score_metric: str | None = None
     track_options: tuple[str, ...] = ()
     episode_steps: Callable[..., int] | None = None
+    rules: dict = field(default_factory=dict)
     description: str = ""
     extras: dict = field(default_factory=dict)
 
@@ -162,6 +184,11 @@ class Domain:
             raise BadInput(f"{self.env_id}: metrics must map names to 'lower' or 'higher' (better), got {bad}")
         if self.score_metric is not None and self.score_metric not in self.metrics:
             raise BadInput(f"{self.env_id}: score_metric {self.score_metric!r} is not one of its metrics")
+        bad = [k for k, v in self.rules.items() if not isinstance(v, Rule) or not str(k).isidentifier()
+               or k in ("random", "scripted")]
+        if bad:
+            raise BadInput(f"{self.env_id}: rules must map names (identifiers, not 'random' or 'scripted') to Rule, "
+                           f"got {bad}")
         if not set(self.track_options) <= set(self.gs_options):
             raise BadInput(f"{self.env_id}: track_options must be GS options, got {list(self.track_options)}")
 
@@ -417,5 +444,6 @@ __all__ = [
     "get_domain",
     "ials_domain_ids",
     "register_domain",
+    "Rule",
     "unregister_domain",
 ]

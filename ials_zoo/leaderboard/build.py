@@ -249,6 +249,8 @@ def result_for(env_id, agent, policy, episodes, deterministic=False, frame_stack
                            learning_curves=[{"seed": seed, "points": curve}] if curve else [],
                            trained_agents=list(pol.agents), submitter=submitter, notes=notes)
     algorithm = ev.policy_kind if ev.policy_kind in ("random", "scripted", "callable") else "model"
+    if ev.policy_kind == "rule":
+        algorithm = ev.policy  # a rule's entry is named as itself
     return make_result([ev], algorithm=algorithm, submitter=submitter, notes=notes)
 
 

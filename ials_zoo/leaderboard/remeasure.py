@@ -43,7 +43,8 @@ def remeasure_result(data: dict, files: list[str] | None, progress: bool = False
     ev = data["evaluation"]
     reports = []
     for i, s in enumerate(data["scores"]):
-        spec = kind if kind in ("random", "scripted") else files[i]
+        spec = kind if kind in ("random", "scripted") else f"rule:{data['policy']['name']}" if kind == "rule" \
+            else files[i]
         if data["track"] == MULTI:
             res = evaluate_joint(data["env_id"], spec, agents=data["agents"], seeds=ev["seeds"],
                                  deterministic=ev["deterministic"], progress=progress, **ev["options"])

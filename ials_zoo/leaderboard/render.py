@@ -70,6 +70,8 @@ def console_text(text) -> str:
 def _row(d: dict) -> list[str]:
     s, t = d["score"], d["training"]
     label = d["algorithm"] + (" (deterministic)" if d["evaluation"].get("deterministic") else "")
+    if d["policy"]["kind"] == "rule":
+        label += " (rule)"
     if d.get("provenance") == "external":
         label += " [external: training claims unverified]"
     if d.get("retrained"):

@@ -109,6 +109,8 @@ def _links(d: dict, folder: str, link_base: str) -> str:
 
 def _label(d: dict) -> str:
     label = d["algorithm"] + (" (deterministic)" if d["evaluation"].get("deterministic") else "")
+    if d["policy"]["kind"] == "rule":
+        label += " (rule)"
     tags = []
     if d.get("provenance") == "external":
         tags.append("external: training claims unverified")

@@ -73,8 +73,10 @@ def load_entries(directory=None, subdir: str = RESULTS_SUBDIR) -> tuple[list[tup
 
 def identity(data: dict) -> str:
     """What a result evaluated: track, domain, scored agents, policies (each seed's sha256, or
-    the reference policy's name), and the evaluation (seeds, options, deterministic)."""
-    policies = sorted(s["policy_sha256"] or data["policy"]["kind"] for s in data["scores"])
+    the reference policy's name, a rule's ``rule:NAME``), and the evaluation (seeds, options, deterministic)."""
+    kind = data["policy"]["kind"]
+    reference = f"rule:{data['policy']['name']}" if kind == "rule" else kind  # a rule by its name
+    policies = sorted(s["policy_sha256"] or reference for s in data["scores"])
     ev = data["evaluation"]
     key = {"track": data["track"], "env_id": data["env_id"], "agents": data["agents"], "policies": policies,
            "seeds": ev["seeds"], "options": ev["options"], "deterministic": ev["deterministic"]}

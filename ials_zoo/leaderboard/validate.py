@@ -123,6 +123,8 @@ def validate_result(data, local: bool = False) -> dict:
         if data["training"] is not None or data["algorithm"] != kind or data["trained_agents"]:
             raise ResultError("training", f"the reference policy {kind!r} makes a reference entry: training null, "
                               f"algorithm {kind!r}, no trained agents")
+    if kind == "rule":
+        _check_rule(data, domain)
     if "provenance" in data and kind != "model":
         raise ResultError("provenance", "only trained policies have a provenance")
     if "retrained" in data:
@@ -196,6 +198,18 @@ def _check_track_and_protocol(data: dict) -> None:
                           f"it {want!r}")
 
 
+def _check_rule(data: dict, domain) -> None:
+    """A rule is a reference entry of the multi-agent track, named as itself, of its domain."""
+    name = data["policy"]["name"]
+    if name not in domain.rules:
+        raise ResultError("policy.name", f"{data['env_id']} has no rule {name!r}; its rules: {', '.join(domain.rules)}")
+    if data["track"] != MULTI:
+        raise ResultError("track", "a rule drives every agent: multi-agent track only")
+    if data["training"] is not None or data["algorithm"] != name or data["trained_agents"]:
+        raise ResultError("training", f"the rule {name!r} makes a reference entry: training null, algorithm "
+                          f"{name!r}, no trained agents")
+
+
 def _check_seed_scores(data: dict, kind: str) -> None:
     """Each seed's returns (and a multi-agent episode's agents' returns), mean, interval and policy file."""
     ev = data["evaluation"]
@@ -221,7 +235,7 @@ def _check_seed_scores(data: dict, kind: str) -> None:
         for key, value in (("mean", mean), ("ci_low", lo), ("ci_high", hi)):
             if not _close(s[key], value):
                 raise ResultError(f"{where}.{key}", f"{s[key]!r} does not match the returns ({value!r})")
-        if kind in ("random", "scripted") and (s["policy_sha256"] is not None or s["policy_file"] is not None):
+        if kind in ("random", "scripted", "rule") and (s["policy_sha256"] is not None or s["policy_file"] is not None):
             raise ResultError(f"{where}.policy_sha256", f"must be null for the reference policy {kind!r}")
         if kind == "model" and (s["policy_sha256"] is None or not s["policy_file"]):
             raise ResultError(f"{where}.policy_sha256", "a model needs the file and the sha256 of its policy")

@@ -36,7 +36,10 @@ def check_controller(name: str) -> str:
 
 
 class Greedy:
-    """RESCO's MAXWAVE on any network: the green serving the most detected vehicles."""
+    """RESCO's MAXWAVE on any network: the green serving the most vehicles within 50 m (its own
+    detection distance, read with :meth:`SumoNetEnv.near_counts` whatever the env's)."""
+
+    DISTANCE = CONTROLLERS["greedy"]
 
     def __init__(self, network: Network):
         self.rows = {x.id: [[x.lanes.index(lane) for lane in x.served_lanes(a)] for a in range(x.n_actions)]
@@ -45,8 +48,7 @@ class Greedy:
     def __call__(self, env) -> dict:
         out = {}
         for tls in env.agents:
-            m = env.measures(tls)
-            wave = m["queue"] + m["approach"]
+            wave = env.near_counts(tls, self.DISTANCE)  # RESCO's queue + approach within 50 m
             out[tls] = int(np.argmax([wave[rows].sum() for rows in self.rows[tls]]))
         return out
 
@@ -92,6 +94,17 @@ class Random:
         return {a: int(self.rng.integers(env.action_space(a).n)) for a in env.agents}
 
 
+def greedy_rule(env) -> Greedy:
+    """The board's ``rule:greedy`` on the GS ``env`` drives."""
+    return Greedy(env.network)
+
+
+def max_pressure_rule(env) -> MaxPressure:
+    """The board's ``rule:max_pressure``: at the env's detection distance (the protocol's 200 m,
+    RESCO's for MAXPRESSURE)."""
+    return MaxPressure(env.network)
+
+
 def run_episode(controller: str, seed: int, **options) -> dict[str, float]:
     """One episode of ``controller`` on the network ``options`` name; its metrics (and its
     wall-clock ``seconds``). Detection uses RESCO's distance for the controller.
@@ -121,4 +134,5 @@ def run_episode(controller: str, seed: int, **options) -> dict[str, float]:
         env.close()
 
 
-__all__ = ["CONTROLLERS", "Greedy", "MaxPressure", "Random", "check_controller", "run_episode"]
+__all__ = ["CONTROLLERS", "Greedy", "MaxPressure", "Random", "check_controller", "greedy_rule", "max_pressure_rule",
+           "run_episode"]

@@ -92,6 +92,19 @@ class _Signal:
         self.waits = waits
         return np.array(rows, np.float64).reshape(len(self.lanes), len(MEASURES))
 
+    def near_counts(self, raw, distance: float) -> list[int]:
+        """Per lane, the vehicles whose light is at most ``distance`` m ahead (detected as
+        :meth:`observe` detects them): RESCO's MAXWAVE wave at its own detection distance."""
+        ids, position = raw.lane_getLastStepVehicleIDs, raw.vehicle_getLanePosition
+        out = []
+        for lane, length in zip(self.lanes, self.lengths):
+            vehicles = ids(lane)
+            if length > distance:
+                out.append(sum(1 for veh in vehicles if length - position(veh) <= distance))
+            else:
+                out.append(len(vehicles))
+        return out
+
 
 class NetCore:
     """RESCO's multi-signal loop over one network (see the module docstring).
@@ -187,6 +200,12 @@ class NetCore:
     def timing(self) -> float:
         """Seconds spent inside SUMO's own start, steps and end since the core was made."""
         return self.sim_seconds
+
+    def near_counts(self, distance: float) -> np.ndarray:
+        """Every light's lanes (observation order, concatenated): the vehicles within
+        ``distance`` m of the light now (:meth:`_Signal.near_counts`)."""
+        raw = self.ls._libsumo
+        return np.array([n for s in self.signals for n in s.near_counts(raw, float(distance))], np.float64)
 
     def make_actuated(self) -> None:
         """Every light on SUMO's actuated control of its own program's phases (type 3)."""

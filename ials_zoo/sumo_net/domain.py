@@ -6,7 +6,7 @@ this domain."""
 
 from __future__ import annotations
 
-from ials_zoo.core.domains import Domain
+from ials_zoo.core.domains import Domain, Rule
 from ials_zoo.core.extras import BenchSettings, DIALSSettings, StudySettings, ViewerSettings
 from ials_zoo.sumo_net.names import BOARD_OPTIONS, DEFAULT_NET, ENV_ID, SCENARIO_OPTIONS
 from ials_zoo.sumo_net.scenario import RESCO_MAPS
@@ -124,6 +124,29 @@ DIALS = DIALSSettings(aip_arch="mlp", aip_hidden=64, aip_lr=3e-3, aip_epochs=150
                       aip_lr_schedule="linear", collect_steps=720, copies=2, aip_clock_horizon=360,
                       fidelity_aip_clock_horizon=360)
 
+def _greedy(env):
+    from ials_zoo.sumo_net.controllers import greedy_rule
+
+    return greedy_rule(env)
+
+
+def _max_pressure(env):
+    from ials_zoo.sumo_net.controllers import max_pressure_rule
+
+    return max_pressure_rule(env)
+
+
+# the multi-agent track's rules (``ials-zoo evaluate --joint --policy rule:NAME``), RESCO's
+# heuristics (``random`` is the zoo's own reference: RESCO's STOCHASTIC)
+RULES = {
+    "fixed": Rule("every light on the network's own program (RESCO's Fixed Time)",
+                  env_options={"scripted_learners": "fixed"}),
+    "actuated": Rule("SUMO's actuated control of each program's own phases",
+                     env_options={"scripted_learners": "actuated"}),
+    "greedy": Rule("the green serving the most vehicles within 50 m (RESCO's MAXWAVE)", make=_greedy),
+    "max_pressure": Rule("the green of the largest pressure within 200 m (RESCO's MAXPRESSURE)", make=_max_pressure),
+}
+
 TOOLS = {"resco-controllers": ("ials_zoo.sumo_net.study",
                                "fixed time, max pressure, greedy and actuated lights on RESCO's maps, beside RESCO's table")}
 
@@ -141,6 +164,7 @@ def episode_steps(**options) -> int:
 
 DOMAIN = Domain(
     env_id=ENV_ID,
+    rules=RULES,
     description="any SUMO network, RESCO's eight city and grid maps by name (libsumo; single-junction IALS)",
     parallel_env=parallel_env,
     local_simulator=local_simulator,

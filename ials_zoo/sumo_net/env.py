@@ -41,6 +41,21 @@ def _check_distance(value) -> float:
     return float(value)
 
 
+PROGRAMS = {True: "fixed", "fixed": "fixed", "actuated": "actuated"}
+
+
+def _program_of(scripted_learners) -> str | None:
+    """``scripted_learners``: False (the learners act), True or ``"fixed"`` (they run the
+    network's own program), ``"actuated"`` (SUMO's actuated control of it)."""
+    if scripted_learners is False or scripted_learners is None:
+        return None
+    try:
+        return PROGRAMS[scripted_learners]
+    except (KeyError, TypeError):
+        raise BadInput(f"scripted_learners must be False, True, 'fixed' or 'actuated', got {scripted_learners!r}") \
+            from None
+
+
 def _learner_ids(learners, all_ids: list[str]) -> list[str]:
     if learners is None:
         return list(all_ids)
@@ -118,10 +133,10 @@ class SumoNetEnv(ParallelEnv):
 
     **Other options**: ``region_data=True`` has the GS watch its learners' regions every second
     and report each one's influence sources and d-set in ``infos`` (what AIP data is collected
-    from; a cost, so off by default). ``scripted_learners`` exists for the zoo's single-agent
-    scoring and must stay ``False``: this env has no scripted controller for a learner (pass
-    ``learners=[]`` to run every light on its own program, or see
-    :mod:`ials_zoo.sumo_net.controllers`). Any other keyword (``**unknown`` in the signature) is
+    from; a cost, so off by default). ``scripted_learners=True`` (or ``"fixed"``) has the learners
+    run the network's own program, ``"actuated"`` SUMO's actuated control of it: they are still
+    observed and rewarded, their actions ignored (the zoo's ``scripted`` reference and the rules
+    ``fixed`` and ``actuated``; :mod:`ials_zoo.sumo_net.controllers`). Any other keyword (``**unknown`` in the signature) is
     refused, naming the valid options.
 
     **IALS**: every light's IALS is :class:`ials_zoo.sumo_net.ials_env.IALSNetEnv` (and
@@ -142,9 +157,7 @@ class SumoNetEnv(ParallelEnv):
                  decision_seconds=None, yellow_seconds=None, max_cycles=None, learners=None, max_distance=200.0,
                  observation="drq_norm", reward="wait_norm", backend="worker", fresh_process=True, render_mode=None,
                  scripted_learners=False, region_data=False, **unknown):
-        if scripted_learners is not False:  # the zoo's single-agent scoring passes False
-            raise BadInput(f"{ENV_ID} has no scripted controller for learners: pass learners=[] to run every light "
-                           "on its own program, or see ials_zoo.sumo_net.controllers")
+        self.program = _program_of(scripted_learners)
         if unknown:
             raise BadInputType(f"unknown option(s) {sorted(unknown)} for {ENV_ID}; valid options: {', '.join(OPTIONS)}")
         if render_mode not in (None, *self.metadata["render_modes"]):
@@ -194,6 +207,7 @@ class SumoNetEnv(ParallelEnv):
         self._metrics, self._episodes, self._tripinfo = None, 0, None
         self._unread_tripinfo = None  # the ended episode's tripinfo until episode_metrics() reads it
         self._view = self._last_frame = None
+        self._near = None  # (distance, every lane's vehicles within it) this decision
 
     def _core_config(self) -> dict:
         s, lights = self.scenario, self.network.lights
@@ -202,7 +216,7 @@ class SumoNetEnv(ParallelEnv):
             "decision": s.decision_seconds, "yellow": s.yellow_seconds, "lights": [x.id for x in lights],
             "lanes": [list(x.lanes) for x in lights],
             "greens": [[x.phases[i] for i in x.greens] for x in lights],
-            "controlled": list(self.possible_agents), "max_distance": self.max_distance,
+            "controlled": [] if self.program else list(self.possible_agents), "max_distance": self.max_distance,
             **({"regions": self._region_layouts()} if self.region_data else {}),
         }
 
@@ -249,6 +263,15 @@ class SumoNetEnv(ParallelEnv):
         m = self._light_measures(tls)
         return {name: m[:, i].copy() for i, name in enumerate(MEASURES)}
 
+    def near_counts(self, tls: str, distance: float) -> np.ndarray:
+        """Light ``tls``'s vehicles within ``distance`` m of it, per lane (observation order),
+        whatever the env's own ``max_distance``: a rule with a detection distance of its own
+        (RESCO's MAXWAVE: 50 m) reads it here. One core call per decision for every light."""
+        if self._near is None or self._near[0] != distance:
+            self._near = (distance, self._sim.call("near_counts", float(distance)))
+        k = self._index[tls]
+        return self._near[1][self._rows[k]:self._rows[k + 1]].copy()
+
     def _core_step(self, actions: list[int]) -> tuple:
         """The core's ``step`` arguments for these actions (a local simulator adds its influence)."""
         return (actions,)
@@ -283,6 +306,9 @@ class SumoNetEnv(ParallelEnv):
         if self.fresh_process:  # a new process, started during the last episode
             self._sim.restart(spare=True)
         self._store(self._sim.call("reset", seed, self._tripinfo))
+        if self.program == "actuated":
+            self._sim.call("make_actuated")
+        self._near = None
         _remove_if_there(previous)  # an episode cut short: SUMO wrote its file until the reset above
         self.agents = list(self.possible_agents)
         return self._observations(self.agents), self._infos()
@@ -311,7 +337,9 @@ class SumoNetEnv(ParallelEnv):
     def step(self, actions):
         if not self.agents:
             raise RuntimeError("step() called on a finished episode; call reset() first")
-        self._store(self._sim.call("step", *self._core_step(self._actions(actions))))
+        actions = self._actions(actions)
+        self._store(self._sim.call("step", *self._core_step([] if self.program else actions)))
+        self._near = None
         done = self._time >= self.scenario.end
         if done:
             self._metrics = self._finish()

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ials_zoo.errors import BadInput
 from ials_zoo.sumo.command import load_budget
 from ials_zoo.sumo.lease import SimHandle
 from ials_zoo.sumo_net.core import NetCore
@@ -114,6 +115,8 @@ class RegionsNetEnv(SumoNetEnv):
     CUT = True  # the regions are cut from the network for SUMO (a core on arrays needs no cut)
 
     def __init__(self, **options):
+        if options.get("scripted_learners", False) is not False:  # the single-agent scoring passes False
+            raise BadInput("the regions' learners are driven by actions: scripted_learners must stay False")
         scenario = scenario_of(**{k: options[k] for k in SCENARIO_OPTIONS if k in options})
         self._folder = Path(tempfile.mkdtemp(prefix="ials_zoo_regions_"))
         try:
