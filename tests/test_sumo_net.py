@@ -20,6 +20,7 @@ from ials_zoo.sumo_net.core import yellow_program
 from ials_zoo.sumo_net.metrics import episode_metrics
 from ials_zoo.sumo_net.network import read_network
 from ials_zoo.sumo_net.scenario import make_scenario
+from ials_zoo.sumo_net.env import SumoNetEnv
 from ials_zoo.sumo_net.study import run_plain_sumo
 
 
@@ -87,6 +88,56 @@ def test_fixed_time_in_the_env_is_plain_sumo_exactly_episode_after_episode():
         ours = run_episode("fixed", 3, net="cologne1")
         for key in ("delay", "trip_time", "waiting_time", "throughput", "vehicles"):
             assert ours[key] == plain[key], key
+
+
+def test_vehicles_near_a_light_are_what_an_env_detecting_that_far_counts():
+    """The greedy rule reads its 50 m wave from an env that detects at 200 m: at every decision
+    it is the queue + approach of an env that detects at 50 m (RESCO's MAXWAVE env), lane by lane."""
+    near, far = SumoNetEnv(net="cologne1", max_cycles=40), SumoNetEnv(net="cologne1", max_cycles=40,
+                                                                      max_distance=50.0)
+    try:
+        near.reset(seed=4)
+        far.reset(seed=4)
+        tls = near.agents[0]
+        rng = np.random.default_rng(0)
+        counted = 0
+        while near.agents:
+            m = far.measures(tls)
+            got = near.near_counts(tls, 50.0)
+            np.testing.assert_array_equal(got, m["queue"] + m["approach"])
+            assert (near.near_counts(tls, 1e6) >= got).all()
+            counted += got.sum()
+            act = {tls: int(rng.integers(near.action_space(tls).n))}
+            near.step(act)
+            far.step(act)
+        assert counted > 20  # vehicles were there to count
+    finally:
+        near.close()
+        far.close()
+
+
+@pytest.mark.parametrize("program", ["fixed", "actuated"])
+def test_scripted_learners_run_the_program_observed_and_rewarded(program):
+    """``scripted_learners`` leaves every light on its program (the episode of learners=[]),
+    while the learners are still observed and rewarded; their actions are ignored."""
+    plain = SumoNetEnv(net="cologne1", max_cycles=30, learners=[])
+    plain.reset(seed=2)
+    plain.run_uncontrolled(actuated=program == "actuated")
+    want = plain.episode_metrics()
+    plain.close()
+    env = SumoNetEnv(net="cologne1", max_cycles=30, scripted_learners=program)
+    try:
+        env.reset(seed=2)
+        tls, total = env.agents[0], 0.0
+        while env.agents:
+            _, rewards, *_ = env.step({tls: env.action_space(tls).n - 1})
+            total += rewards[tls]
+        got = env.episode_metrics()
+    finally:
+        env.close()
+    assert total < 0 and got["delay"] == want["delay"] and got["throughput"] == want["throughput"]
+    with pytest.raises(BadInput, match="scripted_learners must be"):
+        SumoNetEnv(net="cologne1", scripted_learners="greedy")
 
 
 def test_one_env_repeats_an_episode_exactly_reset_after_reset():
@@ -258,6 +309,10 @@ class _Fake:
 
     def measures(self, tls):
         return self._m[tls]
+
+    def near_counts(self, tls, distance):
+        assert distance == 50.0  # MAXWAVE's own detection distance
+        return self._m[tls]["queue"] + self._m[tls]["approach"]
 
 
 @pytest.mark.parametrize("net_name", ["cologne8", "grid4x4"])

@@ -10,7 +10,8 @@ import pytest
 from ials_zoo import leaderboard as lb
 from ials_zoo.core.domains import get_domain
 from ials_zoo.core.spaces import JointSizes, joint_sizes, stack_observations
-from ials_zoo.evaluation import eval_seeds, evaluate_joint
+from ials_zoo.errors import BadInput
+from ials_zoo.evaluation import eval_seeds, evaluate, evaluate_joint
 from ials_zoo.learners.batched_ppo import BatchedPPO, PPOConfig
 from ials_zoo.policy import PolicyFileError, PolicyNetwork, load_policy_file, save_policy
 
@@ -115,6 +116,40 @@ def test_a_map_is_a_track_ranked_by_delay_and_its_entries_re_measure_exactly(tmp
     assert "delay [95% CI] (lower is better)" in readme
     for p in (board / "results").glob("*.json"):
         assert lb.verify(p, directory=board)[0]["ok"]
+
+
+def test_the_rules_are_reference_entries_of_each_map_re_measured_exactly(tmp_path):
+    """``rule:NAME`` entries: the lights driven as the rule drives them (greedy's delay is the
+    study's controller episode), each its own entry on the map's track, re-measured on submit;
+    a rule's entry that claims training or another rule's name is refused."""
+    from ials_zoo.sumo_net.controllers import run_episode
+
+    board = tmp_path / "board"
+    (board / "results").mkdir(parents=True)
+    entries = {}
+    for rule in ("greedy", "fixed"):
+        ev = evaluate_joint(ENV, f"rule:{rule}", seeds=[10000], net="cologne1", max_cycles=30)
+        assert ev.metrics["delay"]["mean"] == run_episode(rule, 10000, net="cologne1", max_cycles=30)["delay"]
+        d = lb.make_result([ev], algorithm=rule)
+        assert d["policy"] == {"name": rule, "kind": "rule", "frame_stack": 1, "deterministic": False}
+        lb.validate_result(d)
+        (tmp_path / f"{rule}.json").write_text(json.dumps(d))
+        lb.submit(tmp_path / f"{rule}.json", board)
+        entries[rule] = d
+    assert entries["greedy"]["metrics"]["delay"]["mean"] < entries["fixed"]["metrics"]["delay"]["mean"]
+    assert "greedy (rule)" in lb.show(board) and "fixed (rule)" in lb.show(board)
+    for p in (board / "results").glob("*.json"):
+        assert lb.verify(p, directory=board)[0]["ok"]
+    bad = dict(entries["greedy"], algorithm="fixed")
+    with pytest.raises(lb.ResultError, match="training"):
+        lb.validate_result(bad)
+    bad = dict(entries["greedy"], policy=dict(entries["greedy"]["policy"], name="maxwave"), algorithm="maxwave")
+    with pytest.raises(lb.ResultError, match="no rule 'maxwave'"):
+        lb.validate_result(bad)
+    with pytest.raises(BadInput, match="rule:greedy, rule:fixed|its rules: rule:fixed"):
+        evaluate_joint(ENV, "rule:maxwave", episodes=1, net="cologne1")
+    with pytest.raises(BadInput, match="multi-agent track"):
+        evaluate(ENV, get_domain(ENV).agents(net="cologne1")[0], "rule:greedy", episodes=1, net="cologne1")
 
 
 def test_ippo_trains_every_light_of_a_map_with_its_own_actions(tmp_path):

@@ -3,8 +3,9 @@
     ials-zoo evaluate --env warehouse_v0 --agent robot_20 --policy scripted --out r.json
     ials-zoo evaluate --policy runs/warehouse_v0__robot_20__gs__s0/policy.safetensors --out r.json
     ials-zoo evaluate --env traffic_grid_v0 --joint --policy runs/dials_traffic/policy.safetensors
+    ials-zoo evaluate --env sumo_net_v0 --env-options '{"net": "cologne8"}' --joint --policy rule:greedy
 
-``--policy``: ``random``, ``scripted``, a policy file (``.safetensors``: weights + JSON), an
+``--policy``: ``random``, ``scripted``, ``rule:NAME`` (a rule of the domain, every agent at once), a policy file (``.safetensors``: weights + JSON), an
 SB3 PPO ``.zip`` with its ``.meta.json`` sidecar (read without unpickling), or
 ``module:function`` -- a callable ``fn(obs) -> action`` importable from the current folder
 (it reads ``fn.frame_stack`` stacked observations, default 1; a result of such code can be
@@ -33,7 +34,9 @@ def configure(parser):
     parser.add_argument("--joint", action="store_true",
                         help="every agent acts with its own policy (multi-agent track)")
     parser.add_argument("--policy", required=True,
-                        help="random | scripted | FILE.safetensors | FILE.zip (SB3) | module:function (a callable "
+                        help="random | scripted | rule:NAME (a rule of the domain driving every agent, --joint; "
+                             "sumo_net_v0: rule:fixed, rule:actuated, rule:greedy, rule:max_pressure) | "
+                             "FILE.safetensors | FILE.zip (SB3) | module:function (a callable "
                              "fn(obs) -> action importable from the current folder; fn.frame_stack "
                              "observations, default 1; local results only, never submitted)")
     parser.add_argument("--episodes", type=int, default=PROTOCOL_EPISODES,
