@@ -310,6 +310,9 @@ class _Fake:
     def measures(self, tls):
         return self._m[tls]
 
+    def queues(self):
+        return np.concatenate([self._m[x.id]["queue"] for x in self.network.lights])
+
     def near_counts(self, tls, distance):
         assert distance == 50.0  # MAXWAVE's own detection distance
         return self._m[tls]["queue"] + self._m[tls]["approach"]
@@ -332,20 +335,59 @@ def test_greedy_and_max_pressure_pick_what_a_hand_count_picks(net_name):
                      for lane in {i for i, o, k in x.links if x.green_states()[a][k] in "Gg"})
                  for a in range(x.n_actions)]
         assert greedy[x.id] == int(np.argmax(waves))
-        scores = []
-        for a in range(x.n_actions):
-            moves = {}
-            for i, o, k in x.links:
-                if x.green_states()[a][k] in "Gg":
-                    moves.setdefault((net.lane_edges[i], net.lane_edges[o]), set()).add(i)
-            score = 0.0
-            for (_, out_edge), lanes in moves.items():
-                score += sum(m["queue"][x.lanes.index(lane)] for lane in lanes)
-                score -= sum(measures[incoming[lane][0]]["queue"][incoming[lane][1]]
-                             for lane, edge in net.lane_edges.items() if edge == out_edge and lane in incoming)
-            scores.append(score)
-        assert pressure[x.id] == int(np.argmax(scores))
+        assert pressure[x.id] == int(np.argmax(_hand_pressures(net, x, measures, incoming)[0]))
     assert len(set(greedy.values())) > 1 or len(set(pressure.values())) > 1
+
+
+def _hand_pressures(net, x, measures, incoming):
+    """Light ``x``'s greens' pressures and its own, counted by hand from every light's queues."""
+    scores, downstream = [], set()
+    q = measures[x.id]["queue"]
+    for a in range(x.n_actions):
+        moves = {}
+        for i, o, k in x.links:
+            if x.green_states()[a][k] in "Gg":
+                moves.setdefault((net.lane_edges[i], net.lane_edges[o]), set()).add(i)
+        score = 0.0
+        for (_, out_edge), lanes in moves.items():
+            score += sum(q[x.lanes.index(lane)] for lane in lanes)
+            down = [lane for lane, edge in net.lane_edges.items() if edge == out_edge and lane in incoming]
+            score -= sum(measures[incoming[lane][0]]["queue"][incoming[lane][1]] for lane in down)
+            downstream.update(down)
+        scores.append(score)
+    own = q.sum() - sum(measures[incoming[lane][0]]["queue"][incoming[lane][1]] for lane in downstream)
+    return scores, own
+
+
+def test_mplights_observation_and_pressure_reward_are_the_hand_count():
+    """MPLight's observation (each green's pressure, then a one-hot of the current green) and
+    RESCO's pressure reward, at every decision of a grid4x4 episode, against the hand count."""
+    env = SumoNetEnv(net="grid4x4", max_cycles=25, observation="mplight", reward="pressure")
+    try:
+        obs, _ = env.reset(seed=1)
+        net = env.network
+        incoming = {lane: (x.id, k) for x in net.lights for k, lane in enumerate(x.lanes)}
+        rng = np.random.default_rng(0)
+        seen = 0.0
+        while env.agents:
+            acts = {a: int(rng.integers(env.action_space(a).n)) for a in env.agents}
+            obs, rewards, *_ = env.step(acts)
+            measures = {x.id: env.measures(x.id) for x in net.lights}
+            for x in net.lights:
+                scores, own = _hand_pressures(net, x, measures, incoming)
+                n = x.n_actions
+                assert obs[x.id].shape == env.observation_space(x.id).shape == (2 * n,)
+                np.testing.assert_allclose(obs[x.id][:n], scores)
+                assert obs[x.id][n:].sum() == 1 and obs[x.id][n + acts[x.id]] == 1  # a green lasts the decision here
+                assert rewards[x.id] == -own
+                seen += abs(own)
+        assert seen > 50  # queues were there to count
+    finally:
+        env.close()
+    with pytest.raises(BadInput, match="GS only"):
+        from ials_zoo.sumo_net.local import LocalNetEnv
+
+        LocalNetEnv(net="cologne1", observation="mplight")
 
 
 def test_rule_based_lights_beat_fixed_time_and_random_on_cologne1():

@@ -151,7 +151,14 @@ class BatchedDQN:
         self.params = {k: torch.nn.Parameter(torch.from_numpy(v)) for k, v in self._initial_weights().items()}
         self.target = {k: v.detach().clone() for k, v in self.params.items()}
         self.opt = torch.optim.Adam(list(self.params.values()), lr=cfg.learning_rate)
-        self.buffers = ReplayBuffers(len(self.agents), cfg.buffer_size, self.input_size)
+        self.buffers = self._make_buffers()
+
+    def _make_buffers(self):
+        return ReplayBuffers(len(self.agents), self.cfg.buffer_size, self.input_size)
+
+    def _networks(self) -> list[str]:
+        """Whose weights the learner holds, one row each: every agent's own."""
+        return self.agents
 
     def _initial_weights(self) -> dict:
         """torch's ``nn.Linear`` initialisation (uniform in +-1/sqrt(fan_in)), from a generator
@@ -160,7 +167,7 @@ class BatchedDQN:
         for i, (a, b) in enumerate(zip(self.sizes[:-1], self.sizes[1:])):
             bound = 1.0 / math.sqrt(a)
             ws, bs = [], []
-            for agent in self.agents:
+            for agent in self._networks():
                 rng = np.random.default_rng([self.seed, agent_key(agent), i])
                 ws.append(rng.uniform(-bound, bound, (a, b)))
                 bs.append(rng.uniform(-bound, bound, b))
@@ -168,18 +175,21 @@ class BatchedDQN:
             out[f"{i}.bias"] = np.asarray(bs, np.float32)
         return out
 
-    def q_values(self, x, target: bool = False):
+    def q_values(self, x, target: bool = False, invalid=None):
         """``Q [A, N, n_actions]`` of inputs ``x [A, N, input_size]`` (a torch tensor); the
-        actions an agent lacks at -inf."""
+        actions an agent lacks (``invalid``, default: row ``i``'s are agent ``i``'s) at -inf."""
+        h = self._forward(x, self.target if target else self.params)
+        return h.masked_fill(self._invalid if invalid is None else invalid, -math.inf)
+
+    def _forward(self, x, p):
         import torch
 
-        p = self.target if target else self.params
         h = x
         for i in range(len(self.sizes) - 1):
             h = torch.baddbmm(p[f"{i}.bias"][:, None, :], h, p[f"{i}.weight"])
             if i < len(self.sizes) - 2:
                 h = torch.relu(h)
-        return h.masked_fill(self._invalid, -math.inf)
+        return h
 
     def epsilon(self, steps: int | None = None) -> float:
         """Exploration at transition ``steps`` (default: now): linear from ``eps_start`` to
@@ -215,22 +225,28 @@ class BatchedDQN:
                 self.sync_target()
         return stats
 
-    def td_targets(self, r, x2, terminal):
+    def td_targets(self, r, x2, terminal, invalid=None):
         """``r + gamma (1 - terminal) max_a' Q_target(x2, a')`` (torch tensors ``[A, B]``)."""
         import torch
 
         with torch.no_grad():
-            best = self.q_values(x2, target=True).max(-1).values
+            best = self.q_values(x2, target=True, invalid=invalid).max(-1).values
         return r + self.cfg.gamma * (1.0 - terminal) * best
+
+    def _minibatch(self):
+        """The update's minibatch (torch tensors ``[A, B, ...]``) and the actions its rows lack."""
+        import torch
+
+        rng = np.random.default_rng(derived_seed(self.seed, "dqn-update", self.updates))
+        return (*(torch.from_numpy(v) for v in self.buffers.sample(rng, self.cfg.batch_size)), None)
 
     def update(self) -> dict:
         """One gradient step of every agent on its own minibatch."""
         import torch
 
-        rng = np.random.default_rng(derived_seed(self.seed, "dqn-update", self.updates))
-        x, a, r, x2, term = (torch.from_numpy(v) for v in self.buffers.sample(rng, self.cfg.batch_size))
-        target = self.td_targets(r, x2, term)
-        q = self.q_values(x).gather(-1, a[..., None])[..., 0]
+        x, a, r, x2, term, invalid = self._minibatch()
+        target = self.td_targets(r, x2, term, invalid)
+        q = self.q_values(x, invalid=invalid).gather(-1, a[..., None])[..., 0]
         loss_fn = torch.nn.functional.smooth_l1_loss if self.cfg.huber else torch.nn.functional.mse_loss
         per_agent = loss_fn(q, target, reduction="none").mean(-1)
         self.opt.zero_grad()
@@ -263,8 +279,83 @@ class BatchedDQN:
 
     def q_layers(self) -> list:
         """The Q-networks' ``[(W [A, in, out], b [A, out]), ...]`` as float32 numpy arrays."""
-        return [(self.params[f"{i}.weight"].detach().numpy().copy(), self.params[f"{i}.bias"].detach().numpy().copy())
-                for i in range(len(self.sizes) - 1)]
+        rows = np.zeros(len(self.agents), np.int64) if len(self._networks()) == 1 else np.arange(len(self.agents))
+        return [(self.params[f"{i}.weight"].detach().numpy()[rows].copy(),
+                 self.params[f"{i}.bias"].detach().numpy()[rows].copy()) for i in range(len(self.sizes) - 1)]
+
+
+class PooledReplay:
+    """One replay buffer for every agent's transitions (a shared DQN's): each step adds one
+    transition of every agent, and a row remembers whose it is (the actions that agent has)."""
+
+    KEYS = ("obs", "next_obs", "actions", "rewards", "terminal", "agent")
+
+    def __init__(self, capacity: int, width: int):
+        self.capacity, self.pos, self.size = int(capacity), 0, 0
+        self.obs = np.zeros((self.capacity, width), np.float32)
+        self.next_obs = np.zeros_like(self.obs)
+        self.actions = np.zeros(self.capacity, np.int64)
+        self.rewards = np.zeros(self.capacity, np.float32)
+        self.terminal = np.zeros(self.capacity, np.float32)
+        self.agent = np.zeros(self.capacity, np.int64)
+
+    def add(self, x, a, r, x2, terminal: bool) -> None:
+        """One transition of every agent (arrays ``[A, ...]``), in agent order."""
+        rows = (self.pos + np.arange(len(a))) % self.capacity
+        self.obs[rows], self.next_obs[rows], self.actions[rows] = x, x2, a
+        self.rewards[rows], self.terminal[rows], self.agent[rows] = r, float(terminal), np.arange(len(a))
+        self.pos = int(rows[-1] + 1) % self.capacity
+        self.size = min(self.size + len(a), self.capacity)
+
+    def sample(self, rng: np.random.Generator, batch: int):
+        """``batch`` rows, uniformly among the stored transitions: arrays ``[1, batch, ...]`` and
+        the rows' agents ``[batch]``."""
+        idx = rng.integers(self.size, size=batch)
+        return (*(getattr(self, k)[idx][None] for k in ("obs", "actions", "rewards", "next_obs", "terminal")),
+                self.agent[idx])
+
+    def state_dict(self) -> dict:
+        import torch
+
+        n = self.size
+        return {"pos": self.pos, "size": n, **{k: torch.from_numpy(getattr(self, k)[:n].copy()) for k in self.KEYS}}
+
+    def load_state_dict(self, state: dict) -> None:
+        n = int(state["size"])
+        for k in self.KEYS:
+            getattr(self, k)[:n] = state[k].numpy()
+        self.pos, self.size = int(state["pos"]), n
+
+
+class SharedDQN(BatchedDQN):
+    """One DQN shared by every agent: RESCO's MPLight learner (pfrl's DQN under its
+    ``SharedAgent``, ``agents/pfrl_dqn.py``). Every agent acts with the same Q-network on its
+    own observation and adds its transitions to one replay buffer of ``buffer_size``
+    transitions; one update on a minibatch of ``batch_size`` from it and one epsilon per step of
+    every agent, the target network copied every ``target_update`` such steps (RESCO:
+    ``update_interval`` and ``target_update_interval`` times the number of lights). An agent
+    never chooses nor bootstraps from an action it lacks (its row's mask)."""
+
+    def _make_buffers(self):
+        if self.cfg.buffer_size < len(self.agents):
+            raise BadInput(f"--buffer-size ({self.cfg.buffer_size}) must hold one step of every agent "
+                           f"({len(self.agents)} transitions)")
+        return PooledReplay(self.cfg.buffer_size, self.input_size)
+
+    def _networks(self) -> list[str]:
+        return ["shared"]
+
+    def _forward(self, x, p):
+        rows, n = x.shape[0], x.shape[1]  # every agent's rows through the one network
+        return super()._forward(x.reshape(1, rows * n, x.shape[2]), p).reshape(rows, n, -1)
+
+    def _minibatch(self):
+        import torch
+
+        rng = np.random.default_rng(derived_seed(self.seed, "dqn-update", self.updates))
+        *arrays, agent = self.buffers.sample(rng, self.cfg.batch_size)
+        x, a, r, x2, term = (torch.from_numpy(v) for v in arrays)
+        return x, a, r, x2, term, self._invalid[torch.from_numpy(agent), 0][None]
 
 
 class DQNTrainer(SeededEpisodes):
@@ -296,4 +387,4 @@ class DQNTrainer(SeededEpisodes):
         return stats
 
 
-__all__ = ["BatchedDQN", "DQNConfig", "DQNTrainer", "ReplayBuffers", "check_dqn_config"]
+__all__ = ["BatchedDQN", "DQNConfig", "DQNTrainer", "PooledReplay", "ReplayBuffers", "SharedDQN", "check_dqn_config"]

@@ -24,6 +24,7 @@ import numpy as np
 from ials_zoo.errors import BadInput
 from ials_zoo.sumo_net.env import SumoNetEnv
 from ials_zoo.sumo_net.network import Network
+from ials_zoo.sumo_net.pressure import Pressures
 
 # name -> RESCO's detection distance (m) for it (agent_config.py); None: no detection needed
 CONTROLLERS = {"fixed": 200.0, "actuated": 200.0, "greedy": 50.0, "max_pressure": 200.0, "random": 1.0}
@@ -54,34 +55,17 @@ class Greedy:
 
 
 class MaxPressure:
-    """RESCO's MAXPRESSURE on any network (see the module docstring)."""
+    """RESCO's MAXPRESSURE on any network: the green of the largest pressure
+    (:class:`ials_zoo.sumo_net.pressure.Pressures`, the module docstring)."""
 
     def __init__(self, network: Network):
-        entering = {lane: (x.id, k) for x in network.lights for k, lane in enumerate(x.lanes)}
-        edge_lanes: dict[str, list[str]] = {}
-        for lane, edge in network.lane_edges.items():
-            edge_lanes.setdefault(edge, []).append(lane)
-        self.terms = {}
-        for x in network.lights:
-            per_green = []
-            for a in range(x.n_actions):
-                moves: dict[tuple, set] = {}
-                for lane_in, lane_out in x.movements(a):
-                    key = (network.lane_edges.get(lane_in), network.lane_edges.get(lane_out))
-                    moves.setdefault(key, set()).add(x.lanes.index(lane_in))
-                per_green.append([(sorted(rows), [entering[lane] for lane in edge_lanes.get(out, []) if lane in entering])
-                                  for (_, out), rows in moves.items()])
-            self.terms[x.id] = per_green
+        self.pressures = Pressures(network)
+        self.index = {x.id: k for k, x in enumerate(network.lights)}
 
     def __call__(self, env) -> dict:
-        queues = {x: env.measures(x)["queue"] for x in env.network.ids}
-        out = {}
-        for tls in env.agents:
-            q = queues[tls]
-            scores = [sum(q[rows].sum() - sum(queues[t][k] for t, k in down) for rows, down in green)
-                      for green in self.terms[tls]]
-            out[tls] = int(np.argmax(scores))
-        return out
+        scores, starts = self.pressures.of_greens(env.queues()), self.pressures.green_starts
+        return {tls: int(np.argmax(scores[starts[k]:starts[k + 1]])) for tls, k in
+                ((tls, self.index[tls]) for tls in env.agents)}
 
 
 class Random:

@@ -18,10 +18,11 @@ from ials_zoo.sumo.command import load_budget
 from ials_zoo.sumo.lease import SimHandle
 from ials_zoo.sumo_net.core import MEASURES
 from ials_zoo.sumo_net.influence import full_dset, region_layout, region_spec
-from ials_zoo.sumo_net.mdp import BATCHED_OBSERVATIONS, N_FEATURES, lanes_tables, observation_fn, reward_fn
+from ials_zoo.sumo_net.mdp import BATCHED_OBSERVATIONS, N_FEATURES, lanes_tables, mplight, observation_fn, reward_fn
 from ials_zoo.sumo_net.metrics import episode_metrics, scheduled_departures
 from ials_zoo.sumo_net.names import ENV_ID, OPTIONS, SCENARIO_OPTIONS
 from ials_zoo.sumo_net.network import read_network
+from ials_zoo.sumo_net.pressure import Pressures
 from ials_zoo.sumo_net.render import NetworkView
 from ials_zoo.sumo_net.scenario import scenario_of
 from ials_zoo.utils import check_reset_options, check_seed
@@ -39,6 +40,16 @@ def _check_distance(value) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) or not value > 0:
         raise BadInput(f"max_distance must be a positive number of metres, got {value!r}")
     return float(value)
+
+
+QUEUE = MEASURES.index("queue")
+
+
+def _observation_spaces(lights, pressures: bool) -> dict:
+    """RESCO's lanes tables (5 entries per incoming lane), or MPLight's (2 per green)."""
+    if pressures:
+        return {x.id: spaces.Box(-np.inf, np.inf, (2 * x.n_actions,), np.float32) for x in lights}
+    return {x.id: spaces.Box(0.0, np.inf, (N_FEATURES * len(x.lanes),), np.float32) for x in lights}
 
 
 PROGRAMS = {True: "fixed", "fixed": "fixed", "actuated": "actuated"}
@@ -151,6 +162,7 @@ class SumoNetEnv(ParallelEnv):
                 "render_fps": 10}
     CORE = "ials_zoo.sumo_net.core:NetCore"  # the simulation core (``"package.module:Class"``)
     REGION_CORE = "ials_zoo.sumo_net.influence:RegionNetCore"  # the core that watches the learners' regions
+    NETWORK_WIDE = True  # observations and rewards may read other lights (MPLight's): the whole network is here
     HANDLE = SimHandle  # where the core runs (a core without SUMO: :class:`ials_zoo.sumo.lease.PlainHandle`)
 
     def __init__(self, net=None, sumocfg=None, net_file=None, route_files=None, begin=None, end=None,
@@ -163,7 +175,8 @@ class SumoNetEnv(ParallelEnv):
         if render_mode not in (None, *self.metadata["render_modes"]):
             raise BadInput(f"unknown render_mode {render_mode!r}; expected None or one of {self.metadata['render_modes']}")
         self.render_mode = render_mode
-        self._observe, self._reward = observation_fn(observation), reward_fn(reward)
+        self._observe = observation_fn(observation, self.NETWORK_WIDE)
+        self._reward = reward_fn(reward, self.NETWORK_WIDE)  # None: RESCO's pressure, every light at once
         self.scenario = scenario_of(net, sumocfg, net_file, route_files, begin, end, decision_seconds, yellow_seconds,
                                     max_cycles)
         given = dict(net=net, sumocfg=sumocfg, net_file=net_file, route_files=route_files, begin=begin, end=end,
@@ -180,10 +193,13 @@ class SumoNetEnv(ParallelEnv):
         self._rows = np.cumsum([0] + [len(x.lanes) for x in lights]).tolist()
         self._starts = np.asarray(self._rows, np.int64)
         self._index = {x.id: k for k, x in enumerate(lights)}
-        self.observation_spaces = {
-            x.id: spaces.Box(0.0, np.inf, (N_FEATURES * len(x.lanes),), np.float32) for x in lights}
+        wide = self._observe is mplight or self._reward is None
+        self._pressures = Pressures(self.network) if wide else None
+        self.observation_spaces = _observation_spaces(lights, self._observe is mplight)
         self.action_spaces = {x.id: spaces.Discrete(x.n_actions) for x in lights}
-        self.state_space = spaces.Box(0.0, np.inf, (int(self._rows[-1]) * N_FEATURES,), np.float32)
+        width = sum(s.shape[0] for s in self.observation_spaces.values())
+        low = -np.inf if self._observe is mplight else 0.0
+        self.state_space = spaces.Box(low, np.inf, (width,), np.float32)
         if not isinstance(fresh_process, (bool, np.bool_)):
             raise BadInputType(f"fresh_process must be a bool, got {fresh_process!r}")
         if fresh_process and backend != "worker":
@@ -246,13 +262,17 @@ class SumoNetEnv(ParallelEnv):
 
     def observe(self, tls: str) -> np.ndarray:
         """Light ``tls``'s observation now (any light, learner or not)."""
-        return self._observe(self._light_measures(tls), int(self._phases[self._index[tls]]))
+        return self._observations([tls])[tls]
 
     def _observations(self, agents) -> dict[str, np.ndarray]:
-        """``agents``' observations now: RESCO's tables for every light in one pass, else the
-        observation function light by light."""
+        """``agents``' observations now: RESCO's tables for every light in one pass, MPLight's
+        pressures for every green in one product, else the observation function light by light."""
+        if self._observe is mplight:
+            pressures, starts = self._pressures.of_greens(self._measures[:, QUEUE]), self._pressures.green_starts
+            return {a: mplight(pressures[starts[k]:starts[k + 1]], int(self._phases[k]))
+                    for a, k in ((a, self._index[a]) for a in agents)}
         if self._observe not in BATCHED_OBSERVATIONS:
-            return {a: self.observe(a) for a in agents}
+            return {a: self._observe(self._light_measures(a), int(self._phases[self._index[a]])) for a in agents}
         table = lanes_tables(self._measures, self._phases, self._starts, BATCHED_OBSERVATIONS[self._observe])
         rows, index = self._rows, self._index
         return {a: table[rows[index[a]]:rows[index[a] + 1]].reshape(-1) for a in agents}
@@ -262,6 +282,10 @@ class SumoNetEnv(ParallelEnv):
         lanes in its observation order; for rule-based controllers."""
         m = self._light_measures(tls)
         return {name: m[:, i].copy() for i, name in enumerate(MEASURES)}
+
+    def queues(self) -> np.ndarray:
+        """Every light's lanes' queues now (network order, concatenated; for max pressure)."""
+        return self._measures[:, QUEUE].copy()
 
     def near_counts(self, tls: str, distance: float) -> np.ndarray:
         """Light ``tls``'s vehicles within ``distance`` m of it, per lane (observation order),
@@ -343,16 +367,21 @@ class SumoNetEnv(ParallelEnv):
         done = self._time >= self.scenario.end
         if done:
             self._metrics = self._finish()
-        obs, rewards = self._observations(self.agents), {}
-        for a in self.agents:
-            k = self._index[a]
-            rewards[a] = self._reward(self._measures[self._rows[k]:self._rows[k + 1]], int(self._phases[k]))
+        obs, rewards = self._observations(self.agents), self._rewards()
         terms = {a: False for a in self.agents}
         truncs = {a: done for a in self.agents}
         infos = self._infos()
         if done:
             self.agents = []
         return obs, rewards, terms, truncs, infos
+
+    def _rewards(self) -> dict[str, float]:
+        if self._reward is None:  # RESCO's pressure: minus every light's pressure, one product
+            pressure = self._pressures.of_lights(self._measures[:, QUEUE])
+            return {a: -float(pressure[self._index[a]]) for a in self.agents}
+        rows, reward = self._rows, self._reward
+        return {a: reward(self._measures[rows[k]:rows[k + 1]], int(self._phases[k]))
+                for a, k in ((a, self._index[a]) for a in self.agents)}
 
     def run_uncontrolled(self, actuated: bool = False, on_decision=None) -> dict[str, float]:
         """Run the episode started by :meth:`reset` to its end with no learner acting (every

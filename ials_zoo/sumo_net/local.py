@@ -112,6 +112,7 @@ class RegionsNetEnv(SumoNetEnv):
     subclass says how vehicles come in: what it records before SUMO starts (:meth:`_prepare`)
     and its core. ``episode_metrics()`` has only ``queue``: trip delays need the whole network."""
 
+    NETWORK_WIDE = False  # a region holds no other light's downstream queues: per-light observations only
     CUT = True  # the regions are cut from the network for SUMO (a core on arrays needs no cut)
 
     def __init__(self, **options):

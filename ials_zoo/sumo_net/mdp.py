@@ -78,16 +78,41 @@ BATCHED_OBSERVATIONS = {drq_norm: _DRQ_DIVISORS, drq: None}
 REWARDS = {"wait_norm": wait_norm, "wait": wait, "queue": queue}
 
 
-def observation_fn(name: str):
-    if name not in OBSERVATIONS:
-        raise BadInput(f"unknown observation {name!r}; expected one of {', '.join(OBSERVATIONS)}")
-    return OBSERVATIONS[name]
+def mplight(pressures: np.ndarray, phase: int) -> np.ndarray:
+    """MPLight's observation (RESCO's ``states.mplight`` on our greens): the light's greens'
+    pressures (:class:`ials_zoo.sumo_net.pressure.Pressures`), then a one-hot of its current
+    green (all zero during a yellow)."""
+    n = len(pressures)
+    out = np.zeros(2 * n, np.float32)
+    out[:n] = pressures
+    if 0 <= phase < n:
+        out[n + phase] = 1.0
+    return out
 
 
-def reward_fn(name: str):
+NETWORK_OBSERVATIONS = {"mplight": mplight}
+"""Observations that read other lights (the downstream queues): the GS only, not a region."""
+NETWORK_REWARDS = ("pressure",)
+"""RESCO's ``pressure`` (MPLight): minus the light's pressure; the GS only, not a region."""
+
+
+def observation_fn(name: str, network_wide: bool = False):
+    known = {**OBSERVATIONS, **(NETWORK_OBSERVATIONS if network_wide else {})}
+    if name not in known:
+        raise BadInput(f"unknown observation {name!r}; expected one of {', '.join(known)}"
+                       + ("" if network_wide else " (mplight reads other lights: the GS only)"))
+    return known[name]
+
+
+def reward_fn(name: str, network_wide: bool = False):
+    if network_wide and name in NETWORK_REWARDS:
+        return None  # the env computes it for every light at once
     if name not in REWARDS:
-        raise BadInput(f"unknown reward {name!r}; expected one of {', '.join(REWARDS)}")
+        known = [*REWARDS, *(NETWORK_REWARDS if network_wide else ())]
+        raise BadInput(f"unknown reward {name!r}; expected one of {', '.join(known)}"
+                       + ("" if network_wide else " (pressure reads other lights: the GS only)"))
     return REWARDS[name]
 
 
-__all__ = ["BATCHED_OBSERVATIONS", "N_FEATURES", "OBSERVATIONS", "lanes_tables", "REWARDS", "drq", "drq_norm", "observation_fn", "reward_fn", "wait", "wait_norm"]
+__all__ = ["BATCHED_OBSERVATIONS", "N_FEATURES", "NETWORK_OBSERVATIONS", "NETWORK_REWARDS", "OBSERVATIONS", "REWARDS",
+           "drq", "drq_norm", "lanes_tables", "mplight", "observation_fn", "reward_fn", "wait", "wait_norm"]
