@@ -77,6 +77,13 @@ CASES = [
      "less than one episode"),
     (["train", "idqn", "--env", "warehouse_v0", "--env-options", '{"gamma": 1}', "--out-dir", "{d}/r"], "gamma"),
     (["reproduce", "--experiments", "dials", "--dials-variants", "bogus", "--dry-run"], "bogus"),
+    (["train", "mplight", "--env", "warehouse_v0", "--out-dir", "{d}/r"], "no pressure observation"),
+    (["train", "mplight", "--env", "sumo_net_v0", "--env-options", '{"reward": "wait"}', "--out-dir", "{d}/r"],
+     "MPLight sets reward itself"),
+    (["train", "mplight", "--env", "sumo_net_v0", "--buffer-size", "5", "--batch-size", "4", "--learning-starts", "4",
+      "--out-dir", "{d}/r"], "--buffer-size"),
+    (["evaluate", "--env", "sumo_net_v0", "--joint", "--policy", "rule:maxwave"], "rule:greedy"),
+    (["evaluate", "--env", "sumo_net_v0", "--policy", "rule:greedy"], "--joint"),
 ]
 
 

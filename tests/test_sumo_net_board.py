@@ -152,6 +152,37 @@ def test_the_rules_are_reference_entries_of_each_map_re_measured_exactly(tmp_pat
         evaluate(ENV, get_domain(ENV).agents(net="cologne1")[0], "rule:greedy", episodes=1, net="cologne1")
 
 
+def test_mplight_shares_one_dqn_learns_from_pressure_and_is_scored_on_the_protocols_reward(tmp_path):
+    """MPLight's policy reads the pressure observation its file records, and is scored, like
+    every entry, on RESCO's wait_norm: its result re-evaluates exactly from the file, stays on
+    the official protocol with only the map and its observation named, and never on pressure."""
+    from ials_zoo.baselines import mplight
+
+    agents = get_domain(ENV).agents(net="cologne8")
+    assert lb.protocol_of("multi-agent", ENV, agents, eval_seeds(), {"net": "cologne8", "observation": "mplight"}) \
+        == "official"
+    assert lb.protocol_of("multi-agent", ENV, agents, eval_seeds(), {"net": "cologne8", "reward": "pressure"}) \
+        == "variant"
+    out = tmp_path / "run"
+    result = mplight.main(mplight.Args(env_id=ENV, env_options='{"net": "cologne8", "max_cycles": 20}',
+                                       total_timesteps=60, eval_every=60, eval_episodes=1, final_eval_episodes=2,
+                                       out_dir=str(out), progress=False))
+    options = result["evaluation"]["options"]
+    assert options == {"net": "cologne8", "max_cycles": 20, "observation": "mplight"}
+    assert result["training"]["hyperparameters"]["train_options"] == {"reward": "pressure"}
+    adapter = mplight.idqn.DQNCopiesLearner(ENV, agents, options, 1, 0, mplight.idqn.dqn_config(mplight.Args()), 1, 0,
+                                            60, joint_sizes(get_domain(ENV), agents, options),
+                                            learner_cls=mplight.SharedDQN, train_options={"reward": "pressure"})
+    assert adapter.options == dict(options, reward="pressure")  # the GS copies it learns on
+    net = load_policy_file(out / "policy.safetensors")
+    first = net.layers[0][0]
+    assert all(np.array_equal(first[0], first[i]) for i in range(len(agents)))  # one network for every light
+    again = evaluate_joint(ENV, str(out / "policy.safetensors"), episodes=2, **options)
+    assert again.returns == result["scores"][0]["returns"]
+    on_pressure = evaluate_joint(ENV, str(out / "policy.safetensors"), episodes=2, reward="pressure", **options)
+    assert on_pressure.returns != again.returns
+
+
 def test_ippo_trains_every_light_of_a_map_with_its_own_actions(tmp_path):
     """cologne3: lights with 3, 4 and 4 greens, observations of 19 lanes in all: the run's
     policy file masks each light's missing greens and the board re-measures it exactly."""

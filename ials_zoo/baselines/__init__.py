@@ -1,7 +1,7 @@
 """Baselines: PPO for one agent on a GS or an IALS (:mod:`.ppo_single`), all agents with shared
 parameters on the GS (:mod:`.ppo_shared`), every agent with its own policy on the GS
 (:mod:`.ippo`) or each on its own IALS (:mod:`.dials`), and every agent with its own DQN on the GS
-(:mod:`.idqn`, RESCO's IDQN).
+(:mod:`.idqn`, RESCO's IDQN), or one DQN shared by every light on its pressures (:mod:`.mplight`).
 
 The implementations live in the installed package so that ``ials-zoo train`` works from any
 folder; ``baselines/*.py`` at the repository root are thin runners
@@ -14,4 +14,5 @@ BASELINES = {
     "dials": "ials_zoo.baselines.dials",
     "ippo": "ials_zoo.baselines.ippo",
     "idqn": "ials_zoo.baselines.idqn",
+    "mplight": "ials_zoo.baselines.mplight",
 }

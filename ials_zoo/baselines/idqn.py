@@ -101,10 +101,12 @@ class DQNCopiesLearner(CopiesLearner):
     log_columns = ("steps_per_agent", "wall_clock_seconds", "mean_episode_return", "loss", "q_mean", "epsilon",
                    "updates")
 
-    def __init__(self, env_id, agents, options, copies, processes, cfg: DQNConfig, frame_stack, seed, total, sizes):
-        self._setup(env_id, agents, options, copies, processes, frame_stack, seed, sizes)
-        self.learner = BatchedDQN(agents, self.obs_size * frame_stack, self.n_actions, cfg, seed, total,
-                                  action_counts=self.action_counts)
+    def __init__(self, env_id, agents, options, copies, processes, cfg: DQNConfig, frame_stack, seed, total, sizes,
+                 learner_cls=BatchedDQN, train_options=None):
+        # the GS copies learn under the options plus the learner's own training reward, if any
+        self._setup(env_id, agents, {**options, **(train_options or {})}, copies, processes, frame_stack, seed, sizes)
+        self.learner = learner_cls(agents, self.obs_size * frame_stack, self.n_actions, cfg, seed, total,
+                                   action_counts=self.action_counts)
 
     def _make_trainer(self):
         return DQNTrainer(self.learner, self.env, self.frame_stack, seed=self.seed)

@@ -38,7 +38,7 @@ from ials_zoo.runtime.processes import add_worker_context
 
 ENTRY_POINT_GROUP = "ials_zoo.domains"
 # the subsystems that keep per-domain settings in Domain.extras (ials_zoo.core.extras)
-EXTRA_KINDS = ("study", "dials", "viewer", "bench", "tools")
+EXTRA_KINDS = ("study", "dials", "viewer", "bench", "tools", "learners")
 
 
 @dataclass(frozen=True)
@@ -127,6 +127,9 @@ class Domain:
         episode_steps: the steps of an episode under GS options (a network's hour of
             decisions, say), or None: ``max_cycles`` if given, else :attr:`episode_length`
             (:meth:`steps_of_episode`; what an evaluation's cost is estimated from).
+        policy_options: GS options that change only what the agents observe, never the
+            episode nor its rewards (e.g. ``("observation",)``): a policy keeps the ones it was
+            trained with, and its result stays on the official protocol.
         rules: ``{name: Rule}``, the domain's rule-based controllers of every agent (the
             multi-agent track's references beside ``random``; :class:`Rule`).
         description: one line for listings.
@@ -162,6 +165,7 @@ class Domain:
     track_options: tuple[str, ...] = ()
     episode_steps: Callable[..., int] | None = None
     rules: dict = field(default_factory=dict)
+    policy_options: tuple[str, ...] = ()
     description: str = ""
     extras: dict = field(default_factory=dict)
 
@@ -189,8 +193,9 @@ class Domain:
         if bad:
             raise BadInput(f"{self.env_id}: rules must map names (identifiers, not 'random' or 'scripted') to Rule, "
                            f"got {bad}")
-        if not set(self.track_options) <= set(self.gs_options):
-            raise BadInput(f"{self.env_id}: track_options must be GS options, got {list(self.track_options)}")
+        if not set(self.track_options) | set(self.policy_options) <= set(self.gs_options):
+            raise BadInput(f"{self.env_id}: track_options and policy_options must be GS options, got "
+                           f"{list(self.track_options) + list(self.policy_options)}")
 
     def with_absolute_files(self, options: dict) -> dict:
         """``options`` with the paths its :attr:`file_options` name (a path, or a list of them)

@@ -11,7 +11,9 @@ the core):
 * ``"viewer"``: :class:`ViewerSettings` (``ials-zoo demo``: the GIF legend, an episode's summary);
 * ``"bench"``: :class:`BenchSettings` (``ials-zoo bench --scaling``);
 * ``"tools"``: extra ``ials-zoo`` subcommands, ``{name: (module, help)}``, each module with
-  ``configure(parser)`` and ``run(args)``.
+  ``configure(parser)`` and ``run(args)``;
+* ``"learners"``: ``{algorithm: LearnerOptions}``, the GS options a learner needs here (MPLight's
+  pressure observation and reward: :class:`LearnerOptions`).
 
 The accessors take a :class:`Domain` or a domain id.
 """
@@ -188,6 +190,26 @@ class BenchSettings:
     """The names ``--net`` takes (checked before any work; empty: the runner checks)."""
 
 
+@dataclass(frozen=True)
+class LearnerOptions:
+    """The GS options a learner of the zoo trains with on a domain (MPLight's pressure MDP).
+
+    Attributes:
+        observe: what its agents read, among the domain's ``policy_options``: kept with its
+            policy, so that an evaluation shows the policy what it learnt from.
+        train: what it learns from in training only (a reward of its own): every policy is
+            scored on the domain's own reward.
+    """
+
+    observe: dict = field(default_factory=dict)
+    train: dict = field(default_factory=dict)
+
+
+def learner_options_of(domain, algorithm: str) -> LearnerOptions | None:
+    """The GS options ``algorithm`` needs on the domain, or None where the domain has none for it."""
+    return dict(_extra(domain, "learners", {})).get(algorithm)
+
+
 def _extra(domain, kind: str, default):
     domain = domain if isinstance(domain, Domain) else get_domain(domain)
     return domain.extras.get(kind, default)
@@ -221,5 +243,5 @@ def tools_of(domain) -> dict:
 _DEFAULT_STUDY, _DEFAULT_DIALS = StudySettings(), DIALSSettings()
 _DEFAULT_VIEWER, _DEFAULT_BENCH = ViewerSettings(), BenchSettings()
 
-__all__ = ["BenchSettings", "DIALSSettings", "StudySettings", "ViewerSettings", "bench_of", "dials_of", "study_of",
-           "tools_of", "viewer_of"]
+__all__ = ["BenchSettings", "DIALSSettings", "LearnerOptions", "StudySettings", "ViewerSettings", "bench_of", "dials_of",
+           "learner_options_of", "study_of", "tools_of", "viewer_of"]

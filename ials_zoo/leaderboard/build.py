@@ -99,11 +99,13 @@ def per_agent_scores(scores: Sequence[dict]) -> dict:
 
 def protocol_of(track: str, env_id: str, agents, seeds, options) -> str:
     """``official`` when a result follows the benchmark's protocol -- the protocol's seeds and
-    episode count, no GS options but the domain's track options (e.g. the network), and on the
-    multi-agent track every agent -- else ``variant``."""
+    episode count, no GS options but the domain's track options (e.g. the network) and what its
+    policy observes (:attr:`Domain.policy_options`), and on the multi-agent track every agent --
+    else ``variant``."""
     domain = get_domain(env_id)
     # the track options are named, not left to their defaults (one track per network), and no other
-    if list(seeds) != eval_seeds() or set(options) != set(domain.track_options):
+    # option changes the episode or its score
+    if list(seeds) != eval_seeds() or set(options) - set(domain.policy_options) != set(domain.track_options):
         return VARIANT
     tracked = {k: v for k, v in options.items() if k in domain.track_options}
     if track == MULTI and list(agents) != domain.agents(**tracked):

@@ -7,7 +7,7 @@ this domain."""
 from __future__ import annotations
 
 from ials_zoo.core.domains import Domain, Rule
-from ials_zoo.core.extras import BenchSettings, DIALSSettings, StudySettings, ViewerSettings
+from ials_zoo.core.extras import BenchSettings, DIALSSettings, LearnerOptions, StudySettings, ViewerSettings
 from ials_zoo.sumo_net.names import BOARD_OPTIONS, DEFAULT_NET, ENV_ID, SCENARIO_OPTIONS
 from ials_zoo.sumo_net.scenario import RESCO_MAPS
 
@@ -147,6 +147,10 @@ RULES = {
     "max_pressure": Rule("the green of the largest pressure within 200 m (RESCO's MAXPRESSURE)", make=_max_pressure),
 }
 
+# MPLight (RESCO's agents/mplight.py with states.mplight and rewards.pressure): our greens'
+# pressures as the light's observation, minus its pressure as the reward it learns from
+LEARNERS = {"mplight": LearnerOptions(observe={"observation": "mplight"}, train={"reward": "pressure"})}
+
 TOOLS = {"resco-controllers": ("ials_zoo.sumo_net.study",
                                "fixed time, max pressure, greedy and actuated lights on RESCO's maps, beside RESCO's table")}
 
@@ -165,6 +169,7 @@ def episode_steps(**options) -> int:
 DOMAIN = Domain(
     env_id=ENV_ID,
     rules=RULES,
+    policy_options=("observation",),  # what a light reads; the reward that scores it stays RESCO's wait_norm
     description="any SUMO network, RESCO's eight city and grid maps by name (libsumo; single-junction IALS)",
     parallel_env=parallel_env,
     local_simulator=local_simulator,
@@ -186,6 +191,6 @@ DOMAIN = Domain(
              "throughput": "higher", "queue": "lower"},
     score_metric="delay",  # RESCO's average delay per vehicle ranks the board, lower first
     track_options=("net",),  # one board track per RESCO map
-    extras={"tools": TOOLS, "study": STUDY, "dials": DIALS, "bench": BenchSettings(gs_runner=bench_gs, nets=tuple(RESCO_MAPS)),
+    extras={"learners": LEARNERS, "tools": TOOLS, "study": STUDY, "dials": DIALS, "bench": BenchSettings(gs_runner=bench_gs, nets=tuple(RESCO_MAPS)),
             "viewer": ViewerSettings(legend=_legend(), episode_summary=episode_summary)},
 )
