@@ -152,6 +152,17 @@ def test_the_rules_are_reference_entries_of_each_map_re_measured_exactly(tmp_pat
         evaluate(ENV, get_domain(ENV).agents(net="cologne1")[0], "rule:greedy", episodes=1, net="cologne1")
 
 
+def test_a_maps_track_shows_rescos_published_figures_beside_it_never_a_variants():
+    from ials_zoo.leaderboard.render import published_of
+
+    row = {"env_id": ENV, "evaluation": {"protocol": "official", "options": {"net": "cologne8"}}}
+    note, rows = published_of([row])
+    assert "not re-measured" in note and "SUMO 1.9" in note
+    assert ("RESCO IDQN", "22.06") in rows and ("RESCO MAXWAVE", "21.87 (21.85)") in rows
+    assert published_of([dict(row, evaluation={"protocol": "variant", "options": {"net": "cologne8"}})]) == ("", [])
+    assert published_of([dict(row, evaluation={"protocol": "official", "options": {"net": "grid3x3"}})]) == ("", [])
+
+
 def test_mplight_shares_one_dqn_learns_from_pressure_and_is_scored_on_the_protocols_reward(tmp_path):
     """MPLight's policy reads the pressure observation its file records, and is scored, like
     every entry, on RESCO's wait_norm: its result re-evaluates exactly from the file, stays on

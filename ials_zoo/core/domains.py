@@ -130,6 +130,9 @@ class Domain:
         policy_options: GS options that change only what the agents observe, never the
             episode nor its rewards (e.g. ``("observation",)``): a policy keeps the ones it was
             trained with, and its result stays on the official protocol.
+        published: ``published(**track_options) -> (note, [(who, figure), ...])``: others'
+            published figures for a track (a paper's table, say), shown beside its board table
+            as a reference, never ranked nor re-measured; None: none.
         rules: ``{name: Rule}``, the domain's rule-based controllers of every agent (the
             multi-agent track's references beside ``random``; :class:`Rule`).
         description: one line for listings.
@@ -165,6 +168,7 @@ class Domain:
     track_options: tuple[str, ...] = ()
     episode_steps: Callable[..., int] | None = None
     rules: dict = field(default_factory=dict)
+    published: Callable | None = None
     policy_options: tuple[str, ...] = ()
     description: str = ""
     extras: dict = field(default_factory=dict)

@@ -104,6 +104,17 @@ def sort_key(sort: str):
     return key
 
 
+def published_of(rows: list[dict]) -> tuple[str, list[tuple[str, str]]]:
+    """Others' published figures for the track of ``rows`` (:attr:`Domain.published`): a note
+    and ``(who, figure)`` rows, or ``("", [])``."""
+    domain = get_domain(rows[0]["env_id"])
+    if domain.published is None or rows[0]["evaluation"]["protocol"] != OFFICIAL:
+        return "", []
+    tracked = {k: v for k, v in rows[0]["evaluation"]["options"].items() if k in domain.track_options}
+    note, published = domain.published(**tracked)
+    return (note, list(published)) if published else ("", [])
+
+
 def group_entries(entries, sort: str = "score") -> dict:
     """``{(section, env_id, who): [entries best first]}``; section: ``single-agent``,
     ``multi-agent`` or ``variants``; ``who``: the agent, or ``all agents``; best by
@@ -330,6 +341,10 @@ def _sections(board: Path, entries, titles: dict) -> list[str]:
             current = section
         parts.append(f"\n### {env_id} / {who}\n\n")
         parts += _md_table(rows)
+        note, published = published_of(rows)
+        if published:
+            parts.append(f"\n*{markdown_cell(note)}:* " + "; ".join(
+                f"{markdown_cell(who)} {markdown_cell(figure)}" for who, figure in published) + "\n")
         plot = _plot(board, key, rows)
         if plot:
             parts.append(f"\n![{env_id} {who}]({plot})\n")
@@ -382,4 +397,4 @@ def render(directory=None) -> Path:
     return out
 
 
-__all__ = ["format_duration", "group_entries", "render", "show"]
+__all__ = ["format_duration", "group_entries", "published_of", "render", "show"]

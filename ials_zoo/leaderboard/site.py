@@ -29,6 +29,7 @@ from ials_zoo.leaderboard.render import (
     _training_label,
     console_text,
     group_entries,
+    published_of,
     wall_clock_text,
 )
 from ials_zoo.leaderboard.store import ARCHIVE_SUBDIR, board_path, load_entries
@@ -241,6 +242,10 @@ def _sections(groups: dict, folder: str, link_base: str, titles: dict, start: in
         if rank is not None:
             parts.append(f'<p class="note">Ranked by {_e(rank)}, {_e(get_domain(env_id).metrics[rank])} is better.</p>')
         parts.append(_table(rows, folder, link_base))
+        note, published = published_of(rows)
+        if published:
+            parts.append(f'<p class="note">{_e(note)}: ' + "; ".join(f"{_e(who)} {_e(figure)}" for who, figure in published)
+                         + "</p>")
         parts.append(_curves(rows, n))
     return parts
 

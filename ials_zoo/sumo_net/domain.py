@@ -136,6 +136,13 @@ def _max_pressure(env):
     return max_pressure_rule(env)
 
 
+def _published(net=None, **_):
+    """RESCO's table for a map's board track (:mod:`ials_zoo.sumo_net.resco`)."""
+    from ials_zoo.sumo_net.resco import PUBLISHED_NOTE, published_rows
+
+    return PUBLISHED_NOTE, published_rows(net)
+
+
 # the multi-agent track's rules (``ials-zoo evaluate --joint --policy rule:NAME``), RESCO's
 # heuristics (``random`` is the zoo's own reference: RESCO's STOCHASTIC)
 RULES = {
@@ -169,6 +176,7 @@ def episode_steps(**options) -> int:
 DOMAIN = Domain(
     env_id=ENV_ID,
     rules=RULES,
+    published=_published,
     policy_options=("observation",),  # what a light reads; the reward that scores it stays RESCO's wait_norm
     description="any SUMO network, RESCO's eight city and grid maps by name (libsumo; single-junction IALS)",
     parallel_env=parallel_env,

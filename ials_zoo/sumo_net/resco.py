@@ -34,6 +34,19 @@ LEARNED = {
     "cologne8": {"IDQN": 22.06, "IPPO": 21.62},
 }
 
+PUBLISHED_NOTE = ("RESCO's published delays (Ault & Sharon 2021): SUMO 1.9 and RESCO's own map files, not "
+                  "re-measured here; a learner's is its best training episode, a rule's the mean over its episodes "
+                  "(median in brackets)")
+
+
+def published_rows(net: str) -> list[tuple[str, str]]:
+    """RESCO's figures for map ``net`` (none for another network): ``(who, delay)``."""
+    if net not in LEARNED:
+        return []
+    rows = [(f"RESCO {k}", f"{v:.2f}") for k, v in LEARNED[net].items()]
+    return rows + [(f"RESCO {k}", f"{x[0]:.2f} ({x[1]:.2f})") for k, x in RULE_BASED[net].items() if x is not None]
+
+
 # our controller -> the RESCO keys it is compared with
 COMPARED = {"fixed": ("FIXED",), "plain_sumo": ("FIXED",), "greedy": ("MAXWAVE", "MAXPRESSURE"),
             "max_pressure": ("MAXPRESSURE", "MAXWAVE")}
@@ -46,4 +59,4 @@ FILE_DIFFERENCES = {
     "arterial4x4": "one route file for every episode (RESCO: one per episode)",
 }
 
-__all__ = ["COMPARED", "FILE_DIFFERENCES", "LEARNED", "RULE_BASED"]
+__all__ = ["COMPARED", "FILE_DIFFERENCES", "LEARNED", "PUBLISHED_NOTE", "RULE_BASED", "published_rows"]
