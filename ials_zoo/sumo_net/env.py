@@ -113,10 +113,16 @@ class SumoNetEnv(ParallelEnv):
     **Observation** (``observation="drq_norm"``, RESCO's for IDQN and IPPO):
     ``Box(0, inf, (5 * lanes,), float32)``, per incoming lane in controlled-link order
     ``[lane index == current phase index, approach / 28, total wait / 28, queue / 28, speed sum
-    / 560]`` (row-major). ``"drq"``: the same without the scaling.
+    / 560]`` (row-major). ``"drq"``: the same without the scaling. ``"mplight"`` (MPLight's, on
+    our greens): ``Box(-inf, inf, (2 * greens,))``, each green's pressure (the queue on the
+    lanes it lets go minus the queue where their outgoing edges enter another light;
+    :mod:`ials_zoo.sumo_net.pressure`), then a one-hot of the current green. What a light
+    observes changes neither the episode nor its reward: a board entry may name it.
 
     **Reward** (``reward="wait_norm"``, RESCO's): ``clip(-total wait / 224, -4, 4)`` of the
-    light's detected vehicles; ``"wait"`` and ``"queue"`` are offered too.
+    light's detected vehicles; ``"wait"``, ``"queue"`` and ``"pressure"`` (RESCO's for MPLight:
+    minus the light's pressure) are offered too. ``mplight`` and ``pressure`` read other lights'
+    queues: the GS takes them, a light's IALS does not.
 
     **Episode end**: truncation when SUMO's clock reaches ``end`` (360 decisions on RESCO's maps;
     ``max_cycles=N``: after N decisions, for short tests).
