@@ -82,6 +82,8 @@ CASES = [
      "MPLight sets reward itself"),
     (["train", "mplight", "--env", "sumo_net_v0", "--buffer-size", "5", "--batch-size", "4", "--learning-starts", "4",
       "--out-dir", "{d}/r"], "--buffer-size"),
+    (["train", "shared_ppo", "--env", "warehouse_v0", "--recurrent-hidden", "8", "--out-dir", "{d}/r"],
+     "--recurrent-hidden"),
     (["evaluate", "--env", "sumo_net_v0", "--joint", "--policy", "rule:maxwave"], "rule:greedy"),
     (["evaluate", "--env", "sumo_net_v0", "--policy", "rule:greedy"], "--joint"),
 ]

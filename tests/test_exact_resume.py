@@ -128,6 +128,22 @@ def test_a_resumed_idqn_run_ends_bitwise_as_the_uninterrupted_one(tmp_path, monk
     assert all(row[2] and row[4] for row in rows[1:])  # every stretch says its loss and epsilon
 
 
+def test_resumed_mplight_and_shared_ppo_runs_end_bitwise_as_the_uninterrupted_ones(tmp_path, monkeypatch):
+    """The shared learners come back whole too: MPLight's pooled replay on cologne3's lights of
+    their own action counts, and the shared actor-critic on the warehouse."""
+    from ials_zoo.baselines import mplight, shared_ppo
+
+    for module, kwargs in ((mplight, dict(IDQN, env_id="sumo_net_v0", agents="all", n_envs=1, total_timesteps=96,
+                                          env_options=json.dumps({"net": "cologne3", "max_cycles": 30}),
+                                          eval_every=32, final_eval_episodes=1)),
+                           (shared_ppo, IPPO)):
+        folder = tmp_path / module.__name__.rsplit(".", 1)[-1]
+        whole = module.main(module.Args(**kwargs, out_dir=str(folder / "whole"))), folder / "whole"
+        resumed = _stopped_and_resumed(monkeypatch, module, folder / "resumed", kwargs)
+        assert_same_run(whole, resumed)
+        assert _progress_rows(whole[1]) == _progress_rows(resumed[1])
+
+
 @pytest.mark.parametrize("module_name", ["ippo", "dials"])
 def test_a_resumed_traffic_run_ends_bitwise_as_the_uninterrupted_one(tmp_path, monkeypatch, module_name):
     """SUMO in the GS copies (IPPO) and in the local simulators (DIALS), two lights."""

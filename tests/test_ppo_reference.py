@@ -197,3 +197,65 @@ def test_reward_scale_survives_a_checkpoint():
     copy.load_state_dict(scale.state_dict())
     r = np.full((1, 2), 3.0)
     np.testing.assert_array_equal(scale(r, False), copy(r, False))
+
+
+def _agent_loss(ref, cfg, obs, actions, logp_old, returns, adv):
+    """SB3's PPO loss of one agent's minibatch (as in :func:`_reference_update`)."""
+    logits, values = ref(obs)
+    dist = torch.distributions.Categorical(logits=logits)
+    ratio = torch.exp(dist.log_prob(actions) - logp_old)
+    if cfg.normalize_advantage:
+        adv = (adv - adv.mean()) / (adv.std() + 1e-8)
+    policy_loss = -torch.min(adv * ratio, adv * torch.clamp(ratio, 1 - cfg.clip_range, 1 + cfg.clip_range)).mean()
+    value_loss = torch.nn.functional.mse_loss(returns, values)
+    return policy_loss + cfg.ent_coef * -torch.mean(dist.entropy()) + cfg.vf_coef * value_loss
+
+
+def test_the_shared_ppo_is_one_network_on_every_agents_minibatch_and_its_id():
+    """One update of :class:`SharedPPO` equals one plain torch actor-critic (SB3's formulas)
+    reading each agent's observation with a one-hot of its id, minimising the mean of the
+    agents' minibatch losses with one gradient clip; its policy file's actors are that network."""
+    from ials_zoo.learners.batched_ppo import SharedPPO
+
+    agents = ["tls_0", "robot_7", "x"]
+    cfg = PPOConfig(n_steps=8, n_envs=4, batch_size=8, n_epochs=2, learning_rate=3e-3, anneal_lr=False,
+                    ent_coef=0.05, vf_coef=0.7, max_grad_norm=0.5, hidden=(13, 11))
+    learner = SharedPPO(agents, 7, 3, cfg, seed=11)
+    ref = _ReferenceAgent(learner, 0)  # the one network (10 inputs: 7 + the id)
+    rng = np.random.default_rng(3)
+    A, N = len(agents), 32
+    obs = rng.standard_normal((A, N, 7)).astype(np.float32)
+    actions = rng.integers(3, size=(A, N))
+    logp_old = np.log(np.full((A, N), 1 / 3) + rng.uniform(-0.1, 0.1, size=(A, N))).astype(np.float32)
+    returns = (rng.standard_normal((A, N)) * 5.0).astype(np.float32)
+    adv = (rng.standard_normal((A, N)) * 3.0 + 1.0).astype(np.float32)
+    ids = np.repeat(np.eye(A, dtype=np.float32)[:, None], N, 1)
+    x = torch.as_tensor(np.concatenate([obs, ids], -1))
+    opt = torch.optim.Adam(ref.parameters(), lr=cfg.learning_rate, eps=1e-5)
+    perm_rngs = [np.random.default_rng([11, agent_key(a), agent_key("minibatches"), 0]) for a in agents]
+    learner.update(obs, actions, logp_old, returns, adv, np.zeros((A, N), np.float32))
+    for _ in range(cfg.n_epochs):
+        perms = [torch.as_tensor(r.permutation(N)) for r in perm_rngs]
+        for start in range(0, N, cfg.batch_size):
+            losses = []
+            for k in range(A):
+                i = perms[k][start:start + cfg.batch_size]
+                losses.append(_agent_loss(ref, cfg, x[k, i], torch.as_tensor(actions[k])[i],
+                                          torch.as_tensor(logp_old[k])[i], torch.as_tensor(returns[k])[i],
+                                          torch.as_tensor(adv[k])[i]))
+            opt.zero_grad()
+            torch.stack(losses).mean().backward()
+            torch.nn.utils.clip_grad_norm_(ref.parameters(), cfg.max_grad_norm)
+            opt.step()
+    for head in ("pi", "vf"):
+        for i, lin in enumerate(m for m in ref.heads[head] if isinstance(m, torch.nn.Linear)):
+            a, b = lin.in_features, lin.out_features
+            np.testing.assert_allclose(learner.params[f"{head}.{i}.weight"][0, :a, :b].detach().numpy(),
+                                       lin.weight.detach().numpy().T, atol=2e-5, err_msg=f"{head}{i}")
+    with torch.no_grad():
+        want = ref(x)[0].numpy()
+    h = obs.astype(np.float64)
+    for i, (w, b) in enumerate(learner.actor_layers()):
+        h = np.einsum("abi,aio->abo", h, w) + b[:, None]
+        h = np.tanh(h) if i < len(learner.actor_layers()) - 1 else h
+    np.testing.assert_allclose(h, want, atol=1e-5)

@@ -80,11 +80,12 @@ class GSCopiesLearner(CopiesLearner):
     GS copies in ``processes`` worker processes, one update of ``samples_per_update`` samples
     of each agent at a time."""
 
-    def __init__(self, env_id, agents, options, copies, processes, ppo, frame_stack, seed, updates, sizes):
+    def __init__(self, env_id, agents, options, copies, processes, ppo, frame_stack, seed, updates, sizes,
+                 learner_cls=BatchedPPO):
         self._setup(env_id, agents, options, copies, processes, frame_stack, seed, sizes)
         self.per_update = ppo["n_steps"] * ppo["n_envs"]
-        self.learner = BatchedPPO(agents, self.obs_size * frame_stack, self.n_actions, PPOConfig(**ppo), seed, updates,
-                                  action_counts=self.action_counts)
+        self.learner = learner_cls(agents, self.obs_size * frame_stack, self.n_actions, PPOConfig(**ppo), seed,
+                                   updates, action_counts=self.action_counts)
 
     def _make_trainer(self):
         return RolloutTrainer(self.learner, self.env, self.frame_stack, seed=self.seed)
@@ -105,8 +106,9 @@ class GSCopiesLearner(CopiesLearner):
 
 
 
-def main(args: Args | None = None) -> dict:
-    """Train IPPO on the GS; returns the result dict (also written to result.json)."""
+def main(args: Args | None = None, algorithm: str = "ippo", learner_cls=BatchedPPO) -> dict:
+    """Train IPPO (or another PPO of every agent at once: ``learner_cls``) on the GS; returns
+    the result dict (also written to result.json)."""
     args = args or Args()
     domain, agents, options, processes = check_args(args)
     torch.set_num_threads(1)
@@ -114,11 +116,11 @@ def main(args: Args | None = None) -> dict:
     ppo = ppo_config(args, args.n_envs, frame_stack)
     per_update = args.samples_per_update
     total = whole_updates(int(args.total_timesteps or study_of(domain).multi_agent_budget), per_update)
-    plan = gs_run_plan("ippo", args, agents, options, total, per_update, frame_stack, processes, {"ppo": ppo})
+    plan = gs_run_plan(algorithm, args, agents, options, total, per_update, frame_stack, processes, {"ppo": ppo})
     learner = GSCopiesLearner(args.env_id, agents, options, args.n_envs, processes, ppo, frame_stack, args.seed,
-                              total // per_update, joint_sizes(domain, agents, options))
+                              total // per_update, joint_sizes(domain, agents, options), learner_cls)
     copies = f"{args.n_envs} GS cop{'ies' if args.n_envs > 1 else 'y'}"
-    return run(plan, learner, f"ippo: {len(agents)} agents of {args.env_id} learn at once on the GS ({copies}, "
+    return run(plan, learner, f"{algorithm}: {len(agents)} agents of {args.env_id} learn at once on the GS ({copies}, "
                f"{processes} worker process{'es' if processes != 1 else ''})", domain)
 
 

@@ -208,12 +208,17 @@ class BatchedPPO:
         if self.recurrent:
             x = self._gru(head, x)
         for i in range(self.n_layers):
-            x = torch.baddbmm(self.params[f"{head}.{i}.bias"][:, None], x, self.params[f"{head}.{i}.weight"])
+            w, b = self._layer(head, i, x.shape[0])
+            x = torch.baddbmm(b[:, None], x, w)
             if i < self.n_layers - 1:
                 # tanh(x) = 2 sigmoid(2x) - 1: torch's CPU tanh costs ~10x its sigmoid here
                 # (115 vs 12 us on [13, 64, 64]) and was a fifth of a whole PPO update
                 x = torch.sigmoid(x * 2.0) * 2.0 - 1.0
         return x
+
+    def _layer(self, head: str, i: int, rows: int):
+        """Layer ``i`` of ``head``'s weights and biases for ``rows`` agents: each agent's own."""
+        return self.params[f"{head}.{i}.weight"], self.params[f"{head}.{i}.bias"]
 
     def _input(self, obs):
         import torch
@@ -284,15 +289,10 @@ class BatchedPPO:
                 policy_loss = -surrogate.mean(dim=1)
                 value_loss = ((ret_t[rows, idx] - values) ** 2).mean(dim=1)
                 entropy = -(logp_all.exp() * logp_all).sum(dim=-1).mean(dim=1)
-                loss = (policy_loss + cfg.vf_coef * value_loss - cfg.ent_coef * entropy).sum()
+                loss = self._total(policy_loss + cfg.vf_coef * value_loss - cfg.ent_coef * entropy)
                 self.opt.zero_grad(set_to_none=True)
                 loss.backward()
-                # per-agent global gradient norm, clipped as each agent's own optimiser would
-                with torch.no_grad():
-                    sq = sum(p.grad.reshape(A, -1).pow(2).sum(dim=1) for p in self.params.values())
-                    scale = torch.clamp(cfg.max_grad_norm / (sq.sqrt() + 1e-6), max=1.0)
-                    for p in self.params.values():
-                        p.grad.mul_(scale.reshape(A, *([1] * (p.grad.dim() - 1))))
+                self._clip_gradients(A)
                 self.opt.step()
                 with torch.no_grad():
                     stats["policy_loss"] += policy_loss.mean().item()
@@ -306,6 +306,20 @@ class BatchedPPO:
         out = {k: v / max(count, 1) for k, v in stats.items()}
         out["learning_rate"] = lr
         return out
+
+    def _total(self, per_agent):
+        """The loss minimised: every agent's own, summed (each agent's parameters see only theirs)."""
+        return per_agent.sum()
+
+    def _clip_gradients(self, rows: int) -> None:
+        """Per-agent global gradient norm, clipped as each agent's own optimiser would."""
+        import torch
+
+        with torch.no_grad():
+            sq = sum(p.grad.reshape(rows, -1).pow(2).sum(dim=1) for p in self.params.values())
+            scale = torch.clamp(self.cfg.max_grad_norm / (sq.sqrt() + 1e-6), max=1.0)
+            for p in self.params.values():
+                p.grad.mul_(scale.reshape(rows, *([1] * (p.grad.dim() - 1))))
 
     # -- state and policies
     def state_dict(self) -> dict:
@@ -344,6 +358,65 @@ class BatchedPPO:
         return gru + [(self.params[f"pi.{i}.weight"].detach().numpy()[:, :a, :b].copy(),
                  self.params[f"pi.{i}.bias"].detach().numpy()[:, :b].copy())
                 for i, (a, b) in enumerate(zip(sizes[:-1], sizes[1:]))]
+
+
+class SharedPPO(BatchedPPO):
+    """One actor-critic shared by every agent: each reads its own observation and a one-hot of
+    its place among the agents (its id), so one network can still tell the lights apart. The
+    rollouts, minibatches, reward scaling and masks are :class:`BatchedPPO`'s, per agent; the
+    loss is the mean of the agents' losses, its gradient clipped as one network's, and the
+    policy file holds each agent's actor with its id folded into the first layer's bias (the
+    same function of the observation). No GRU."""
+
+    def __init__(self, agents, input_size: int, n_actions: int, cfg: PPOConfig, seed: int = 0,
+                 total_updates: int = 1, action_counts=None):
+        import dataclasses
+
+        import torch
+
+        if cfg.recurrent_hidden:
+            raise BadInput("one shared actor-critic reads no GRU: --recurrent-hidden must be 0")
+        self.obs_width = int(input_size)
+        super().__init__(agents, self.obs_width + len(agents), n_actions, dataclasses.replace(cfg, frames=1), seed,
+                         total_updates, action_counts)
+        # the first agent's initial weights become everyone's
+        self.params = {k: torch.nn.Parameter(v.detach()[:1].clone()) for k, v in self.params.items()}
+        self.opt = torch.optim.Adam(self.params.values(), lr=cfg.learning_rate, eps=1e-5, fused=True)
+        self._ids = torch.eye(len(self.agents))
+
+    def _layer(self, head: str, i: int, rows: int):
+        w, b = self.params[f"{head}.{i}.weight"], self.params[f"{head}.{i}.bias"]
+        return w.expand(rows, -1, -1), b.expand(rows, -1)
+
+    def _input(self, obs):
+        import torch
+
+        x = torch.from_numpy(np.asarray(obs, np.float32))
+        x = torch.cat([x, self._ids[:, None, :].expand(x.shape[0], x.shape[1], -1)], dim=-1)
+        pad = _padded(self.input_size) - self.input_size
+        return torch.nn.functional.pad(x, (0, pad)) if pad else x
+
+    def _total(self, per_agent):
+        return per_agent.mean()
+
+    def _clip_gradients(self, rows: int) -> None:
+        import torch
+
+        torch.nn.utils.clip_grad_norm_(list(self.params.values()), self.cfg.max_grad_norm)
+
+    def actor_layers(self) -> list:
+        """Each agent's actor as :meth:`BatchedPPO.actor_layers` gives them: the shared weights,
+        the first layer reading the observation alone, its bias plus the row of the agent's id."""
+        sizes, A, n = self._sizes["pi"], len(self.agents), self.obs_width
+        out = []
+        for i, (a, b) in enumerate(zip(sizes[:-1], sizes[1:])):
+            w = self.params[f"pi.{i}.weight"].detach().numpy()[0, :a, :b]
+            bias = self.params[f"pi.{i}.bias"].detach().numpy()[0, :b]
+            if i == 0:
+                out.append((np.repeat(w[None, :n], A, 0).copy(), (bias[None] + w[n:n + A]).astype(np.float32)))
+            else:
+                out.append((np.repeat(w[None], A, 0).copy(), np.repeat(bias[None], A, 0).copy()))
+        return out
 
 
 class RewardScale:
@@ -402,4 +475,4 @@ def gae(rewards, values, dones, last_values, gamma: float, lam: float):
     return adv, adv + values
 
 
-__all__ = ["BatchedPPO", "PPOConfig", "RewardScale", "gae"]
+__all__ = ["BatchedPPO", "PPOConfig", "RewardScale", "SharedPPO", "gae"]
