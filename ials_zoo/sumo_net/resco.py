@@ -22,16 +22,17 @@ RULE_BASED = {
     "cologne8": {"FIXED": (63.77, 64.21), "MAXWAVE": (21.87, 21.85), "MAXPRESSURE": (47.73, 29.71)},
 }
 
-# map -> best training episode's delay of RESCO's learners (IDQN: 100 episodes, IPPO: 1,400)
+# map -> best training episode's delay of RESCO's learners (IDQN and MPLight: 100 episodes, IPPO
+# and FMA2C: 1,400); RESCO's MPLight series is empty on ingolstadt1
 LEARNED = {
-    "grid4x4": {"IDQN": 32.95, "IPPO": 44.0},
-    "arterial4x4": {"IDQN": 1168.32, "IPPO": 686.62},
-    "ingolstadt1": {"IDQN": 21.48, "IPPO": 20.9},
-    "ingolstadt7": {"IDQN": 31.19, "IPPO": 31.68},
-    "ingolstadt21": {"IDQN": 59.64, "IPPO": 93.11},
-    "cologne1": {"IDQN": 26.05, "IPPO": 43.24},
-    "cologne3": {"IDQN": 23.99, "IPPO": 24.03},
-    "cologne8": {"IDQN": 22.06, "IPPO": 21.62},
+    "grid4x4": {"IDQN": 32.95, "IPPO": 44.0, "MPLight": 46.91, "FMA2C": 99.77},
+    "arterial4x4": {"IDQN": 1168.32, "IPPO": 686.62, "MPLight": 837.75, "FMA2C": 654.13},
+    "ingolstadt1": {"IDQN": 21.48, "IPPO": 20.9, "FMA2C": 27.0},
+    "ingolstadt7": {"IDQN": 31.19, "IPPO": 31.68, "MPLight": 48.21, "FMA2C": 51.39},
+    "ingolstadt21": {"IDQN": 59.64, "IPPO": 93.11, "MPLight": 78.16, "FMA2C": 90.29},
+    "cologne1": {"IDQN": 26.05, "IPPO": 43.24, "MPLight": 28.74, "FMA2C": 30.79},
+    "cologne3": {"IDQN": 23.99, "IPPO": 24.03, "MPLight": 83.65, "FMA2C": 26.86},
+    "cologne8": {"IDQN": 22.06, "IPPO": 21.62, "MPLight": 60.42, "FMA2C": 33.88},
 }
 
 PUBLISHED_NOTE = ("RESCO's published delays (Ault & Sharon 2021): SUMO 1.9 and RESCO's own map files, not "
