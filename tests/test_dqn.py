@@ -84,20 +84,27 @@ def test_the_td_targets_and_one_update_are_the_hand_computation():
         assert np.allclose(got.detach().numpy(), start - step, atol=1e-6)
 
 
-def test_the_learner_solves_a_chain_whose_optimal_values_are_known():
-    """Both agents learn Q* of their chain within 10% and act optimally (always right)."""
+def _learnt_chain(kind, steps: int, buffer_size: int):
+    """A learner of ``kind`` trained ``steps`` on two agents' chains; its Q of every state,
+    checked against Q* (within 10%)."""
     torch.manual_seed(0)
-    cfg = DQNConfig(hidden=(32,), gamma=0.8, learning_rate=3e-3, target_update=100, buffer_size=2000,
+    cfg = DQNConfig(hidden=(32,), gamma=0.8, learning_rate=3e-3, target_update=100, buffer_size=buffer_size,
                     eps_fraction=0.5, eps_end=0.1)
     env = Chain(n_envs=2)
-    learner = BatchedDQN(env.agents, 4, 2, cfg, seed=1, total_steps=8000)
+    learner = kind(env.agents, 4, 2, cfg, seed=1, total_steps=steps)
     trainer = DQNTrainer(learner, env, seed=1)
-    while learner.steps < 8000:
+    while learner.steps < steps:
         trainer.step()
     with torch.no_grad():
         q = learner.q_values(torch.eye(4).expand(2, 4, 4).contiguous()).numpy()
     want = chain_optimum(4, 0.8)
     assert np.abs(q - want).max() < 0.1 * want.max(), (q, want)
+    return learner, q, cfg
+
+
+def test_the_learner_solves_a_chain_whose_optimal_values_are_known():
+    """Both agents learn Q* of their chain within 10% and act optimally (always right)."""
+    learner, _, _ = _learnt_chain(BatchedDQN, 8000, 2000)
     assert (learner.greedy(np.eye(4, dtype=np.float32)[None].repeat(2, 0)) == 1).all()
 
 
@@ -243,18 +250,7 @@ def test_the_shared_dqns_targets_and_update_are_the_hand_computation():
 def test_the_shared_dqn_learns_one_q_for_every_agent_from_all_their_transitions():
     """Two agents on the same chain share one network: it reaches Q* within 10% for both,
     and gives both the same Q on the same input; an agent's missing action stays at -inf."""
-    torch.manual_seed(0)
-    cfg = DQNConfig(hidden=(32,), gamma=0.8, learning_rate=3e-3, target_update=100, buffer_size=4000,
-                    eps_fraction=0.5, eps_end=0.1)
-    env = Chain(n_envs=2)
-    learner = SharedDQN(env.agents, 4, 2, cfg, seed=1, total_steps=5000)
-    trainer = DQNTrainer(learner, env, seed=1)
-    while learner.steps < 5000:
-        trainer.step()
-    with torch.no_grad():
-        q = learner.q_values(torch.eye(4).expand(2, 4, 4).contiguous()).numpy()
-    want = chain_optimum(4, 0.8)
-    assert np.abs(q - want).max() < 0.1 * want.max(), (q, want)
+    _, q, cfg = _learnt_chain(SharedDQN, 5000, 4000)
     assert np.array_equal(q[0], q[1])
     masked = SharedDQN(["a", "b"], 4, 3, cfg, seed=1, total_steps=10, action_counts=[3, 2])
     acts = masked.act(np.random.default_rng(0).random((2, 400, 4), dtype=np.float32))

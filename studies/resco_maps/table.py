@@ -1,0 +1,84 @@
+"""The rules and the learners of RESCO's maps side by side, from their result files: each map's
+delay (mean [95% CI]), its median episode return and how many of the 20 episodes jammed (a
+return below -200: the map's queues at wait_norm's clip for most of the hour), and the best
+learned row's ratio to the best rule's mean.
+
+    python studies/resco_maps/table.py                   # the Markdown table
+    python studies/resco_maps/table.py --copy            # first copy finished runs' results here
+
+Rules: ``results/rules/<map>_<rule>.json`` (``rules.sh``); learners:
+``results/<learner>/<map>_s<seed>_result[_deterministic].json`` (copied from ``runs/<learner>_net``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import sys
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).parent / "results"
+MAPS = ("cologne8", "grid4x4", "ingolstadt21", "cologne1", "ingolstadt1", "ingolstadt7", "cologne3", "arterial4x4")
+RULES = ("fixed", "greedy", "max_pressure", "actuated", "random")
+LEARNERS = ("idqn", "mplight", "shared_ppo", "ippo")
+JAM = -200.0  # an episode whose mean return over the lights is below this jammed
+
+
+def copy_runs(runs: Path = Path("runs")) -> None:
+    """Copy each finished run's result files into ``results/<learner>/``."""
+    for learner in LEARNERS:
+        for run in sorted((runs / f"{learner}_net").glob("*_s*")):
+            for name in ("result.json", "result_deterministic.json", "curve.json", "progress.csv"):
+                if (run / "result.json").exists() and (run / name).exists():
+                    (HERE / learner).mkdir(parents=True, exist_ok=True)
+                    shutil.copy(run / name, HERE / learner / f"{run.name}_{name}")
+
+
+def row(path: Path) -> dict | None:
+    if not path.exists():
+        return None
+    d = json.loads(path.read_text())
+    returns = np.array(d["scores"][0]["returns"]) if len(d["scores"]) == 1 else np.concatenate(
+        [s["returns"] for s in d["scores"]])
+    m = d["metrics"]["delay"]
+    return {"delay": m["mean"], "lo": m["ci_low"], "hi": m["ci_high"], "median_return": float(np.median(returns)),
+            "jammed": int((returns < JAM).sum()), "episodes": len(returns)}
+
+
+def cell(r: dict | None) -> str:
+    if r is None:
+        return "–"
+    return f"{r['delay']:.2f} [{r['lo']:.2f}, {r['hi']:.2f}] ({r['jammed']})"
+
+
+def table() -> str:
+    head = ["map", *RULES, *(f"{k} s0 (sampled / det.)" for k in LEARNERS[:3]), "best learned / best rule"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for net in MAPS:
+        rules = {k: row(HERE / "rules" / f"{net}_{k}.json") for k in RULES}
+        learned = {k: (row(HERE / k / f"{net}_s0_result.json"), row(HERE / k / f"{net}_s0_result_deterministic.json"))
+                   for k in LEARNERS[:3]}
+        best_rule = min((r["delay"] for r in rules.values() if r), default=None)
+        best_learned = min((r["delay"] for pair in learned.values() for r in pair if r), default=None)
+        ratio = f"{best_learned / best_rule:.2f}" if best_rule and best_learned else "–"
+        cells = [cell(rules[k]) for k in RULES]
+        cells += [f"{cell(s)} / {d['delay']:.2f}" if s and d else cell(s) for s, d in learned.values()]
+        lines.append("| " + " | ".join([net, *cells, ratio]) + " |")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--copy", action="store_true", help="copy finished runs' result files from runs/ first")
+    args = p.parse_args(argv)
+    if args.copy:
+        copy_runs()
+    print(table())
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
