@@ -359,6 +359,15 @@ def _hand_pressures(net, x, measures, incoming):
     return scores, own
 
 
+def test_wait_scaled_is_wait_norm_without_its_clip():
+    from ials_zoo.sumo_net.mdp import wait_norm, wait_scaled
+
+    small, large = np.zeros((3, 5)), np.zeros((3, 5))
+    small[:, 1], large[:, 1] = [100.0, 50.0, 0.0], [900.0, 600.0, 300.0]
+    assert wait_scaled(small, 0) == wait_norm(small, 0) == -150.0 / 224
+    assert wait_norm(large, 0) == -4.0 and wait_scaled(large, 0) == -1800.0 / 224
+
+
 def test_mplights_observation_and_pressure_reward_are_the_hand_count():
     """MPLight's observation (each green's pressure, then a one-hot of the current green) and
     RESCO's pressure reward, at every decision of a grid4x4 episode, against the hand count."""

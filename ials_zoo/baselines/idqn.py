@@ -59,6 +59,8 @@ class Args(JointRunArgs):
     eps_fraction: float = arg(0.8, "share of the run over which epsilon falls linearly (RESCO: 0.8)")
     hidden: str = arg("64,64", "hidden layers of every Q-network, comma-separated (RESCO: 64,64)")
     frame_stack: int | None = arg(None, "observations a Q-network reads (default: the domain's)")
+    train_reward: str | None = arg(None, "learn from this reward of the domain, in training only (e.g. sumo_net_v0's "
+                                   "wait_scaled: wait_norm without its clip); the policy is scored on the protocol's")
     n_envs: int = arg(1, "GS copies (RESCO: 1)")
     gs_processes: int | None = arg(None, "worker processes of the GS copies (default: one per copy for SUMO, else 0)")
     out_dir: str | None = arg(None, "output folder (default: runs/<env>__idqn__s<seed>)")
@@ -90,7 +92,23 @@ def check_args(args: Args):
     processes = (args.n_envs if domain.one_simulation_per_process else 0) if args.gs_processes is None else args.gs_processes
     if processes < 0:
         raise BadInput(f"--gs-processes must be >= 0, got {processes}")
+    train_options_of(args, domain, options)
     return domain, agents, options, processes
+
+
+def train_options_of(args: Args, domain, options: dict) -> dict:
+    """The GS options the copies learn under beside ``options``: ``--train-reward``'s reward."""
+    if args.train_reward is None:
+        return {}
+    if domain.reward_option is None:
+        raise BadInput(f"--train-reward: {domain.env_id} has one reward")
+    if args.train_reward not in domain.rewards:
+        raise BadInput(f"--train-reward: {args.train_reward!r} is not a reward of {domain.env_id}; its rewards: "
+                       f"{', '.join(domain.rewards)}")
+    if domain.reward_option in options:
+        raise BadInput(f"--env-options names the reward, which scores the policy: learn from another with "
+                       f"--train-reward instead")
+    return {domain.reward_option: args.train_reward}
 
 
 class DQNCopiesLearner(CopiesLearner):
@@ -142,10 +160,12 @@ def main(args: Args | None = None) -> dict:
     cfg = dqn_config(args)
     per_update = args.n_envs  # one step of every copy: a transition of each agent per copy
     total = int(args.total_timesteps or study_of(domain).multi_agent_budget) // per_update * per_update
+    train_options = train_options_of(args, domain, options)
     plan = gs_run_plan("idqn", args, agents, options, total, per_update, frame_stack, processes,
-                       {"dqn": dataclasses.asdict(cfg), "greedy_temperature": GREEDY_TEMPERATURE})
+                       {"dqn": dataclasses.asdict(cfg), "greedy_temperature": GREEDY_TEMPERATURE,
+                        "train_options": train_options})
     learner = DQNCopiesLearner(args.env_id, agents, options, args.n_envs, processes, cfg, frame_stack, args.seed,
-                               total, joint_sizes(domain, agents, options))
+                               total, joint_sizes(domain, agents, options), train_options=train_options)
     copies = f"{args.n_envs} GS cop{'ies' if args.n_envs > 1 else 'y'}"
     return run(plan, learner, f"idqn: {len(agents)} agents of {args.env_id} learn their own DQN at once on the GS "
                f"({copies}, {processes} worker process{'es' if processes != 1 else ''})", domain)

@@ -62,6 +62,8 @@ def check_args(args: Args):
                        f"have: {', '.join(having) or 'none'}")
     if args.buffer_size < len(agents):
         raise BadInput(f"--buffer-size ({args.buffer_size}) must hold one step of every light ({len(agents)})")
+    if args.train_reward is not None:
+        raise BadInput(f"--train-reward: MPLight learns from its own ({mdp.train})")
     clash = sorted(set(options) & (set(mdp.observe) | set(mdp.train)))
     if clash:
         raise BadInput(f"--env-options: MPLight sets {', '.join(clash)} itself ({ {**mdp.observe, **mdp.train} })")

@@ -130,6 +130,9 @@ class Domain:
         policy_options: GS options that change only what the agents observe, never the
             episode nor its rewards (e.g. ``("observation",)``): a policy keeps the ones it was
             trained with, and its result stays on the official protocol.
+        reward_option, rewards: the GS option that picks the agents' reward and the rewards
+            it takes (the first is the one that scores them): a learner may learn from another
+            (``train idqn --train-reward``) and is still scored on the protocol's; None: one reward.
         published: ``published(**track_options) -> (note, [(who, figure), ...])``: others'
             published figures for a track (a paper's table, say), shown beside its board table
             as a reference, never ranked nor re-measured; None: none.
@@ -168,6 +171,8 @@ class Domain:
     track_options: tuple[str, ...] = ()
     episode_steps: Callable[..., int] | None = None
     rules: dict = field(default_factory=dict)
+    reward_option: str | None = None
+    rewards: tuple[str, ...] = ()
     published: Callable | None = None
     policy_options: tuple[str, ...] = ()
     description: str = ""

@@ -176,6 +176,8 @@ def episode_steps(**options) -> int:
 DOMAIN = Domain(
     env_id=ENV_ID,
     rules=RULES,
+    reward_option="reward",
+    rewards=("wait_norm", "wait_scaled", "wait", "queue", "pressure"),
     published=_published,
     policy_options=("observation",),  # what a light reads; the reward that scores it stays RESCO's wait_norm
     description="any SUMO network, RESCO's eight city and grid maps by name (libsumo; single-junction IALS)",

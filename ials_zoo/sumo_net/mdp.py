@@ -46,6 +46,13 @@ def wait_norm(measures: np.ndarray, phase: int) -> float:
     return min(4.0, max(-4.0, -float(measures[:, 1].sum()) / 224.0))  # np.clip costs 10x on a scalar
 
 
+def wait_scaled(measures: np.ndarray, phase: int) -> float:
+    """``wait_norm`` without its clip: ``-total wait / 224``. Past 896 s of waiting the clip
+    makes every action look alike to a learner; this keeps telling a long queue from a longer
+    one (a reward to learn from: ``train idqn --train-reward wait_scaled``)."""
+    return -float(measures[:, 1].sum()) / 224.0
+
+
 def wait(measures: np.ndarray, phase: int) -> float:
     """RESCO's ``wait``: minus the total wait of the light's detected vehicles (s)."""
     return float(-measures[:, 1].sum())
@@ -75,7 +82,7 @@ def lanes_tables(measures: np.ndarray, phases: np.ndarray, starts: np.ndarray,
 OBSERVATIONS = {"drq_norm": drq_norm, "drq": drq}
 BATCHED_OBSERVATIONS = {drq_norm: _DRQ_DIVISORS, drq: None}
 """The observations :func:`lanes_tables` computes for every light at once, with their divisors."""
-REWARDS = {"wait_norm": wait_norm, "wait": wait, "queue": queue}
+REWARDS = {"wait_norm": wait_norm, "wait_scaled": wait_scaled, "wait": wait, "queue": queue}
 
 
 def mplight(pressures: np.ndarray, phase: int) -> np.ndarray:
