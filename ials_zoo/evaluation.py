@@ -107,11 +107,15 @@ class _MetricRecorder:
     def summary(self) -> dict | None:
         if not self.names:
             return None
-        out = {}
-        for n, vals in self.values.items():
-            mean, lo, hi = mean_ci(vals)
-            out[n] = {"mean": mean, "ci_low": lo, "ci_high": hi}
-        return out
+        return {n: metric_summary(vals) for n, vals in self.values.items()}
+
+
+def metric_summary(values: Sequence[float]) -> dict:
+    """A metric over an evaluation's episodes: mean and interval (:func:`mean_ci`), median and
+    every episode's value (a gridlocked episode shows as a tail, not only in the mean)."""
+    mean, lo, hi = mean_ci(values)
+    return {"mean": mean, "ci_low": lo, "ci_high": hi, "median": float(np.median(values)),
+            "episodes": [float(v) for v in values]}
 
 
 def mean_ci(values: Sequence[float]) -> tuple[float, float, float]:

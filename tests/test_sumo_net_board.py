@@ -140,6 +140,12 @@ def test_the_rules_are_reference_entries_of_each_map_re_measured_exactly(tmp_pat
     assert "greedy (rule)" in lb.show(board) and "fixed (rule)" in lb.show(board)
     for p in (board / "results").glob("*.json"):
         assert lb.verify(p, directory=board)[0]["ok"]
+    delay = entries["greedy"]["scores"][0]["metrics"]["delay"]
+    assert delay["episodes"] == [delay["mean"]] == [delay["median"]]  # every episode's delay is kept
+    forged = json.loads(json.dumps(entries["greedy"]))
+    forged["scores"][0]["metrics"]["delay"]["episodes"] = [delay["mean"] + 1.0]
+    with pytest.raises(lb.ResultError, match="does not match its episodes"):
+        lb.validate_result(forged)
     bad = dict(entries["greedy"], algorithm="fixed")
     with pytest.raises(lb.ResultError, match="training"):
         lb.validate_result(bad)

@@ -59,7 +59,10 @@ def remeasure_result(data: dict, files: list[str] | None, progress: bool = False
         metrics = {}
         for name, claimed in (s.get("metrics") or {}).items():
             measured = (res.metrics or {}).get(name)
-            if measured is None or not all(_equal(claimed[k], measured[k]) for k in ("mean", "ci_low", "ci_high")):
+            same_episodes = "episodes" not in claimed or (measured is not None and len(claimed["episodes"]) == len(
+                measured.get("episodes", ())) and all(map(_equal, claimed["episodes"], measured["episodes"])))
+            if measured is None or not same_episodes or not all(
+                    _equal(claimed[k], measured[k]) for k in ("mean", "ci_low", "ci_high")):
                 diffs.append(f"metrics.{name}")
                 metrics[name] = (claimed["mean"], None if measured is None else measured["mean"])
         ok = not diffs and _equal(s["mean"], res.mean)

@@ -308,6 +308,8 @@ def _check_metrics(data: dict, domain) -> None:
                                   f"{', '.join(known) or 'none'})")
             if not value["ci_low"] <= value["mean"] <= value["ci_high"]:
                 raise ResultError(f"{where}.{name}", "the mean must lie in [ci_low, ci_high]")
+            if "episodes" in value:
+                _check_metric_episodes(data, f"{where}.{name}", value)
             low, high = domain.metric_range(name)
             # a seed's interval is over its episodes (inside the range); the top level's is a
             # t interval over seeds, which may reach past it
@@ -322,6 +324,18 @@ def _check_metrics(data: dict, domain) -> None:
             _close(got[n][k], want[n][k]) for n in want for k in ("mean", "ci_low", "ci_high")))):
         raise ResultError("metrics", "does not match the per-seed metrics (every seed carries the same metrics, "
                           "and the top level is their mean with a t interval over seeds)")
+
+
+def _check_metric_episodes(data: dict, where: str, value: dict) -> None:
+    """A metric's episodes: one value per evaluated episode, whose mean, interval and median
+    are the ones it claims."""
+    values = value["episodes"]
+    if len(values) != data["evaluation"]["episodes"]:
+        raise ResultError(f"{where}.episodes", f"{len(values)} values for {data['evaluation']['episodes']} episodes")
+    mean, lo, hi = bootstrap_interval(values)
+    for key, want in (("mean", mean), ("ci_low", lo), ("ci_high", hi), ("median", float(np.median(values)))):
+        if key in value and not _close(value[key], want):
+            raise ResultError(f"{where}.{key}", f"{value[key]!r} does not match its episodes ({want!r})")
 
 
 def parse_result_text(text: str, where: str) -> dict:
