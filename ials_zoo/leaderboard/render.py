@@ -82,6 +82,15 @@ def _row(d: dict) -> list[str]:
             wall_clock_text(d), console_text(d["created"][:10])]
 
 
+def metric_text(m: dict | None) -> str:
+    """A metric's cell: mean [95% CI], and its median where the result keeps one (a gridlocked
+    episode moves the mean, not the median)."""
+    if m is None:
+        return "-"
+    text = f"{m['mean']:.2f} [{m['ci_low']:.2f}, {m['ci_high']:.2f}]"
+    return text + (f"; median {m['median']:.2f}" if "median" in m else "")
+
+
 def ranking_metric(env_id: str) -> str | None:
     """The metric that ranks a domain's entries (:attr:`Domain.score_metric`), or None: the score."""
     return get_domain(env_id).score_metric
@@ -141,8 +150,7 @@ def _text_table(rows: list[dict], sort: str = "score") -> list[str]:
         table = [HEADER] + [_row(d) for d in rows]
     else:
         def metric(d):
-            m = (d.get("metrics") or {}).get(sort)
-            return "-" if m is None else f"{m['mean']:.2f} [{m['ci_low']:.2f}, {m['ci_high']:.2f}]"
+            return metric_text((d.get("metrics") or {}).get(sort))
 
         better = get_domain(rows[0]["env_id"]).metrics.get(sort, "higher")
         table = [[*HEADER[:2], f"{sort} ({better} is better)", *HEADER[2:]]] + [
@@ -314,9 +322,7 @@ def _md_table(rows, link: str | None = "results") -> list[str]:
     for d in rows:
         cells = [markdown_cell(c) for c in _row(d)] + ([f"[json]({link}/{d['_file']})"] if link else [])
         if rank is not None:
-            m = (d.get("metrics") or {}).get(rank)
-            cells = [*cells[:2], "-" if m is None else f"{m['mean']:.2f} [{m['ci_low']:.2f}, {m['ci_high']:.2f}]",
-                     *cells[2:]]
+            cells = [*cells[:2], metric_text((d.get("metrics") or {}).get(rank)), *cells[2:]]
         out.append("| " + " | ".join(cells) + " |\n")
     return out
 
@@ -397,4 +403,4 @@ def render(directory=None) -> Path:
     return out
 
 
-__all__ = ["format_duration", "group_entries", "published_of", "render", "show"]
+__all__ = ["format_duration", "group_entries", "metric_text", "published_of", "render", "show"]

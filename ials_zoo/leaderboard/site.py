@@ -29,6 +29,7 @@ from ials_zoo.leaderboard.render import (
     _training_label,
     console_text,
     group_entries,
+    metric_text,
     published_of,
     wall_clock_text,
 )
@@ -143,8 +144,7 @@ def _table(rows: list[dict], folder: str, link_base: str) -> str:
                  _cell(_e(wall_clock_text(d)), "" if total is None else total, True)]
         for m in names:
             v = (d.get("metrics") or {}).get(m)
-            cells.append(_cell("-" if v is None else f"{v['mean']:.2f} [{v['ci_low']:.2f}, {v['ci_high']:.2f}]",
-                               "" if v is None else v["mean"], True))
+            cells.append(_cell(_e(metric_text(v)), "" if v is None else v["mean"], True))
         cells += [_cell(_e(d["created"][:10])), _cell(_links(d, folder, link_base))]
         body.append("<tr>" + "".join(cells) + "</tr>")
     return (f'<table class="board"><thead><tr>{"".join(head)}</tr></thead><tbody>{"".join(body)}</tbody></table>')
