@@ -621,15 +621,15 @@ def evaluate_joint(env_id: str, policy, agents=None, episodes: int = PROTOCOL_EP
         sizes = sizes_of_env(env, agents)  # agents with spaces of their own: padded, each its own actions
         if isinstance(pol, NetworkPolicy):
             _check_fits(pol, sizes, agents)
-        rule_act = pol.joint_actor(env, agents) if pol.kind == "rule" else None
+        # the shared-space draw stays as it was (entries on the board re-measure bitwise)
+        counts = sizes.n_actions if sizes.action_counts is None else np.asarray(sizes.action_counts)
+        act = _joint_actor(pol, env, agents, counts)
     except BaseException:
         env.close()
         raise
     recorder = _MetricRecorder(domain, env)
     stack = FrameStack(pol.frame_stack)
     width = sizes.obs_size
-    # the shared-space draw stays as it was (entries on the board re-measure bitwise)
-    counts = sizes.n_actions if sizes.action_counts is None else np.asarray(sizes.action_counts)
     start = time.perf_counter()
     iterator = seeds
     if progress:
@@ -644,15 +644,7 @@ def evaluate_joint(env_id: str, policy, agents=None, episodes: int = PROTOCOL_EP
             x = stack.reset(stack_observations(obs, agents, width))
             steps = 0
             while env.agents:
-                if isinstance(pol, NetworkPolicy):
-                    acts = pol.act_all(x)
-                elif pol.kind == "random":
-                    acts = pol._rng.integers(counts, size=len(agents))
-                elif rule_act is not None:
-                    acts = rule_act()
-                else:
-                    acts = np.zeros(len(agents), np.int64)
-                obs, rewards, _, _, _ = env.step({a: int(u) for a, u in zip(agents, acts)})
+                obs, rewards, _, _, _ = env.step({a: int(u) for a, u in zip(agents, act(x))})
                 per_agent[:, e] += [rewards[a] for a in agents]
                 steps += 1
                 if env.agents:
@@ -672,6 +664,21 @@ def evaluate_joint(env_id: str, policy, agents=None, episodes: int = PROTOCOL_EP
         per_agent_returns={a: per_agent[i].tolist() for i, a in enumerate(agents)},
         metrics=recorder.summary(),
     )
+
+
+def _joint_actor(pol: Policy, env, agents, counts):
+    """``act(x) -> every agent's action`` from the stacked observations ``x``: the network's, a
+    uniform draw (from the generator the episode's seed reset), the rule's (it reads the GS), or
+    zeros where the GS's own controller drives the agents."""
+    if isinstance(pol, NetworkPolicy):
+        return pol.act_all
+    if pol.kind == "random":
+        return lambda x: pol._rng.integers(counts, size=len(agents))
+    if pol.kind == "rule":
+        rule = pol.joint_actor(env, agents)
+        return lambda x: rule()
+    zeros = np.zeros(len(agents), np.int64)
+    return lambda x: zeros
 
 
 def _evaluate_worker(env_id, agent, policy, kwargs):
