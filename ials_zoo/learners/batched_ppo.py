@@ -37,7 +37,7 @@ learns like SB3's PPO.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -370,14 +370,12 @@ class SharedPPO(BatchedPPO):
 
     def __init__(self, agents, input_size: int, n_actions: int, cfg: PPOConfig, seed: int = 0,
                  total_updates: int = 1, action_counts=None):
-        import dataclasses
-
         import torch
 
         if cfg.recurrent_hidden:
             raise BadInput("one shared actor-critic reads no GRU: --recurrent-hidden must be 0")
         self.obs_width = int(input_size)
-        super().__init__(agents, self.obs_width + len(agents), n_actions, dataclasses.replace(cfg, frames=1), seed,
+        super().__init__(agents, self.obs_width + len(agents), n_actions, replace(cfg, frames=1), seed,
                          total_updates, action_counts)
         # the first agent's initial weights become everyone's
         self.params = {k: torch.nn.Parameter(v.detach()[:1].clone()) for k, v in self.params.items()}
