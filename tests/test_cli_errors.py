@@ -87,6 +87,7 @@ CASES = [
     (["train", "idqn", "--env", "sumo_net_v0", "--env-options", '{"reward": "wait"}', "--train-reward", "wait",
       "--out-dir", "{d}/r"], "scores the policy"),
     (["train", "mplight", "--env", "sumo_net_v0", "--train-reward", "wait", "--out-dir", "{d}/r"], "its own"),
+    (["train", "ippo", "--env", "sumo_net_v0", "--train-reward", "speed", "--out-dir", "{d}/r"], "wait_scaled"),
     (["train", "shared_ppo", "--env", "warehouse_v0", "--recurrent-hidden", "8", "--out-dir", "{d}/r"],
      "--recurrent-hidden"),
     (["evaluate", "--env", "sumo_net_v0", "--joint", "--policy", "rule:maxwave"], "rule:greedy"),

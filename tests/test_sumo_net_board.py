@@ -193,6 +193,11 @@ def test_mplight_shares_one_dqn_learns_from_pressure_and_is_scored_on_the_protoc
     assert adapter.options == dict(options, reward="pressure")  # the GS copies it learns on
     args = mplight.idqn.Args(env_id=ENV, train_reward="wait_scaled")
     assert mplight.idqn.train_options_of(args, get_domain(ENV), {"net": "cologne8"}) == {"reward": "wait_scaled"}
+    # a run without --train-reward records what runs recorded before it existed (re-training stays bit for bit)
+    from ials_zoo.baselines import ippo
+    from ials_zoo.baselines.driver import _recorded
+
+    assert "train_reward" not in _recorded(ippo.Args()) and _recorded(args)["train_reward"] == "wait_scaled"
     net = load_policy_file(out / "policy.safetensors")
     first = net.layers[0][0]
     assert all(np.array_equal(first[0], first[i]) for i in range(len(agents)))  # one network for every light

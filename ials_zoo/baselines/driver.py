@@ -230,6 +230,15 @@ class CopiesLearner(JointActors):
             self.env.close()
 
 
+LATER_OPTIONS = ("train_reward",)
+"""Arguments added after runs were on the board: left out of a run's record at their default
+(None), so that re-training an older entry still makes its policy file bit for bit."""
+
+
+def _recorded(args) -> dict:
+    return {k: v for k, v in dataclasses.asdict(args).items() if not (k in LATER_OPTIONS and v is None)}
+
+
 def gs_run_plan(algorithm: str, args, agents: list, options: dict, total: int, per_update: int, frame_stack: int,
                 processes: int, hyperparameters: dict) -> RunPlan:
     """The plan of a run in which every agent learns on GS copies (IPPO, IDQN): the budget,
@@ -238,7 +247,7 @@ def gs_run_plan(algorithm: str, args, agents: list, options: dict, total: int, p
     eval_every = int(args.eval_every or max(per_update, total // 10))
     training = {"simulator": "gs", "aip": None, "seeds": [args.seed], "env_steps": 0, "wall_clock_seconds": 0.0,
                 "aip_seconds": 0.0, "workers": max(processes, 1),
-                "hyperparameters": dict(dataclasses.asdict(args), agents=agents, total_timesteps=total,
+                "hyperparameters": dict(_recorded(args), agents=agents, total_timesteps=total,
                                         eval_every=eval_every, **hyperparameters, gs_processes=processes)}
     return RunPlan(algorithm, args.env_id, agents, options, args.seed, total, per_update, eval_every,
                    args.eval_episodes, args.final_eval_episodes, frame_stack,

@@ -31,7 +31,7 @@ import torch
 
 from ials_zoo.baselines.arguments import arg, check_frame_stack, hidden_sizes, run_cli
 from ials_zoo.baselines.driver import CopiesLearner, check_run_args, gs_run_plan, run
-from ials_zoo.baselines.multiagent import JointRunArgs, env_options_of
+from ials_zoo.baselines.multiagent import JointRunArgs, env_options_of, train_options_of
 from ials_zoo.core.domains import domain_ids, get_domain
 from ials_zoo.core.extras import study_of
 from ials_zoo.core.spaces import joint_sizes
@@ -96,20 +96,6 @@ def check_args(args: Args):
     return domain, agents, options, processes
 
 
-def train_options_of(args: Args, domain, options: dict) -> dict:
-    """The GS options the copies learn under beside ``options``: ``--train-reward``'s reward."""
-    if args.train_reward is None:
-        return {}
-    if domain.reward_option is None:
-        raise BadInput(f"--train-reward: {domain.env_id} has one reward")
-    if args.train_reward not in domain.rewards:
-        raise BadInput(f"--train-reward: {args.train_reward!r} is not a reward of {domain.env_id}; its rewards: "
-                       f"{', '.join(domain.rewards)}")
-    if domain.reward_option in options:
-        raise BadInput(f"--env-options names the reward, which scores the policy: learn from another with "
-                       f"--train-reward instead")
-    return {domain.reward_option: args.train_reward}
-
 
 class DQNCopiesLearner(CopiesLearner):
     """The driver's adapter for IDQN: every agent's DQN (:class:`BatchedDQN`) on ``copies`` GS
@@ -163,7 +149,7 @@ def main(args: Args | None = None) -> dict:
     train_options = train_options_of(args, domain, options)
     plan = gs_run_plan("idqn", args, agents, options, total, per_update, frame_stack, processes,
                        {"dqn": dataclasses.asdict(cfg), "greedy_temperature": GREEDY_TEMPERATURE,
-                        "train_options": train_options})
+                        **({"train_options": train_options} if train_options else {})})
     learner = DQNCopiesLearner(args.env_id, agents, options, args.n_envs, processes, cfg, frame_stack, args.seed,
                                total, joint_sizes(domain, agents, options), train_options=train_options)
     copies = f"{args.n_envs} GS cop{'ies' if args.n_envs > 1 else 'y'}"

@@ -31,6 +31,7 @@ from ials_zoo.baselines.multiagent import (
     check_multi_ppo,
     env_options_of,
     frame_stack_of,
+    train_options_of,
     merge_shard_stats,
     ppo_config,
     whole_updates,
@@ -49,6 +50,8 @@ class Args(MultiAgentRunArgs):
     """Arguments of :func:`main` (``python -m baselines.ippo --help``)."""
 
     simulator: str = arg("gs", "gs (IPPO trains on the GS; for IALS use `train dials`)")
+    train_reward: str | None = arg(None, "learn from this reward of the domain, in training only (e.g. sumo_net_v0's "
+                                   "wait_scaled: wait_norm without its clip); the policy is scored on the protocol's")
     n_envs: int = arg(2, "GS copies")
     gs_processes: int | None = arg(None, "worker processes of the GS copies (default: one per copy for SUMO, else 0)")
     out_dir: str | None = arg(None, "output folder (default: runs/<env>__ippo__s<seed>)")
@@ -72,6 +75,7 @@ def check_args(args: Args):
     processes = (args.n_envs if domain.one_simulation_per_process else 0) if args.gs_processes is None else args.gs_processes
     if processes < 0:
         raise BadInput(f"gs_processes must be >= 0, got {processes}")
+    train_options_of(args, domain, options)
     return domain, agents, options, processes
 
 
@@ -81,8 +85,9 @@ class GSCopiesLearner(CopiesLearner):
     of each agent at a time."""
 
     def __init__(self, env_id, agents, options, copies, processes, ppo, frame_stack, seed, updates, sizes,
-                 learner_cls=BatchedPPO):
-        self._setup(env_id, agents, options, copies, processes, frame_stack, seed, sizes)
+                 learner_cls=BatchedPPO, train_options=None):
+        # the GS copies learn under the options plus a training reward of their own, if any
+        self._setup(env_id, agents, {**options, **(train_options or {})}, copies, processes, frame_stack, seed, sizes)
         self.per_update = ppo["n_steps"] * ppo["n_envs"]
         self.learner = learner_cls(agents, self.obs_size * frame_stack, self.n_actions, PPOConfig(**ppo), seed,
                                    updates, action_counts=self.action_counts)
@@ -116,9 +121,11 @@ def main(args: Args | None = None, algorithm: str = "ippo", learner_cls=BatchedP
     ppo = ppo_config(args, args.n_envs, frame_stack)
     per_update = args.samples_per_update
     total = whole_updates(int(args.total_timesteps or study_of(domain).multi_agent_budget), per_update)
-    plan = gs_run_plan(algorithm, args, agents, options, total, per_update, frame_stack, processes, {"ppo": ppo})
+    train_options = train_options_of(args, domain, options)
+    extra = {"ppo": ppo, **({"train_options": train_options} if train_options else {})}
+    plan = gs_run_plan(algorithm, args, agents, options, total, per_update, frame_stack, processes, extra)
     learner = GSCopiesLearner(args.env_id, agents, options, args.n_envs, processes, ppo, frame_stack, args.seed,
-                              total // per_update, joint_sizes(domain, agents, options), learner_cls)
+                              total // per_update, joint_sizes(domain, agents, options), learner_cls, train_options)
     copies = f"{args.n_envs} GS cop{'ies' if args.n_envs > 1 else 'y'}"
     return run(plan, learner, f"{algorithm}: {len(agents)} agents of {args.env_id} learn at once on the GS ({copies}, "
                f"{processes} worker process{'es' if processes != 1 else ''})", domain)

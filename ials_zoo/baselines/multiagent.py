@@ -129,6 +129,22 @@ def env_options_of(args, domain, only_gs: bool = False) -> dict:
     return absolute
 
 
+def train_options_of(args, domain, options: dict) -> dict:
+    """The GS options the GS copies of a run (IPPO, IDQN) learn under beside ``options``:
+    ``--train-reward``'s reward, which the policy is not scored on."""
+    if args.train_reward is None:
+        return {}
+    if domain.reward_option is None:
+        raise BadInput(f"--train-reward: {domain.env_id} has one reward")
+    if args.train_reward not in domain.rewards:
+        raise BadInput(f"--train-reward: {args.train_reward!r} is not a reward of {domain.env_id}; its rewards: "
+                       f"{', '.join(domain.rewards)}")
+    if domain.reward_option in options:
+        raise BadInput(f"--env-options names the reward, which scores the policy: learn from another with "
+                       f"--train-reward instead")
+    return {domain.reward_option: args.train_reward}
+
+
 def fill_update_size(args, domain) -> None:
     """Set ``args.samples_per_update`` and ``args.batch_size`` where they are None: the
     domain's choice (:attr:`DIALSSettings.ppo_samples_per_update`, ``ppo_batch_size``). Runs
