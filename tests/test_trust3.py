@@ -351,6 +351,7 @@ def test_impossible_metrics_are_refused(scripted):
 
     bad = copy.deepcopy(scripted)
     for m in (bad["scores"][0]["metrics"]["age_at_collection"], bad["metrics"]["age_at_collection"]):
+        m.pop("episodes"), m.pop("median")  # as an older result, which kept none: only the range can refuse it
         m.update(mean=-m["mean"] - 1, ci_low=-m["ci_high"] - 1, ci_high=-m["ci_low"] - 1)
     with pytest.raises(lb.ResultError, match="age_at_collection.* is not a value age_at_collection can take"):
         lb.validate_result(bad)
@@ -365,6 +366,7 @@ def test_a_metric_only_mismatch_says_which_metric_and_both_values(tmp_path, scri
     forged = copy.deepcopy(scripted)
     seed_metric = forged["scores"][0]["metrics"]["items_per_robot"]
     for m in (seed_metric, forged["metrics"]["items_per_robot"]):
+        m.pop("episodes"), m.pop("median")  # as an older result, which kept none: only the re-measure can tell
         m.update(mean=m["mean"] + 0.5, ci_low=m["ci_low"] + 0.5, ci_high=m["ci_high"] + 0.5)
     path = tmp_path / "f.json"
     path.write_text(json.dumps(forged))
@@ -374,6 +376,30 @@ def test_a_metric_only_mismatch_says_which_metric_and_both_values(tmp_path, scri
     claimed, measured = seed_metric["mean"], scripted["scores"][0]["metrics"]["items_per_robot"]["mean"]
     assert "returns re-measure exactly, but not its metrics" in text
     assert f"items_per_robot claimed {claimed!r}, measured {measured!r}" in text
+
+
+def test_a_metrics_episodes_must_give_its_mean_and_are_re_measured(tmp_path, scripted):
+    """Each episode's value is kept: a mean its episodes do not give is refused on validate,
+    and episodes forged together with their mean and interval are caught by the re-measure."""
+    import copy
+
+    from ials_zoo import leaderboard as lb
+    from ials_zoo.evaluation import metric_summary
+
+    forged = copy.deepcopy(scripted)
+    forged["scores"][0]["metrics"]["items_per_robot"]["median"] += 0.5
+    with pytest.raises(lb.ResultError, match="median: .* does not match its episodes"):
+        lb.validate_result(forged)
+    forged = copy.deepcopy(scripted)
+    values = forged["scores"][0]["metrics"]["items_per_robot"]["episodes"]
+    consistent = metric_summary([v + 0.5 for v in values])
+    forged["scores"][0]["metrics"]["items_per_robot"] = consistent
+    forged["metrics"]["items_per_robot"] = dict(consistent)
+    lb.validate_result(forged)
+    path = tmp_path / "f.json"
+    path.write_text(json.dumps(forged))
+    with pytest.raises(lb.ResultError, match="items_per_robot"):
+        lb.submit(path, _board(tmp_path))
 
 
 def test_show_escapes_control_characters_of_entry_strings(tmp_path, trained):
