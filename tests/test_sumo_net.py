@@ -17,10 +17,10 @@ from ials_zoo.errors import BadInput
 from ials_zoo.sumo.command import sumo_binary, sumo_command
 from ials_zoo.sumo_net.controllers import Greedy, MaxPressure, run_episode
 from ials_zoo.sumo_net.core import yellow_program
+from ials_zoo.sumo_net.env import SumoNetEnv
 from ials_zoo.sumo_net.metrics import episode_metrics
 from ials_zoo.sumo_net.network import read_network
 from ials_zoo.sumo_net.scenario import make_scenario
-from ials_zoo.sumo_net.env import SumoNetEnv
 from ials_zoo.sumo_net.study import run_plain_sumo
 
 

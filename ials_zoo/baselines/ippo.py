@@ -31,9 +31,9 @@ from ials_zoo.baselines.multiagent import (
     check_multi_ppo,
     env_options_of,
     frame_stack_of,
-    train_options_of,
     merge_shard_stats,
     ppo_config,
+    train_options_of,
     whole_updates,
 )
 from ials_zoo.core.domains import domain_ids, get_domain

@@ -140,8 +140,8 @@ def train_options_of(args, domain, options: dict) -> dict:
         raise BadInput(f"--train-reward: {args.train_reward!r} is not a reward of {domain.env_id}; its rewards: "
                        f"{', '.join(domain.rewards)}")
     if domain.reward_option in options:
-        raise BadInput(f"--env-options names the reward, which scores the policy: learn from another with "
-                       f"--train-reward instead")
+        raise BadInput("--env-options names the reward, which scores the policy: learn from another with "
+                       "--train-reward instead")
     return {domain.reward_option: args.train_reward}
 
 

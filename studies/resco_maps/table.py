@@ -1,13 +1,13 @@
 """The rules and the learners of RESCO's maps side by side, from their result files: each map's
-delay (mean [95% CI]), its median episode return and how many of the 20 episodes jammed (a
-return below -200: the map's queues at wait_norm's clip for most of the hour), and the best
-learned row's ratio to the best rule's mean.
+delay (mean [95% CI]) and its median over the 20 episodes where the result keeps each episode's
+(a gridlocked episode moves the mean, not the median), and the best learned row's ratio to the
+best rule's mean.
 
     python studies/resco_maps/table.py                   # the Markdown table
     python studies/resco_maps/table.py --copy            # first copy finished runs' results here
 
 Rules: ``results/rules/<map>_<rule>.json`` (``rules.sh``); learners:
-``results/<learner>/<map>_s<seed>_result[_deterministic].json`` (copied from ``runs/<learner>_net``).
+``results/<learner>/<map>_s<seed>_result[_deterministic].json`` (copied from ``runs/``, :data:`LEARNERS`).
 """
 
 from __future__ import annotations
@@ -18,19 +18,19 @@ import shutil
 import sys
 from pathlib import Path
 
-import numpy as np
-
 HERE = Path(__file__).parent / "results"
 MAPS = ("cologne8", "grid4x4", "ingolstadt21", "cologne1", "ingolstadt1", "ingolstadt7", "cologne3", "arterial4x4")
 RULES = ("fixed", "greedy", "max_pressure", "actuated", "random")
-LEARNERS = ("idqn", "mplight", "shared_ppo", "ippo")
-JAM = -200.0  # an episode whose mean return over the lights is below this jammed
+# learner -> its runs' folder under runs/ (idqn_wait_scaled: IDQN with --train-reward wait_scaled)
+LEARNERS = {"idqn": "idqn_net", "mplight": "mplight_net", "shared_ppo": "shared_ppo_net",
+            "idqn_wait_scaled": "idqn_wait_scaled", "ippo": "ippo_net"}
+SHOWN = ("idqn", "mplight", "shared_ppo", "idqn_wait_scaled")
 
 
 def copy_runs(runs: Path = Path("runs")) -> None:
     """Copy each finished run's result files into ``results/<learner>/``."""
-    for learner in LEARNERS:
-        for run in sorted((runs / f"{learner}_net").glob("*_s*")):
+    for learner, folder in LEARNERS.items():
+        for run in sorted((runs / folder).glob("*_s*")):
             for name in ("result.json", "result_deterministic.json", "curve.json", "progress.csv"):
                 if (run / "result.json").exists() and (run / name).exists():
                     (HERE / learner).mkdir(parents=True, exist_ok=True)
@@ -40,27 +40,24 @@ def copy_runs(runs: Path = Path("runs")) -> None:
 def row(path: Path) -> dict | None:
     if not path.exists():
         return None
-    d = json.loads(path.read_text())
-    returns = np.array(d["scores"][0]["returns"]) if len(d["scores"]) == 1 else np.concatenate(
-        [s["returns"] for s in d["scores"]])
-    m = d["metrics"]["delay"]
-    return {"delay": m["mean"], "lo": m["ci_low"], "hi": m["ci_high"], "median_return": float(np.median(returns)),
-            "jammed": int((returns < JAM).sum()), "episodes": len(returns)}
+    m = json.loads(path.read_text())["metrics"]["delay"]
+    return {"delay": m["mean"], "lo": m["ci_low"], "hi": m["ci_high"], "median": m.get("median")}
 
 
 def cell(r: dict | None) -> str:
     if r is None:
         return "–"
-    return f"{r['delay']:.2f} [{r['lo']:.2f}, {r['hi']:.2f}] ({r['jammed']})"
+    median = "" if r["median"] is None else f"; median {r['median']:.2f}"
+    return f"{r['delay']:.2f} [{r['lo']:.2f}, {r['hi']:.2f}]{median}"
 
 
 def table() -> str:
-    head = ["map", *RULES, *(f"{k} s0 (sampled / det.)" for k in LEARNERS[:3]), "best learned / best rule"]
+    head = ["map", *RULES, *(f"{k} s0 (sampled / det.)" for k in SHOWN), "best learned / best rule"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for net in MAPS:
         rules = {k: row(HERE / "rules" / f"{net}_{k}.json") for k in RULES}
         learned = {k: (row(HERE / k / f"{net}_s0_result.json"), row(HERE / k / f"{net}_s0_result_deterministic.json"))
-                   for k in LEARNERS[:3]}
+                   for k in SHOWN}
         best_rule = min((r["delay"] for r in rules.values() if r), default=None)
         best_learned = min((r["delay"] for pair in learned.values() for r in pair if r), default=None)
         ratio = f"{best_learned / best_rule:.2f}" if best_rule and best_learned else "–"
