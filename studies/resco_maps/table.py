@@ -51,20 +51,35 @@ def cell(r: dict | None) -> str:
     return f"{r['delay']:.2f} [{r['lo']:.2f}, {r['hi']:.2f}]{median}"
 
 
-def table() -> str:
-    head = ["map", *RULES, *(f"{k} s0 (sampled / det.)" for k in SHOWN), "best learned / best rule"]
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+def _markdown(head: list[str], rows: list[list[str]]) -> str:
+    return "\n".join(["| " + " | ".join(head) + " |", "|" + "---|" * len(head)] + ["| " + " | ".join(r) + " |"
+                                                                                   for r in rows])
+
+
+def _rules(net: str) -> dict:
+    return {k: row(HERE / "rules" / f"{net}_{k}.json") for k in RULES}
+
+
+def rules_table() -> str:
+    """Every rule on every map: delay mean [95% CI]; median."""
+    return _markdown(["map", *RULES], [[net, *(cell(r) for r in _rules(net).values())] for net in MAPS])
+
+
+def learners_table() -> str:
+    """Each learner's seed 0 (sampled / deterministic), the best rule, and the best learned
+    row's ratio to it."""
+    rows = []
     for net in MAPS:
-        rules = {k: row(HERE / "rules" / f"{net}_{k}.json") for k in RULES}
+        rules = {k: r for k, r in _rules(net).items() if r}
         learned = {k: (row(HERE / k / f"{net}_s0_result.json"), row(HERE / k / f"{net}_s0_result_deterministic.json"))
                    for k in SHOWN}
-        best_rule = min((r["delay"] for r in rules.values() if r), default=None)
+        best = min(rules, key=lambda k: rules[k]["delay"]) if rules else None
         best_learned = min((r["delay"] for pair in learned.values() for r in pair if r), default=None)
-        ratio = f"{best_learned / best_rule:.2f}" if best_rule and best_learned else "–"
-        cells = [cell(rules[k]) for k in RULES]
-        cells += [f"{cell(s)} / {d['delay']:.2f}" if s and d else cell(s) for s, d in learned.values()]
-        lines.append("| " + " | ".join([net, *cells, ratio]) + " |")
-    return "\n".join(lines)
+        ratio = f"{best_learned / rules[best]['delay']:.2f}" if best and best_learned else "–"
+        cells = [f"{cell(s)} / {d['delay']:.2f}" if s and d else cell(s) for s, d in learned.values()]
+        rows.append([net, *cells, f"{best} {rules[best]['delay']:.2f}" if best else "–", ratio])
+    return _markdown(["map", *(f"{k} (sampled / deterministic)" for k in SHOWN), "best rule", "best learned / best rule"],
+                     rows)
 
 
 def main(argv=None) -> int:
@@ -73,7 +88,7 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     if args.copy:
         copy_runs()
-    print(table())
+    print(rules_table() + "\n\n" + learners_table())
     return 0
 
 
