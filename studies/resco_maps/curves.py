@@ -1,7 +1,7 @@
 """Learning curves of the learners on RESCO's maps (docs/sumo_net.md): the GS score (mean over
 lights of the episode return, RESCO's wait_norm reward) against steps per light and against
 wall-clock, one line per seed, from the runs of studies/resco_maps/ippo.sh (runs/ippo_net),
-studies/resco_maps/idqn.sh (runs/idqn_net) or studies/ials_real_maps/dials.sh (runs/dials_net).
+idqn.sh, mplight.sh, shared_ppo.sh (runs/<learner>_net) or studies/ials_real_maps/dials.sh (runs/dials_net).
 The score's axis is symmetric-log: a policy of random weights scores hundreds of times lower
 than a trained one. The title names the command and the commit that drew it.
 
@@ -17,6 +17,11 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
+
+# a runs folder's learner and the script that fills it
+SCRIPTS = {"dials": ("DIALS", "studies/ials_real_maps/dials.sh"), "idqn": ("IDQN", "studies/resco_maps/idqn.sh"),
+           "mplight": ("MPLight", "studies/resco_maps/mplight.sh"),
+           "shared_ppo": ("shared PPO", "studies/resco_maps/shared_ppo.sh"), "ippo": ("IPPO", "studies/resco_maps/ippo.sh")}
 
 
 def main(runs="runs/ippo_net", out="studies/resco_maps/ippo_curves.png"):
@@ -41,10 +46,8 @@ def main(runs="runs/ippo_net", out="studies/resco_maps/ippo_curves.png"):
                    ylabel="mean return over lights")
         row[1].set(title=f"{net}: vs wall-clock", xlabel="training minutes (2 cores)")
         row[0].legend(fontsize=8)
-    name = Path(runs).name
-    script = ("studies/ials_real_maps/dials.sh" if "dials" in name else
-              "studies/resco_maps/idqn.sh" if "idqn" in name else "studies/resco_maps/ippo.sh")
-    learner = "DIALS" if "dials" in name else "IDQN" if "idqn" in name else "IPPO"
+    name = Path(runs).name.removesuffix("_net")
+    learner, script = SCRIPTS.get(name, ("IPPO", "studies/resco_maps/ippo.sh"))
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
     title = (f"{learner} on RESCO's maps\nbash {script}; python studies/resco_maps/curves.py {runs} {out} "
              f"(commit {commit or 'unknown'})")
