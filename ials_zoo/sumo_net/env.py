@@ -268,7 +268,9 @@ class SumoNetEnv(ParallelEnv):
 
     def observe(self, tls: str) -> np.ndarray:
         """Light ``tls``'s observation now (any light, learner or not)."""
-        return self._observations([tls])[tls]
+        if self._observe is mplight:  # its greens' pressures read the downstream lights
+            return self._observations([tls])[tls]
+        return self._observe(self._light_measures(tls), int(self._phases[self._index[tls]]))
 
     def _observations(self, agents) -> dict[str, np.ndarray]:
         """``agents``' observations now: RESCO's tables for every light in one pass, MPLight's
