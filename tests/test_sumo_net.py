@@ -502,8 +502,8 @@ def test_a_network_without_lights_or_a_missing_route_file_is_refused(tmp_path):
     bad.write_text('<net><edge id="e"><lane id="e_0" length="abc" shape="0,0 1,1"/></edge></net>')
     with pytest.raises(BadInput, match="bad.net.xml is not a valid SUMO network"):
         sumo_net_v0.parallel_env(net_file=str(bad), route_files=[str(routes)])
-    with pytest.raises(BadInput, match="no scripted controller"):
-        sumo_net_v0.parallel_env(net="cologne1", scripted_learners=True)
+    with pytest.raises(BadInput, match="scripted_learners must be False, True, 'fixed' or 'actuated'"):
+        sumo_net_v0.parallel_env(net="cologne1", scripted_learners="maxwave")
 
 
 def test_a_truncated_route_file_is_refused_before_any_step(tmp_path, monkeypatch):
