@@ -422,6 +422,14 @@ def test_verify_retrain_reports_both_wall_clocks_in_reference_seconds(trained, c
 # -- 6. Ctrl-C while starting: the imports finish, then the command ends ----------------------
 
 
+def _fresh_process_sigint() -> None:
+    """Ctrl-C as an ``ials-zoo`` process starts with it: Python's own handler (a test earlier
+    in this long-lived pytest process may have left another disposition behind)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
 def test_ctrl_c_during_a_commands_imports_lets_them_finish_then_ends_with_130(monkeypatch, capsys):
     """A KeyboardInterrupt raised inside an import that runs compiled code aborts the process
     (exit -6, what made the start-up test flaky): the start-up only notes the Ctrl-C, lets the
@@ -431,6 +439,7 @@ def test_ctrl_c_during_a_commands_imports_lets_them_finish_then_ends_with_130(mo
 
     from ials_zoo import cli
 
+    _fresh_process_sigint()
     sys.modules.pop("interrupting_command", None)
     monkeypatch.setitem(cli.SUBCOMMANDS, "interrupting", ("interrupting_command", "x"))
     assert cli.main(["interrupting"]) == 130
@@ -493,6 +502,7 @@ def test_ctrl_c_during_start_up_then_help_still_says_interrupted(monkeypatch, ca
 
     from ials_zoo import cli
 
+    _fresh_process_sigint()
     sys.modules.pop("interrupting_command", None)
     monkeypatch.setitem(cli.SUBCOMMANDS, "interrupting", ("interrupting_command", "x"))
     assert cli.main(["interrupting", "--help"]) == 130
