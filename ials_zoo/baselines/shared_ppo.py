@@ -32,12 +32,10 @@ class Args(ippo.Args):
     out_dir: str | None = arg(None, "output folder (default: runs/<env>__shared_ppo__s<seed>)")
 
 
-def check_args(args: Args):
-    """IPPO's checks (:func:`ials_zoo.baselines.ippo.check_args`), and no GRU."""
-    out = ippo.check_args(args)
+def check_args(args: Args) -> None:
+    """No GRU; the rest is IPPO's checks, which :func:`ials_zoo.baselines.ippo.main` makes."""
     if args.recurrent_hidden:
         raise BadInput("--recurrent-hidden: the shared actor-critic reads no GRU (leave it 0)")
-    return out
 
 
 def main(args: Args | None = None) -> dict:
