@@ -32,16 +32,22 @@ class Args(ippo.Args):
     out_dir: str | None = arg(None, "output folder (default: runs/<env>__shared_ppo__s<seed>)")
 
 
-def check_args(args: Args) -> None:
-    """No GRU; the rest is IPPO's checks, which :func:`ials_zoo.baselines.ippo.main` makes."""
+def _check_shared(args: Args) -> None:
     if args.recurrent_hidden:
         raise BadInput("--recurrent-hidden: the shared actor-critic reads no GRU (leave it 0)")
+
+
+def check_args(args: Args):
+    """No GRU, and IPPO's checks (:func:`ials_zoo.baselines.ippo.check_args`; what
+    ``verify --retrain`` asks of a recorded command)."""
+    _check_shared(args)
+    return ippo.check_args(args)
 
 
 def main(args: Args | None = None) -> dict:
     """Train one shared actor-critic for every agent on the GS; returns the result dict."""
     args = args or Args()
-    check_args(args)
+    _check_shared(args)  # IPPO's own checks run in ippo.main
     return ippo.main(args, ALGORITHM, SharedPPO)
 
 
