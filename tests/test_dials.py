@@ -263,6 +263,20 @@ def test_dials_trains_refreshes_and_samples_autoregressive_aips_alike_on_any_wor
     assert all(p.autoregressive for p in load_predictor_set(folder / "aips.pt", env_id=ENV).values())
 
 
+def test_the_shared_learner_is_one_network_in_one_worker_however_many_cores(tmp_path):
+    """``--learner shared`` on a batched IALS: shared PPO's network (the same weights for every
+    robot, its id in the first layer's bias), in the one shard it needs by default."""
+    from test_sumo_net_dials import _one_network
+
+    from ials_zoo.policy import load_policy_file
+
+    result, folder = _dials(tmp_path, "shared", learner="shared", aip="untrained", refresh="never")
+    assert result["training"]["workers"] == 1 and result["training"]["simulator"] == "untrained-dials-shared"
+    assert _one_network(load_policy_file(folder / "policy.safetensors").layers)
+    _, batched = _dials(tmp_path, "batched", aip="untrained", refresh="never", workers=1)
+    assert not _one_network(load_policy_file(batched / "policy.safetensors").layers)
+
+
 def test_a_dials_result_is_accepted_and_verified_by_the_leaderboard(tmp_path):
     from ials_zoo.leaderboard import submit, validate_result, verify
 
@@ -302,6 +316,8 @@ def test_ippo_on_the_gs_is_the_same_with_or_without_worker_processes(tmp_path):
     ({"ray_address": "127.0.0.1:1"}, "needs --backend ray"),
     ({"recurrent_hidden": -1}, "recurrent_hidden must be >= 0"),
     ({"recurrent_hidden": 8, "learner": "sb3"}, "needs --learner batched"),
+    ({"recurrent_hidden": 8, "learner": "shared"}, "needs --learner batched"),
+    ({"learner": "shared", "workers": 2}, "--learner shared is one network for every agent: --workers 1"),
     ({"aip_training": "best"}, "unknown aip_training 'best'"),
     ({"aip_training": "fidelity", "aip": "untrained", "refresh": "never"}, "needs --aip trained"),
     ({"aip_training": "fidelity", "aip_autoregressive": False}, "drop --aip-autoregressive no"),

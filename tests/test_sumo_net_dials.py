@@ -67,6 +67,27 @@ def test_dials_on_a_two_node_ray_cluster_is_the_same_run(tmp_path, whole_run):
         cluster.shutdown()
 
 
+def _one_network(layers) -> bool:
+    """Whether every agent's actor is one network's: the same weights everywhere, the first
+    layer's bias apart (where shared PPO folds an agent's id)."""
+    same = [np.array_equal(t, t[:1].repeat(len(t), 0)) for t in (t for W, b in layers for t in (W, b))]
+    return all(same[:1] + same[2:]) and not same[1]
+
+
+def test_dials_with_the_shared_learner_trains_one_network_for_every_light(tmp_path, whole_run):
+    """``--learner shared``: shared PPO's one actor-critic (:class:`~ials_zoo.learners.batched_ppo.SharedPPO`)
+    on the IALS copies; IPPO's learner (the reference run) keeps a network per light."""
+    from ials_zoo.baselines import dials
+    from ials_zoo.policy import load_policy_file
+
+    run = {**DIALS, "aip": "untrained", "refresh": "never", "total_timesteps": 128, "eval_every": 128}
+    result = dials.main(dials.Args(**run, learner="shared", out_dir=str(tmp_path / "shared")))
+    assert result["training"]["simulator"] == "untrained-dials-shared"
+    assert result["training"]["hyperparameters"]["learner"] == "shared"
+    assert _one_network(load_policy_file(tmp_path / "shared" / "policy.safetensors").layers)
+    assert not _one_network(load_policy_file(whole_run[1] / "policy.safetensors").layers)
+
+
 @pytest.mark.parametrize("flag,value", [("learner", "sb3"), ("aip", "shipped"), ("workers", 0)])
 def test_what_the_ials_copies_cannot_do_is_named_before_any_work(tmp_path, flag, value):
     from ials_zoo.baselines import dials

@@ -87,7 +87,7 @@ from ials_zoo.core.domains import dials_domain_ids, get_domain
 from ials_zoo.core.extras import dials_of, study_of
 from ials_zoo.core.spaces import joint_sizes
 from ials_zoo.dials.backends import BACKENDS, InProcessBackend, check_ray_address, make_backend
-from ials_zoo.dials.shard import LEARNERS, ShardSpec, split_agents
+from ials_zoo.dials.shard import LEARNERS, PPO_CLASSES, ShardSpec, split_agents
 from ials_zoo.errors import BadInput
 from ials_zoo.influence.fidelity import on_policy_training
 from ials_zoo.influence.multi import shipped_set_path
@@ -146,7 +146,9 @@ class Args(MultiAgentRunArgs):
     local: str = arg("sumo", "the agents' local simulators, where the domain has a choice: sumo (every region cut "
                      "from the network, one SUMO simulation per copy) | arrays (every region of every copy as numpy "
                      "arrays, one batch: ials_zoo.sumo_net.arrays)")
-    learner: str = arg("batched", "batched (one torch program) | sb3 (one SB3 PPO per agent)")
+    learner: str = arg("batched", "batched (every agent's own PPO in one torch program: IPPO's) | shared (one "
+                       "actor-critic for every agent with its id: shared_ppo's; one worker on a batched IALS) | sb3 "
+                       "(one SB3 PPO per agent)")
     workers: int | None = arg(None, "worker processes (default: one per core; 0: this process)")
     backend: str = arg("process", "process | ray")
     ray_address: str | None = arg(None, "an existing Ray cluster (host:port); default: a new local Ray of the run's "
@@ -204,8 +206,7 @@ def check_args(args: Args):
         raise BadInput("--recurrent-hidden needs --learner batched (the SB3 learner's policies are MLPs)")
     if args.workers is not None and args.workers < 0:
         raise BadInput(f"workers must be >= 0, got {args.workers}")
-    if args.learner not in LEARNERS:
-        raise BadInput(f"unknown learner {args.learner!r}; expected one of {LEARNERS}")
+    _check_learner(args, domain)
     if args.backend not in BACKENDS:
         raise BadInput(f"unknown backend {args.backend!r}; expected one of {BACKENDS}")
     if args.ray_address is not None:
@@ -213,6 +214,14 @@ def check_args(args: Args):
             raise BadInput("--ray-address needs --backend ray")
         check_ray_address(args.ray_address)
     return domain, agents, options, refresh, copies
+
+
+def _check_learner(args, domain) -> None:
+    if args.learner not in LEARNERS:
+        raise BadInput(f"unknown learner {args.learner!r}; expected one of {LEARNERS}")
+    if args.learner == "shared" and not on_copies(domain) and (args.workers or 0) > 1:
+        raise BadInput(f"--learner shared is one network for every agent: --workers 1 (or 0), not {args.workers} "
+                       "(each worker would train a network of its own agents)")
 
 
 def on_copies(domain) -> bool:
@@ -228,9 +237,9 @@ LOCALS = ("sumo", "arrays")
 def _check_copies_args(args) -> None:
     if args.local not in LOCALS:
         raise BadInput(f"--local: expected one of {', '.join(LOCALS)}, got {args.local!r}")
-    if args.learner != "batched":
-        raise BadInput(f"--learner {args.learner}: agents with spaces of their own train with --learner batched "
-                       "(one torch program, observations padded)")
+    if args.learner not in PPO_CLASSES:
+        raise BadInput(f"--learner {args.learner}: agents with spaces of their own train with --learner batched or "
+                       "shared (one torch program, observations padded)")
     if args.backend == "ray" and args.workers == 0:
         raise BadInput("--workers 0 with --backend ray: the IALS copies run in Ray actors, at least one")
     if args.aip == "shipped":
@@ -306,12 +315,15 @@ def main(args: Args | None = None) -> dict:
     per_update = args.samples_per_update
     total = whole_updates(int(args.total_timesteps or study_of(domain).multi_agent_budget), per_update)
     eval_every = int(args.eval_every or max(per_update, total // 10))
+    one_network = args.learner == "shared" and not on_copies(domain)  # a shared network has one shard
     workers = default_workers(len(agents)) if args.workers is None else min(args.workers, len(agents))
+    workers = 1 if one_network and args.workers is None else workers
     frame_stack = frame_stack_of(args, domain)
     out = Path(args.out_dir or f"runs/{args.env_id}__dials__s{args.seed}")
     ppo = ppo_config(args, copies, frame_stack)
     how = aip_training_of(args, domain)
-    label = _label(args.aip, refresh, how.autoregressive, args.aip_training) + ("-arrays" if args.local == "arrays" else "")
+    label = (_label(args.aip, refresh, how.autoregressive, args.aip_training) + ("-arrays" if args.local == "arrays" else "")
+             + ("-shared" if args.learner == "shared" else ""))
     training = {"simulator": label, "aip": None, "seeds": [args.seed], "env_steps": 0,
                 "wall_clock_seconds": 0.0, "aip_seconds": 0.0, "workers": max(workers, 1), "backend": args.backend,
                 "hyperparameters": dict(settings_of(args), agents=agents, refresh_steps=refresh,
@@ -333,7 +345,8 @@ def main(args: Args | None = None) -> dict:
         n = min(workers, copies)
         holders = (f"{n} Ray actor{'s' if n != 1 else ''}" if args.backend == "ray"
                    else f"{n} worker process{'es' if n != 1 else ''}")
-        where = (f"every agent's IALS side by side, {copies} cop{'ies' if copies > 1 else 'y'} in {holders}"
+        ppo_of = "one shared PPO" if args.learner == "shared" else "every agent's PPO"
+        where = (f"{ppo_of}, every agent's IALS side by side, {copies} cop{'ies' if copies > 1 else 'y'} in {holders}"
                  + (", on arrays" if args.local == "arrays" else ""))
     else:
         learner = ShardsLearner(args, domain, agents, options, refresh, copies, workers, ppo, frame_stack,

@@ -4,7 +4,8 @@ Such a domain has no batched array IALS (:class:`~ials_zoo.core.multi.MultiAgent
 agents of one shape); it has a multi-agent IALS ParallelEnv instead (``Domain.ials_parallel_env``:
 every agent's local simulator and AIP side by side in one simulation, the regions apart, each fed
 only by its own AIP). DIALS then trains every agent's PPO, as IPPO does on the GS (the same
-batched learner, observations zero-padded, missing actions masked), on ``--n-envs`` copies of
+batched learner, observations zero-padded, missing actions masked; or, with ``--learner shared``,
+shared PPO's one network for every light), on ``--n-envs`` copies of
 that IALS spread over ``--workers`` worker processes (or Ray actors, ``--backend ray``), and retrains the AIPs at the refresh points
 on GS data from the joint policy (:class:`~ials_zoo.baselines.aip_rounds.AIPRefreshes`). The work is
 split by copies, not by agents: each worker steps every agent's region of its copies.
@@ -17,6 +18,7 @@ from pathlib import Path
 from ials_zoo.baselines.aip_rounds import AIPRefreshes, aip_training_of
 from ials_zoo.baselines.ippo import GSCopiesLearner
 from ials_zoo.baselines.multiagent import save_aips
+from ials_zoo.dials.shard import PPO_CLASSES
 from ials_zoo.learners.gs_vec import GSVecEnv
 
 
@@ -28,7 +30,7 @@ class IALSCopiesLearner(AIPRefreshes, GSCopiesLearner):
     def __init__(self, args, domain, agents, options, refresh, copies, workers, ppo, frame_stack, updates, sizes,
                  training: dict, out: Path):
         super().__init__(args.env_id, agents, options, copies, min(workers, copies), ppo, frame_stack, args.seed,
-                         updates, sizes)
+                         updates, sizes, learner_cls=PPO_CLASSES[args.learner])
         self.args, self.domain, self.refresh, self.training, self.out = args, domain, refresh, training, out
         self.simulator = training["simulator"]
         self.aip_training = aip_training_of(args, domain)

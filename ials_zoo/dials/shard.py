@@ -6,12 +6,15 @@ batch, :class:`~ials_zoo.influence.multi.MultiAgentIALS`) and their learners:
 * ``"batched"``: :class:`~ials_zoo.learners.batched_ppo.BatchedPPO`, every agent's PPO in one
   torch program, trained on the shard's multi-agent IALS;
 * ``"sb3"``: one stable-baselines3 PPO per agent on its own single-agent IALS vector env (the
-  reference learner), trained one agent after the other.
+  reference learner), trained one agent after the other;
+* ``"shared"``: :class:`~ials_zoo.learners.batched_ppo.SharedPPO`, one actor-critic for every
+  agent of the shard with its id (``train shared_ppo``'s learner); DIALS keeps such a run to
+  one shard, so that the network is every agent's.
 
 Everything an agent does depends on the run seed and its name only (per-agent random
 streams, per-agent weights and minibatches), not on which shard holds it: the same seed gives
 the same run with any number of workers (:mod:`ials_zoo.learners.batched_ppo` on bitwise
-equality).
+equality); a shared network is the exception, and has one shard.
 """
 
 from __future__ import annotations
@@ -30,13 +33,15 @@ from ials_zoo.core.streams import agent_key
 from ials_zoo.errors import BadInput
 from ials_zoo.influence.ials import make_ials_vec_env
 from ials_zoo.influence.multi import make_multi_agent_ials
-from ials_zoo.learners.batched_ppo import BatchedPPO, PPOConfig
+from ials_zoo.learners.batched_ppo import BatchedPPO, PPOConfig, SharedPPO
 from ials_zoo.learners.rollout import IALSVecEnv, RolloutTrainer
 from ials_zoo.learners.sb3_state import checkpoint_models, resume_models
 from ials_zoo.policy import policy_from_sb3_model, stack_policies
 from ials_zoo.runtime.ray_actors import where
 
-LEARNERS = ("batched", "sb3")
+LEARNERS = ("batched", "sb3", "shared")
+# the learners of every agent in one torch program, by name
+PPO_CLASSES = {"batched": BatchedPPO, "shared": SharedPPO}
 
 
 @dataclass
@@ -67,7 +72,7 @@ class AgentShard:
         self.cfg = PPOConfig(**spec.ppo)
         obs_size = int(np.prod(self.domain.observation_space.shape))
         self.input_size = obs_size * spec.frame_stack
-        if spec.learner == "batched":
+        if spec.learner in PPO_CLASSES:
             self._init_batched(spec)
         elif spec.learner == "sb3":
             self._init_sb3(spec)
@@ -80,8 +85,8 @@ class AgentShard:
         core = make_multi_agent_ials(spec.env_id, self.agents, spec.n_envs, spec.predictors, seed=spec.seed,
                                      **spec.options)
         self.env = IALSVecEnv(core)
-        self.learner = BatchedPPO(self.agents, self.input_size, self.domain.n_actions, self.cfg, spec.seed,
-                                  spec.total_updates)
+        self.learner = PPO_CLASSES[spec.learner](self.agents, self.input_size, self.domain.n_actions, self.cfg,
+                                                 spec.seed, spec.total_updates)
         self.trainer = RolloutTrainer(self.learner, self.env, spec.frame_stack, seed=spec.seed)
 
     # -- one SB3 PPO per agent (the reference learner)
@@ -115,7 +120,7 @@ class AgentShard:
         (mean episode return per agent, PPO losses)."""
         per_update = self.cfg.n_steps * self.spec.n_envs
         stats: list[dict] = []
-        if self.spec.learner == "batched":
+        if self.spec.learner in PPO_CLASSES:
             while self.steps + per_update <= until_steps:
                 stats.append(self.trainer.collect_and_update())
                 self.steps += per_update
@@ -140,7 +145,7 @@ class AgentShard:
     def set_predictors(self, predictors: dict) -> None:
         """New AIPs for some of the shard's agents (after DIALS retrained them)."""
         mine = {a: p for a, p in predictors.items() if a in self.agents}
-        if self.spec.learner == "batched":
+        if self.spec.learner in PPO_CLASSES:
             self.env.set_predictors(mine)
             self.trainer.new_episodes()  # an episode runs on one AIP throughout (and replays on it)
         else:
@@ -165,7 +170,7 @@ class AgentShard:
     def predictors(self) -> dict:
         """The weights of the AIP each agent's IALS samples from now: ``{agent: {name: array}}``
         (what DIALS's refresh must have replaced)."""
-        if self.spec.learner == "batched":
+        if self.spec.learner in PPO_CLASSES:
             held = dict(zip(self.env.core.predictor.agents, self.env.core.predictor.predictors))
         else:
             held = {a: self.models[a]._ials_venv.predictor for a in self.agents}
@@ -173,7 +178,7 @@ class AgentShard:
 
     def actor_layers(self) -> list:
         """Every agent's actor weights, stacked: ``[(W [A, in, out], b [A, out]), ...]``."""
-        if self.spec.learner == "batched":
+        if self.spec.learner in PPO_CLASSES:
             return self.learner.actor_layers()
         nets = [policy_from_sb3_model(self.models[a], a, self.spec.frame_stack) for a in self.agents]
         return stack_policies(nets).layers
@@ -183,13 +188,13 @@ class AgentShard:
         the shard's future depends on. The SB3 learners' episodes cannot be saved: every
         agent starts new ones here, seeded by its seed and the step count, and
         :meth:`load_state` starts the same ones (:mod:`ials_zoo.learners.sb3_state`)."""
-        if self.spec.learner == "batched":
+        if self.spec.learner in PPO_CLASSES:
             return {"steps": self.steps, "learner": self.learner.state_dict(), "trainer": self.trainer.state()}
         return dict(checkpoint_models(self.models, self.seeds, self.steps), steps=self.steps)
 
     def load_state(self, state: dict) -> None:
         self.steps = int(state["steps"])
-        if self.spec.learner == "batched":
+        if self.spec.learner in PPO_CLASSES:
             self.learner.load_state_dict(state["learner"])
             if "trainer" in state:  # the checkpoint's episodes, replayed to where they were
                 self.trainer.restore(state["trainer"])
@@ -200,7 +205,7 @@ class AgentShard:
         resume_models(self.models, self.seeds, self.steps, state)
 
     def close(self) -> None:
-        if self.spec.learner == "batched":
+        if self.spec.learner in PPO_CLASSES:
             self.env.close()
         else:
             for m in self.models.values():
@@ -215,4 +220,4 @@ def split_agents(agents: list, workers: int) -> list[list[str]]:
     return [agents[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
 
 
-__all__ = ["LEARNERS", "AgentShard", "ShardSpec", "split_agents"]
+__all__ = ["LEARNERS", "PPO_CLASSES", "AgentShard", "ShardSpec", "split_agents"]
