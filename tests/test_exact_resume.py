@@ -72,6 +72,24 @@ def _progress_rows(folder):
         return [row[:1] + row[2:] for row in csv.reader(f)]
 
 
+def _agent_returns_match_the_mean(folder) -> list:
+    """agent_returns.csv's rows, each checked against progress.csv: its agents' mean is the
+    row's mean episode return."""
+    import csv
+
+    with open(folder / "agent_returns.csv", newline="") as f:
+        per_agent = list(csv.DictReader(f))
+    with open(folder / "progress.csv", newline="") as f:
+        progress = list(csv.DictReader(f))
+    assert [r["steps_per_agent"] for r in per_agent] == [r["steps_per_agent"] for r in progress if r["mean_episode_return"]]
+    means = {r["steps_per_agent"]: float(r["mean_episode_return"]) for r in progress if r["mean_episode_return"]}
+    for row in per_agent:
+        values = [float(v) for k, v in row.items() if k != "steps_per_agent" and v]
+        assert np.mean(values) == pytest.approx(means[row["steps_per_agent"]], rel=1e-9)
+    assert per_agent  # episodes ended
+    return per_agent
+
+
 def _stopped_and_resumed(monkeypatch, module, out, kwargs, checkpoints=2):
     _crash_after_checkpoints(monkeypatch, checkpoints)
     with pytest.raises(Crash):
@@ -142,6 +160,7 @@ def test_resumed_mplight_and_shared_ppo_runs_end_bitwise_as_the_uninterrupted_on
         resumed = _stopped_and_resumed(monkeypatch, module, folder / "resumed", kwargs)
         assert_same_run(whole, resumed)
         assert _progress_rows(whole[1]) == _progress_rows(resumed[1])
+        assert _agent_returns_match_the_mean(whole[1]) == _agent_returns_match_the_mean(resumed[1])
 
 
 @pytest.mark.parametrize("module_name", ["ippo", "dials"])

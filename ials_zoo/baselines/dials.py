@@ -295,7 +295,7 @@ class ShardsLearner(AIPRefreshes, JointActors):
 
     def train(self, steps, target, advance):
         stats = self.backend.call("train", [(target,)] * len(self.chunks))
-        return dict(merge_shard_stats(stats, [len(c) for c in self.chunks]), aip_refreshes=self.refreshes)
+        return dict(merge_shard_stats(stats, self.chunks), aip_refreshes=self.refreshes)
 
     def checkpoint(self, out):
         save_aips(out / "aips.pt", self.aips)

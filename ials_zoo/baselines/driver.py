@@ -305,7 +305,8 @@ def run(plan: RunPlan, learner: Learner, description: str, domain, scoring: Scor
         training["reproduce"] = reproduce_record(plan.command)
     ok = False
     with folder.running():
-        log = TrainingLog(out / "progress.csv", getattr(learner, "log_columns", TrainingLog.COLUMNS))
+        log = TrainingLog(out / "progress.csv", getattr(learner, "log_columns", TrainingLog.COLUMNS),
+                          agents=plan.agents if len(plan.agents) > 1 else None)
         steps, curve = 0, []
         try:
             try:

@@ -31,7 +31,7 @@ import torch
 
 from ials_zoo.baselines.arguments import arg, check_frame_stack, hidden_sizes, run_cli
 from ials_zoo.baselines.driver import CopiesLearner, check_run_args, gs_run_plan, run
-from ials_zoo.baselines.multiagent import JointRunArgs, env_options_of, train_options_of
+from ials_zoo.baselines.multiagent import JointRunArgs, agent_returns, env_options_of, train_options_of
 from ials_zoo.core.domains import domain_ids, get_domain
 from ials_zoo.core.extras import study_of
 from ials_zoo.core.spaces import joint_sizes
@@ -129,7 +129,8 @@ class DQNCopiesLearner(CopiesLearner):
         returns = self.trainer.episode_returns()
         finite = [] if returns is None else [float(x) for x in returns if x == x]
         row = {"epsilon": self.learner.epsilon(), "updates": self.learner.updates,
-               "mean_episode_return": float(np.mean(finite)) if finite else None, "agents": len(self.agents)}
+               "mean_episode_return": float(np.mean(finite)) if finite else None, "agents": len(self.agents),
+               "agent_returns": agent_returns(self.agents, returns)}
         if updates:
             row.update(loss=float(np.mean([u["loss"] for u in updates])),
                        q_mean=float(np.mean([u["q_mean"] for u in updates])))

@@ -107,7 +107,7 @@ class GSCopiesLearner(CopiesLearner):
         mean = {k: float(np.mean([s[k] for s in stats])) for k in stats[0]}
         returns = self.trainer.episode_returns()
         returns = None if returns is None else [float(x) for x in returns]
-        return merge_shard_stats([dict(mean, episode_returns=returns)], [len(self.agents)])
+        return merge_shard_stats([dict(mean, episode_returns=returns)], [self.agents])
 
 
 

@@ -237,13 +237,18 @@ class JointActor:
 
 class TrainingLog:
     """``progress.csv``: one row per stretch of training (steps per agent, wall-clock, the
-    agents' mean episode return, the learner's statistics: PPO's unless ``columns`` says)."""
+    agents' mean episode return, the learner's statistics: PPO's unless ``columns`` says). With
+    ``agents``, also ``agent_returns.csv``: each agent's own mean episode return per stretch
+    (which light's return moves when the mean does), from a row's ``agent_returns``."""
 
     COLUMNS = ("steps_per_agent", "wall_clock_seconds", "mean_episode_return", "policy_loss", "value_loss",
                "entropy", "clip_fraction", "approx_kl", "learning_rate", "aip_refreshes")
+    PER_AGENT = "agent_returns.csv"
 
-    def __init__(self, path: Path, columns: tuple = COLUMNS):
+    def __init__(self, path: Path, columns: tuple = COLUMNS, agents=None):
         self.path, self.COLUMNS = Path(path), tuple(columns)
+        self.per_agent = None if agents is None else TrainingLog(self.path.with_name(self.PER_AGENT),
+                                                                 ("steps_per_agent", *agents))
         if not self.path.exists():
             with open(self.path, "w", newline="") as f:
                 csv.writer(f).writerow(self.COLUMNS)
@@ -251,6 +256,8 @@ class TrainingLog:
     def add(self, row: dict) -> None:
         with open(self.path, "a", newline="") as f:
             csv.writer(f).writerow(["" if row.get(c) is None else row[c] for c in self.COLUMNS])
+        if self.per_agent is not None and row.get("agent_returns"):
+            self.per_agent.add(dict(row["agent_returns"], steps_per_agent=row["steps_per_agent"]))
 
     def truncate(self, steps: int) -> None:
         """Drop the rows past ``steps`` per agent (a resumed run trains them again from its
@@ -260,10 +267,15 @@ class TrainingLog:
         text = io.StringIO()
         csv.writer(text).writerows(rows[:1] + [r for r in rows[1:] if r and int(float(r[0])) <= steps])
         atomic_write_text(self.path, text.getvalue())
+        if self.per_agent is not None:
+            self.per_agent.truncate(steps)
 
 
-def merge_shard_stats(stats: list[dict], agents_per_shard: list[int]) -> dict:
-    """One row from the shards' statistics (weighted by their agents)."""
+def merge_shard_stats(stats: list[dict], chunks: list[list[str]]) -> dict:
+    """One row from the shards' statistics (weighted by their agents; ``chunks``: each shard's
+    agents), with every agent's own mean episode return (``agent_returns``, None where no
+    episode ended)."""
+    agents_per_shard = [len(c) for c in chunks]
     out, total = {}, sum(agents_per_shard)
     for key in ("policy_loss", "value_loss", "entropy", "clip_fraction", "approx_kl", "learning_rate"):
         vals = [(s[key], n) for s, n in zip(stats, agents_per_shard) if key in s]
@@ -273,7 +285,18 @@ def merge_shard_stats(stats: list[dict], agents_per_shard: list[int]) -> dict:
     finite = [r for r in returns if r == r]
     out["mean_episode_return"] = float(np.mean(finite)) if finite else None
     out["agents"] = total
+    out["agent_returns"] = agent_returns(
+        [a for c in chunks for a in c],
+        None if len(returns) != total else returns)
     return out
+
+
+def agent_returns(agents: list, returns) -> dict | None:
+    """``{agent: its mean episode return}`` (None where no episode of it ended) from returns in
+    ``agents``' order, or None without them."""
+    if returns is None:
+        return None
+    return {a: (float(r) if r == r else None) for a, r in zip(agents, returns)}
 
 
 def write_curve(out: Path, header: dict, points: list) -> None:
@@ -330,4 +353,4 @@ def settings_of(args, skip=("resume", "overwrite", "progress", "out_dir", "submi
 
 
 __all__ = ["JointActor", "MultiPPOSettings", "TrainingLog", "atomic_path", "check_multi_ppo", "fill_update_size", "joint_policy",
-           "PREVIOUS_PPO_SETTINGS", "checkpoint_every_of", "final_results", "frame_stack_of", "merge_shard_stats", "whole_updates", "policy_file", "ppo_config", "save_aips", "settings_of", "write_curve"]
+           "PREVIOUS_PPO_SETTINGS", "checkpoint_every_of", "final_results", "frame_stack_of", "merge_shard_stats", "agent_returns", "whole_updates", "policy_file", "ppo_config", "save_aips", "settings_of", "write_curve"]

@@ -5,6 +5,8 @@ Every baseline writes into one folder (``--out-dir``)::
     status.json        {"state": "running" | "finished" | "failed" | "interrupted", ...}
     progress.csv       training metrics (episode return, losses, entropy, ...) per stretch of
                        training between evaluations and checkpoints
+    agent_returns.csv  (runs of several agents) each agent's own mean episode return per
+                       stretch: which agent's return moves when the mean does
     curve.json         the GS learning curve (steps, wall-clock, score, CI)
     checkpoint.pt      resumable training state: everything the run's future depends on
                        (weights, optimiser, random streams, episodes; tensors and plain
