@@ -4,6 +4,10 @@ which decision, under a policy file or one of the domain's rules.
 
     python studies/resco_maps/jams.py --net ingolstadt21 --policy rule:greedy --out results/jams/greedy.json
     python studies/resco_maps/jams.py --net ingolstadt21 --policy runs/idqn_net/ingolstadt21_s0/policy.safetensors
+    python studies/resco_maps/jams.py --net ingolstadt21 --policy POLICY --rule-at 243641585,gneJ257 --out F
+
+``--rule-at LIGHTS``: those lights follow ``--rule`` (greedy) and the others the policy: whether
+a jam is those lights' making.
 
 A light whose reward is clipped sees no difference between a long queue and a longer one: its
 learner gets no signal there. Resumable: each episode is stored in the output as it ends.
@@ -26,22 +30,46 @@ from ials_zoo.sumo_net.env import SumoNetEnv
 CLIP = -4.0  # wait_norm's lower clip
 
 
-def episode(env, policy, agents, width, seed: int) -> dict:
-    """One episode's per-light clipped share, first clipped decision and return, and its delay."""
+def episode(env, policy, agents, width, seed: int, rule=None, rule_at=()) -> dict:
+    """One episode's per light: clipped share, first clipped decision, return, the longest run of
+    one action (decisions) and the share of decisions that change it, and for a learned policy the
+    mean entropy of its action distribution (nats); and the episode's delay."""
     obs, _ = env.reset(seed=seed)
     policy.reset(seed)
     act = policy.joint_actor(env, agents) if isinstance(policy, RulePolicy) else None
-    rewards = []
+    ruled = rule.joint_actor(env, agents) if rule_at else None
+    at = [agents.index(a) for a in rule_at]
+    rewards, actions, entropies = [], [], []
     while env.agents:
-        acts = act() if act is not None else policy.act_all(stack_observations(obs, agents, width))
+        if act is not None:
+            acts = act()
+        else:
+            x = stack_observations(obs, agents, width)
+            p = policy.net.probs(x)
+            entropies.append(-(p * np.log(np.where(p > 0, p, 1.0))).sum(-1))
+            acts = policy.act_all(x)
+        if ruled is not None:
+            acts = np.array(acts)
+            acts[at] = ruled()[at]
         obs, r, *_ = env.step({a: int(u) for a, u in zip(agents, acts)})
         rewards.append([r[a] for a in agents])
-    r = np.asarray(rewards)
+        actions.append([int(u) for u in acts])
+    r, u = np.asarray(rewards), np.asarray(actions)
     clipped = r <= CLIP
     first = [int(np.argmax(c)) if c.any() else None for c in clipped.T]
+    ent = np.asarray(entropies).mean(0) if entropies else [None] * len(agents)
     return {"seed": seed, "delay": env.episode_metrics()["delay"],
-            "lights": {a: {"clipped": float(clipped[:, i].mean()), "first": first[i], "return": float(r[:, i].sum())}
+            "lights": {a: {"clipped": float(clipped[:, i].mean()), "first": first[i], "return": float(r[:, i].sum()),
+                           "longest_hold": longest_run(u[:, i]), "switches": float((np.diff(u[:, i]) != 0).mean()),
+                           "entropy": None if ent[i] is None else float(ent[i])}
                        for i, a in enumerate(agents)}}
+
+
+def longest_run(actions: np.ndarray) -> int:
+    """The most decisions in a row with one action."""
+    change = np.flatnonzero(np.diff(actions) != 0)
+    bounds = np.concatenate([[-1], change, [len(actions) - 1]])
+    return int(np.diff(bounds).max())
 
 
 def main(argv=None) -> int:
@@ -49,6 +77,8 @@ def main(argv=None) -> int:
     p.add_argument("--net", required=True)
     p.add_argument("--policy", required=True, help="rule:NAME or a policy file")
     p.add_argument("--episodes", type=int, default=20)
+    p.add_argument("--rule-at", default="", help="comma-separated lights that follow --rule instead of the policy")
+    p.add_argument("--rule", default="greedy", help="the rule of --rule-at's lights")
     p.add_argument("--out", required=True)
     args = p.parse_args(argv)
     policy = load_policy(args.policy, "sumo_net_v0")
@@ -59,10 +89,16 @@ def main(argv=None) -> int:
     env = SumoNetEnv(**options)
     agents = list(env.possible_agents)
     width = sizes_of_env(env, agents).obs_size
+    rule_at = [a for a in args.rule_at.split(",") if a]
+    unknown = sorted(set(rule_at) - set(agents))
+    if unknown:
+        p.error(f"--rule-at: no such light {unknown[0]!r}; the lights: {', '.join(agents)}")
+    rule = load_policy(f"rule:{args.rule}", "sumo_net_v0") if rule_at else None
+    done.setdefault("rule_at", {"lights": rule_at, "rule": args.rule} if rule_at else None)
     try:
         for seed in eval_seeds(args.episodes)[len(done["episodes"]):]:
             start = time.perf_counter()
-            done["episodes"].append(episode(env, policy, agents, width, seed))
+            done["episodes"].append(episode(env, policy, agents, width, seed, rule, rule_at))
             with open(args.out + ".tmp", "w") as f:
                 json.dump(done, f)
             os.replace(args.out + ".tmp", args.out)
@@ -76,17 +112,26 @@ def main(argv=None) -> int:
 
 def report(done: dict) -> None:
     """Per light: the mean clipped share, the episodes where it is clipped over half the time,
-    and the median first clipped decision."""
+    the median first clipped decision, and how it switches (where recorded)."""
     eps = done["episodes"]
     print(f"{done['policy']}: delay mean {np.mean([e['delay'] for e in eps]):.1f}, median "
           f"{np.median([e['delay'] for e in eps]):.1f} over {len(eps)} episodes")
     for a in eps[0]["lights"]:
         share = [e["lights"][a]["clipped"] for e in eps]
         firsts = [e["lights"][a]["first"] for e in eps if e["lights"][a]["first"] is not None]
-        if max(share) < 0.05:
-            continue
         print(f"  {a[:30]:30s} clipped {np.mean(share):.2f} of decisions; over half in {sum(s > 0.5 for s in share)} "
-              f"of {len(eps)} episodes; first clip at decision {np.median(firsts) if firsts else '-'} (median)")
+              f"of {len(eps)} episodes; first clip at decision {np.median(firsts) if firsts else '-'} (median)"
+              + _switching(eps, a))
+
+
+def _switching(eps: list, a: str) -> str:
+    lights = [e["lights"][a] for e in eps if "longest_hold" in e["lights"][a]]
+    if not lights:
+        return ""
+    ent = [x["entropy"] for x in lights if x["entropy"] is not None]
+    return (f"; return {np.median([x['return'] for x in lights]):.0f}, longest hold "
+            f"{np.median([x['longest_hold'] for x in lights]):.0f}, switches {np.mean([x['switches'] for x in lights]):.2f}"
+            + (f", entropy {np.mean(ent):.2f}" if ent else "") + " (medians, means)")
 
 
 if __name__ == "__main__":
