@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import subprocess
 import sys
 from pathlib import Path
 
@@ -65,14 +66,20 @@ def plot(folder: Path, out: Path, top: int = 4) -> None:
     _, at_best, last = fall(steps, returns)
     named = set(np.argsort(-(at_best - last))[:top])
     fig, ax = plt.subplots(figsize=(8, 4.5))
+    colours = iter(["tab:red", "tab:blue", "tab:orange", "tab:green", "tab:purple"])
     for i, light in enumerate(lights):
-        ax.plot(steps, returns[:, i], lw=2 if i in named else 0.8, alpha=1 if i in named else 0.35,
-                label=light[:24] if i in named else None)
+        if i in named:
+            ax.plot(steps, returns[:, i], lw=2, color=next(colours), label=light[:24])
+        else:
+            ax.plot(steps, returns[:, i], lw=0.8, color="grey", alpha=0.4)
     ax.set_xlabel("steps per light")
     ax.set_ylabel("training-episode return (wait_norm)")
-    ax.set_title(f"{Path(folder).name}: each light's return", fontsize=10)
+    ax.set_title(f"{Path(folder).parent.name}/{Path(folder).name}: each light's return (named: the largest falls)",
+                 fontsize=10)
     ax.legend(fontsize=8)
-    fig.text(0.01, 0.01, f"python studies/resco_maps/light_returns.py {folder} --plot {out}", fontsize=7)
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
+    fig.text(0.01, 0.01, f"python studies/resco_maps/light_returns.py {folder} --plot {out} (commit {commit or '?'})",
+             fontsize=7)
     fig.tight_layout(rect=(0, 0.03, 1, 1))
     fig.savefig(out, dpi=110)
 
