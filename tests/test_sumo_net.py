@@ -313,9 +313,9 @@ class _Fake:
     def queues(self):
         return np.concatenate([self._m[x.id]["queue"] for x in self.network.lights])
 
-    def near_counts(self, tls, distance):
+    def near_all(self, distance):
         assert distance == 50.0  # MAXWAVE's own detection distance
-        return self._m[tls]["queue"] + self._m[tls]["approach"]
+        return np.concatenate([self._m[x.id]["queue"] + self._m[x.id]["approach"] for x in self.network.lights])
 
 
 @pytest.mark.parametrize("net_name", ["cologne8", "grid4x4"])
@@ -397,6 +397,39 @@ def test_mplights_observation_and_pressure_reward_are_the_hand_count():
         from ials_zoo.sumo_net.local import LocalNetEnv
 
         LocalNetEnv(net="cologne1", observation="mplight")
+
+
+def test_the_wave_observation_is_greedys_hand_count_and_greedy_is_its_argmax():
+    """``wave``: each green's vehicles within 50 m on its served lanes (over 28), counted by hand
+    from the env's per-light counts, then the one-hot of the current green; greedy's choice is the
+    first half's argmax at every decision of a cologne8 episode."""
+    env = SumoNetEnv(net="cologne8", max_cycles=40, observation="wave")
+    greedy = Greedy(env.network)
+    try:
+        obs, _ = env.reset(seed=2)
+        rng, seen, held = np.random.default_rng(0), 0.0, 0
+        while env.agents:
+            chosen = greedy(env)
+            for x in env.network.lights:
+                near, n = env.near_counts(x.id, 50.0), x.n_actions
+                hand = [sum(near[x.lanes.index(lane)] for lane in x.served_lanes(a)) for a in range(n)]
+                assert obs[x.id].shape == env.observation_space(x.id).shape == (2 * n,)
+                np.testing.assert_allclose(obs[x.id][:n] * 28.0, hand, rtol=1e-6)
+                assert chosen[x.id] == int(np.argmax(obs[x.id][:n]))
+                seen += sum(hand)
+            acts = {a: int(rng.integers(env.action_space(a).n)) for a in env.agents}
+            obs, *_ = env.step(acts)
+            for a in env.agents:  # mplight's one-hot (its test holds it to the action on grid4x4)
+                n = env.action_space(a).n  # here a green shorter than the decision moves on: none or another
+                assert obs[a][n:].sum() <= 1.0 and set(np.unique(obs[a][n:])) <= {0.0, 1.0}
+                held += obs[a][n + acts[a]] == 1.0
+        assert seen > 50 and held > 0.5 * 40 * len(env.possible_agents)  # vehicles to count, greens that held
+    finally:
+        env.close()
+    with pytest.raises(BadInput, match="GS only"):
+        from ials_zoo.sumo_net.local import LocalNetEnv
+
+        LocalNetEnv(net="cologne1", observation="wave")
 
 
 def test_rule_based_lights_beat_fixed_time_and_random_on_cologne1():

@@ -25,9 +25,11 @@ from ials_zoo.errors import BadInput
 from ials_zoo.sumo_net.env import SumoNetEnv
 from ials_zoo.sumo_net.network import Network
 from ials_zoo.sumo_net.pressure import Pressures
+from ials_zoo.sumo_net.waves import DISTANCE as WAVE_DISTANCE
+from ials_zoo.sumo_net.waves import Waves
 
 # name -> RESCO's detection distance (m) for it (agent_config.py); None: no detection needed
-CONTROLLERS = {"fixed": 200.0, "actuated": 200.0, "greedy": 50.0, "max_pressure": 200.0, "random": 1.0}
+CONTROLLERS = {"fixed": 200.0, "actuated": 200.0, "greedy": WAVE_DISTANCE, "max_pressure": 200.0, "random": 1.0}
 
 
 def check_controller(name: str) -> str:
@@ -38,20 +40,19 @@ def check_controller(name: str) -> str:
 
 class Greedy:
     """RESCO's MAXWAVE on any network: the green serving the most vehicles within 50 m (its own
-    detection distance, read with :meth:`SumoNetEnv.near_counts` whatever the env's)."""
+    detection distance, read with :meth:`SumoNetEnv.near_all` whatever the env's), every green's
+    wave in one pass (:class:`ials_zoo.sumo_net.waves.Waves`)."""
 
     DISTANCE = CONTROLLERS["greedy"]
 
     def __init__(self, network: Network):
-        self.rows = {x.id: [[x.lanes.index(lane) for lane in x.served_lanes(a)] for a in range(x.n_actions)]
-                     for x in network.lights}
+        self.waves = Waves(network)
+        self.index = {x.id: k for k, x in enumerate(network.lights)}
 
     def __call__(self, env) -> dict:
-        out = {}
-        for tls in env.agents:
-            wave = env.near_counts(tls, self.DISTANCE)  # RESCO's queue + approach within 50 m
-            out[tls] = int(np.argmax([wave[rows].sum() for rows in self.rows[tls]]))
-        return out
+        scores, starts = self.waves.of_greens(env.near_all(self.DISTANCE)), self.waves.green_starts
+        return {tls: int(np.argmax(scores[starts[k]:starts[k + 1]])) for tls, k in
+                ((tls, self.index[tls]) for tls in env.agents)}
 
 
 class MaxPressure:

@@ -18,13 +18,16 @@ from ials_zoo.sumo.command import load_budget
 from ials_zoo.sumo.lease import SimHandle
 from ials_zoo.sumo_net.core import MEASURES
 from ials_zoo.sumo_net.influence import full_dset, region_layout, region_spec
-from ials_zoo.sumo_net.mdp import BATCHED_OBSERVATIONS, N_FEATURES, lanes_tables, mplight, observation_fn, reward_fn
+from ials_zoo.sumo_net.mdp import (BATCHED_OBSERVATIONS, GREEN_OBSERVATIONS, N_FEATURES, lanes_tables, mplight,
+                                   observation_fn, reward_fn, wave)
 from ials_zoo.sumo_net.metrics import episode_metrics, scheduled_departures
 from ials_zoo.sumo_net.names import ENV_ID, OPTIONS, SCENARIO_OPTIONS
 from ials_zoo.sumo_net.network import read_network
 from ials_zoo.sumo_net.pressure import Pressures
 from ials_zoo.sumo_net.render import NetworkView
 from ials_zoo.sumo_net.scenario import scenario_of
+from ials_zoo.sumo_net.waves import DISTANCE as WAVE_DISTANCE
+from ials_zoo.sumo_net.waves import Waves
 from ials_zoo.utils import check_reset_options, check_seed
 
 SUMO_SEED_MAX = 2**31 - 2
@@ -45,9 +48,9 @@ def _check_distance(value) -> float:
 QUEUE = MEASURES.index("queue")
 
 
-def _observation_spaces(lights, pressures: bool) -> dict:
-    """RESCO's lanes tables (5 entries per incoming lane), or MPLight's (2 per green)."""
-    if pressures:
+def _observation_spaces(lights, per_green: bool) -> dict:
+    """RESCO's lanes tables (5 entries per incoming lane), or 2 entries per green (MPLight's, wave)."""
+    if per_green:
         return {x.id: spaces.Box(-np.inf, np.inf, (2 * x.n_actions,), np.float32) for x in lights}
     return {x.id: spaces.Box(0.0, np.inf, (N_FEATURES * len(x.lanes),), np.float32) for x in lights}
 
@@ -116,13 +119,15 @@ class SumoNetEnv(ParallelEnv):
     / 560]`` (row-major). ``"drq"``: the same without the scaling. ``"mplight"`` (MPLight's, on
     our greens): ``Box(-inf, inf, (2 * greens,))``, each green's pressure (the queue on the
     lanes it lets go minus the queue where their outgoing edges enter another light;
-    :mod:`ials_zoo.sumo_net.pressure`), then a one-hot of the current green. What a light
+    :mod:`ials_zoo.sumo_net.pressure`), then a one-hot of the current green. ``"wave"``
+    (greedy's input): ``Box(0, inf, (2 * greens,))``, each green's vehicles within 50 m on the
+    lanes it lets go, over 28 (:mod:`ials_zoo.sumo_net.waves`), then the one-hot. What a light
     observes changes neither the episode nor its reward: a board entry may name it.
 
     **Reward** (``reward="wait_norm"``, RESCO's): ``clip(-total wait / 224, -4, 4)`` of the
     light's detected vehicles; ``"wait"``, ``"queue"`` and ``"pressure"`` (RESCO's for MPLight:
-    minus the light's pressure) are offered too. ``mplight`` and ``pressure`` read other lights'
-    queues: the GS takes them, a light's IALS does not.
+    minus the light's pressure) are offered too. ``mplight``, ``wave`` and ``pressure`` read what
+    a region does not count: the GS takes them, a light's IALS does not.
 
     **Episode end**: truncation when SUMO's clock reaches ``end`` (360 decisions on RESCO's maps;
     ``max_cycles=N``: after N decisions, for short tests).
@@ -201,7 +206,8 @@ class SumoNetEnv(ParallelEnv):
         self._index = {x.id: k for k, x in enumerate(lights)}
         wide = self._observe is mplight or self._reward is None
         self._pressures = Pressures(self.network) if wide else None
-        self.observation_spaces = _observation_spaces(lights, self._observe is mplight)
+        self._waves = Waves(self.network) if self._observe is wave else None
+        self.observation_spaces = _observation_spaces(lights, self._observe in GREEN_OBSERVATIONS)
         self.action_spaces = {x.id: spaces.Discrete(x.n_actions) for x in lights}
         width = sum(s.shape[0] for s in self.observation_spaces.values())
         low = -np.inf if self._observe is mplight else 0.0
@@ -268,22 +274,28 @@ class SumoNetEnv(ParallelEnv):
 
     def observe(self, tls: str) -> np.ndarray:
         """Light ``tls``'s observation now (any light, learner or not)."""
-        if self._observe is mplight:  # its greens' pressures read the downstream lights
+        if self._observe in GREEN_OBSERVATIONS:  # its greens' scores come for every light at once
             return self._observations([tls])[tls]
         return self._observe(self._light_measures(tls), int(self._phases[self._index[tls]]))
 
     def _observations(self, agents) -> dict[str, np.ndarray]:
-        """``agents``' observations now: RESCO's tables for every light in one pass, MPLight's
-        pressures for every green in one product, else the observation function light by light."""
-        if self._observe is mplight:
-            pressures, starts = self._pressures.of_greens(self._measures[:, QUEUE]), self._pressures.green_starts
-            return {a: mplight(pressures[starts[k]:starts[k + 1]], int(self._phases[k]))
+        """``agents``' observations now: RESCO's tables for every light in one pass, every green's
+        pressure or wave in one product, else the observation function light by light."""
+        if self._observe in GREEN_OBSERVATIONS:
+            scores, starts = self._green_scores()
+            return {a: self._observe(scores[starts[k]:starts[k + 1]], int(self._phases[k]))
                     for a, k in ((a, self._index[a]) for a in agents)}
         if self._observe not in BATCHED_OBSERVATIONS:
             return {a: self._observe(self._light_measures(a), int(self._phases[self._index[a]])) for a in agents}
         table = lanes_tables(self._measures, self._phases, self._starts, BATCHED_OBSERVATIONS[self._observe])
         rows, index = self._rows, self._index
         return {a: table[rows[index[a]]:rows[index[a] + 1]].reshape(-1) for a in agents}
+
+    def _green_scores(self) -> tuple[np.ndarray, list[int]]:
+        """Every green's pressure (``mplight``) or wave (``wave``), and each light's first green."""
+        if self._observe is mplight:
+            return self._pressures.of_greens(self._measures[:, QUEUE]), self._pressures.green_starts
+        return self._waves.of_greens(self.near_all(WAVE_DISTANCE)), self._waves.green_starts
 
     def measures(self, tls: str) -> dict[str, np.ndarray]:
         """Light ``tls``'s raw per-lane measures now (:data:`ials_zoo.sumo_net.core.MEASURES`),
@@ -299,10 +311,15 @@ class SumoNetEnv(ParallelEnv):
         """Light ``tls``'s vehicles within ``distance`` m of it, per lane (observation order),
         whatever the env's own ``max_distance``: a rule with a detection distance of its own
         (RESCO's MAXWAVE: 50 m) reads it here. One core call per decision for every light."""
+        k = self._index[tls]
+        return self.near_all(distance)[self._rows[k]:self._rows[k + 1]].copy()
+
+    def near_all(self, distance: float) -> np.ndarray:
+        """Every light's lanes' vehicles within ``distance`` m (network order, concatenated; kept
+        for the decision: read, not written)."""
         if self._near is None or self._near[0] != distance:
             self._near = (distance, self._sim.call("near_counts", float(distance)))
-        k = self._index[tls]
-        return self._near[1][self._rows[k]:self._rows[k + 1]].copy()
+        return self._near[1]
 
     def _core_step(self, actions: list[int]) -> tuple:
         """The core's ``step`` arguments for these actions (a local simulator adds its influence)."""
@@ -373,9 +390,9 @@ class SumoNetEnv(ParallelEnv):
         self._store(self._sim.call("step", *self._core_step([] if self.program else actions)))
         self._near = None
         done = self._time >= self.scenario.end
+        obs, rewards = self._observations(self.agents), self._rewards()  # wave asks SUMO: before it ends
         if done:
             self._metrics = self._finish()
-        obs, rewards = self._observations(self.agents), self._rewards()
         terms = {a: False for a in self.agents}
         truncs = {a: done for a in self.agents}
         infos = self._infos()

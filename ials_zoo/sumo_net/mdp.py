@@ -85,20 +85,35 @@ BATCHED_OBSERVATIONS = {drq_norm: _DRQ_DIVISORS, drq: None}
 REWARDS = {"wait_norm": wait_norm, "wait_scaled": wait_scaled, "wait": wait, "queue": queue}
 
 
-def mplight(pressures: np.ndarray, phase: int) -> np.ndarray:
-    """MPLight's observation (RESCO's ``states.mplight`` on our greens): the light's greens'
-    pressures (:class:`ials_zoo.sumo_net.pressure.Pressures`), then a one-hot of its current
-    green (all zero during a yellow)."""
-    n = len(pressures)
+def _greens_table(scores: np.ndarray, phase: int) -> np.ndarray:
+    n = len(scores)
     out = np.zeros(2 * n, np.float32)
-    out[:n] = pressures
+    out[:n] = scores
     if 0 <= phase < n:
         out[n + phase] = 1.0
     return out
 
 
-NETWORK_OBSERVATIONS = {"mplight": mplight}
-"""Observations that read other lights (the downstream queues): the GS only, not a region."""
+def mplight(pressures: np.ndarray, phase: int) -> np.ndarray:
+    """MPLight's observation (RESCO's ``states.mplight`` on our greens): the light's greens'
+    pressures (:class:`ials_zoo.sumo_net.pressure.Pressures`), then a one-hot of its current
+    green (all zero during a yellow)."""
+    return _greens_table(pressures, phase)
+
+
+def wave(waves: np.ndarray, phase: int) -> np.ndarray:
+    """What greedy (RESCO's MAXWAVE) reads, for a learner: each green's vehicles within 50 m of
+    the light on the lanes it lets go, over 28 (:class:`ials_zoo.sumo_net.waves.Waves`), then a
+    one-hot of its current green. Greedy's choice is the first half's argmax; the one-hot tells
+    a learner what a change costs (a yellow)."""
+    return _greens_table(np.asarray(waves) / 28.0, phase)
+
+
+NETWORK_OBSERVATIONS = {"mplight": mplight, "wave": wave}
+"""Observations of the GS only, not a region: a light's greens' pressures (they read other
+lights' downstream queues) or waves (a count a region does not make)."""
+GREEN_OBSERVATIONS = (mplight, wave)
+"""Observations of two entries per green: its score, then the one-hot of the current green."""
 NETWORK_REWARDS = ("pressure",)
 """RESCO's ``pressure`` (MPLight): minus the light's pressure; the GS only, not a region."""
 
@@ -107,7 +122,7 @@ def observation_fn(name: str, network_wide: bool = False):
     known = {**OBSERVATIONS, **(NETWORK_OBSERVATIONS if network_wide else {})}
     if name not in known:
         raise BadInput(f"unknown observation {name!r}; expected one of {', '.join(known)}"
-                       + ("" if network_wide else " (mplight reads other lights: the GS only)"))
+                       + ("" if network_wide else " (mplight and wave: the GS only)"))
     return known[name]
 
 
@@ -121,5 +136,5 @@ def reward_fn(name: str, network_wide: bool = False):
     return REWARDS[name]
 
 
-__all__ = ["BATCHED_OBSERVATIONS", "N_FEATURES", "NETWORK_OBSERVATIONS", "NETWORK_REWARDS", "OBSERVATIONS", "REWARDS",
-           "drq", "drq_norm", "lanes_tables", "mplight", "observation_fn", "reward_fn", "wait", "wait_norm"]
+__all__ = ["BATCHED_OBSERVATIONS", "GREEN_OBSERVATIONS", "N_FEATURES", "NETWORK_OBSERVATIONS", "NETWORK_REWARDS", "OBSERVATIONS", "REWARDS",
+           "drq", "drq_norm", "lanes_tables", "mplight", "observation_fn", "reward_fn", "wait", "wait_norm", "wave"]
