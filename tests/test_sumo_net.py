@@ -432,6 +432,26 @@ def test_the_wave_observation_is_greedys_hand_count_and_greedy_is_its_argmax():
         LocalNetEnv(net="cologne1", observation="wave")
 
 
+def test_drq_wave_is_drq_norm_then_wave_at_every_decision():
+    """``drq_wave``: RESCO's drq_norm table, then the wave table, of the same decision."""
+    envs = {k: SumoNetEnv(net="ingolstadt7", max_cycles=15, observation=k) for k in ("drq_wave", "drq_norm", "wave")}
+    try:
+        obs = {k: e.reset(seed=3)[0] for k, e in envs.items()}
+        rng, counted = np.random.default_rng(1), 0.0
+        while envs["drq_wave"].agents:
+            for a in envs["drq_wave"].agents:
+                both = obs["drq_wave"][a]
+                assert both.shape == envs["drq_wave"].observation_space(a).shape
+                np.testing.assert_array_equal(both, np.concatenate([obs["drq_norm"][a], obs["wave"][a]]))
+            acts = {a: int(rng.integers(envs["wave"].action_space(a).n)) for a in envs["wave"].agents}
+            obs = {k: e.step(acts)[0] for k, e in envs.items()}
+            counted += sum(x[:envs["wave"].action_space(a).n].sum() for a, x in obs["wave"].items())
+        assert counted > 0  # the waves were not all empty
+    finally:
+        for e in envs.values():
+            e.close()
+
+
 def test_rule_based_lights_beat_fixed_time_and_random_on_cologne1():
     delay = {c: run_episode(c, 0, net="cologne1")["delay"] for c in ("fixed", "greedy", "max_pressure", "random")}
     assert delay["greedy"] < 0.7 * delay["fixed"] and delay["max_pressure"] < 0.7 * delay["fixed"]

@@ -18,8 +18,8 @@ from ials_zoo.sumo.command import load_budget
 from ials_zoo.sumo.lease import SimHandle
 from ials_zoo.sumo_net.core import MEASURES
 from ials_zoo.sumo_net.influence import full_dset, region_layout, region_spec
-from ials_zoo.sumo_net.mdp import (BATCHED_OBSERVATIONS, GREEN_OBSERVATIONS, N_FEATURES, lanes_tables, mplight,
-                                   observation_fn, reward_fn, wave)
+from ials_zoo.sumo_net.mdp import (BATCHED_OBSERVATIONS, GREEN_OBSERVATIONS, N_FEATURES, WAVE_OBSERVATIONS, drq_wave,
+                                   lanes_tables, mplight, observation_fn, reward_fn)
 from ials_zoo.sumo_net.metrics import episode_metrics, scheduled_departures
 from ials_zoo.sumo_net.names import ENV_ID, OPTIONS, SCENARIO_OPTIONS
 from ials_zoo.sumo_net.network import read_network
@@ -48,11 +48,14 @@ def _check_distance(value) -> float:
 QUEUE = MEASURES.index("queue")
 
 
-def _observation_spaces(lights, per_green: bool) -> dict:
-    """RESCO's lanes tables (5 entries per incoming lane), or 2 entries per green (MPLight's, wave)."""
-    if per_green:
+def _observation_spaces(lights, observe) -> dict:
+    """RESCO's lanes tables (5 entries per incoming lane), 2 entries per green (MPLight's, wave),
+    or both (drq_wave)."""
+    if observe in GREEN_OBSERVATIONS:
         return {x.id: spaces.Box(-np.inf, np.inf, (2 * x.n_actions,), np.float32) for x in lights}
-    return {x.id: spaces.Box(0.0, np.inf, (N_FEATURES * len(x.lanes),), np.float32) for x in lights}
+    extra = 2 if observe is drq_wave else 0
+    return {x.id: spaces.Box(0.0, np.inf, (N_FEATURES * len(x.lanes) + extra * x.n_actions,), np.float32)
+            for x in lights}
 
 
 PROGRAMS = {True: "fixed", "fixed": "fixed", "actuated": "actuated"}
@@ -121,12 +124,13 @@ class SumoNetEnv(ParallelEnv):
     lanes it lets go minus the queue where their outgoing edges enter another light;
     :mod:`ials_zoo.sumo_net.pressure`), then a one-hot of the current green. ``"wave"``
     (greedy's input): ``Box(0, inf, (2 * greens,))``, each green's vehicles within 50 m on the
-    lanes it lets go, over 28 (:mod:`ials_zoo.sumo_net.waves`), then the one-hot. What a light
+    lanes it lets go, over 28 (:mod:`ials_zoo.sumo_net.waves`), then the one-hot. ``"drq_wave"``:
+    ``drq_norm``'s table, then ``wave``'s. What a light
     observes changes neither the episode nor its reward: a board entry may name it.
 
     **Reward** (``reward="wait_norm"``, RESCO's): ``clip(-total wait / 224, -4, 4)`` of the
     light's detected vehicles; ``"wait"``, ``"queue"`` and ``"pressure"`` (RESCO's for MPLight:
-    minus the light's pressure) are offered too. ``mplight``, ``wave`` and ``pressure`` read what
+    minus the light's pressure) are offered too. ``mplight``, the waves and ``pressure`` read what
     a region does not count: the GS takes them, a light's IALS does not.
 
     **Episode end**: truncation when SUMO's clock reaches ``end`` (360 decisions on RESCO's maps;
@@ -206,8 +210,8 @@ class SumoNetEnv(ParallelEnv):
         self._index = {x.id: k for k, x in enumerate(lights)}
         wide = self._observe is mplight or self._reward is None
         self._pressures = Pressures(self.network) if wide else None
-        self._waves = Waves(self.network) if self._observe is wave else None
-        self.observation_spaces = _observation_spaces(lights, self._observe in GREEN_OBSERVATIONS)
+        self._waves = Waves(self.network) if self._observe in WAVE_OBSERVATIONS else None
+        self.observation_spaces = _observation_spaces(lights, self._observe)
         self.action_spaces = {x.id: spaces.Discrete(x.n_actions) for x in lights}
         width = sum(s.shape[0] for s in self.observation_spaces.values())
         low = -np.inf if self._observe is mplight else 0.0
@@ -274,7 +278,7 @@ class SumoNetEnv(ParallelEnv):
 
     def observe(self, tls: str) -> np.ndarray:
         """Light ``tls``'s observation now (any light, learner or not)."""
-        if self._observe in GREEN_OBSERVATIONS:  # its greens' scores come for every light at once
+        if self._observe in GREEN_OBSERVATIONS or self._observe is drq_wave:  # greens' scores: all lights at once
             return self._observations([tls])[tls]
         return self._observe(self._light_measures(tls), int(self._phases[self._index[tls]]))
 
@@ -285,6 +289,10 @@ class SumoNetEnv(ParallelEnv):
             scores, starts = self._green_scores()
             return {a: self._observe(scores[starts[k]:starts[k + 1]], int(self._phases[k]))
                     for a, k in ((a, self._index[a]) for a in agents)}
+        if self._observe is drq_wave:
+            scores, starts = self._green_scores()
+            return {a: drq_wave(self._light_measures(a), scores[starts[k]:starts[k + 1]], int(self._phases[k]))
+                    for a, k in ((a, self._index[a]) for a in agents)}
         if self._observe not in BATCHED_OBSERVATIONS:
             return {a: self._observe(self._light_measures(a), int(self._phases[self._index[a]])) for a in agents}
         table = lanes_tables(self._measures, self._phases, self._starts, BATCHED_OBSERVATIONS[self._observe])
@@ -292,7 +300,7 @@ class SumoNetEnv(ParallelEnv):
         return {a: table[rows[index[a]]:rows[index[a] + 1]].reshape(-1) for a in agents}
 
     def _green_scores(self) -> tuple[np.ndarray, list[int]]:
-        """Every green's pressure (``mplight``) or wave (``wave``), and each light's first green."""
+        """Every green's pressure (``mplight``) or wave (``wave``, ``drq_wave``), and each light's first green."""
         if self._observe is mplight:
             return self._pressures.of_greens(self._measures[:, QUEUE]), self._pressures.green_starts
         return self._waves.of_greens(self.near_all(WAVE_DISTANCE)), self._waves.green_starts

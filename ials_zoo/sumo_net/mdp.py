@@ -109,11 +109,19 @@ def wave(waves: np.ndarray, phase: int) -> np.ndarray:
     return _greens_table(np.asarray(waves) / 28.0, phase)
 
 
-NETWORK_OBSERVATIONS = {"mplight": mplight, "wave": wave}
+def drq_wave(measures: np.ndarray, waves: np.ndarray, phase: int) -> np.ndarray:
+    """RESCO's ``drq_norm`` lanes table, then :func:`wave`'s table: what RESCO's learners read and
+    what greedy reads, side by side."""
+    return np.concatenate([drq_norm(measures, phase), wave(waves, phase)])
+
+
+NETWORK_OBSERVATIONS = {"mplight": mplight, "wave": wave, "drq_wave": drq_wave}
 """Observations of the GS only, not a region: a light's greens' pressures (they read other
 lights' downstream queues) or waves (a count a region does not make)."""
 GREEN_OBSERVATIONS = (mplight, wave)
 """Observations of two entries per green: its score, then the one-hot of the current green."""
+WAVE_OBSERVATIONS = (wave, drq_wave)
+"""Observations that read every green's wave."""
 NETWORK_REWARDS = ("pressure",)
 """RESCO's ``pressure`` (MPLight): minus the light's pressure; the GS only, not a region."""
 
@@ -122,7 +130,7 @@ def observation_fn(name: str, network_wide: bool = False):
     known = {**OBSERVATIONS, **(NETWORK_OBSERVATIONS if network_wide else {})}
     if name not in known:
         raise BadInput(f"unknown observation {name!r}; expected one of {', '.join(known)}"
-                       + ("" if network_wide else " (mplight and wave: the GS only)"))
+                       + ("" if network_wide else " (mplight, wave and drq_wave: the GS only)"))
     return known[name]
 
 
@@ -136,5 +144,5 @@ def reward_fn(name: str, network_wide: bool = False):
     return REWARDS[name]
 
 
-__all__ = ["BATCHED_OBSERVATIONS", "GREEN_OBSERVATIONS", "N_FEATURES", "NETWORK_OBSERVATIONS", "NETWORK_REWARDS", "OBSERVATIONS", "REWARDS",
+__all__ = ["BATCHED_OBSERVATIONS", "GREEN_OBSERVATIONS", "N_FEATURES", "WAVE_OBSERVATIONS", "drq_wave", "NETWORK_OBSERVATIONS", "NETWORK_REWARDS", "OBSERVATIONS", "REWARDS",
            "drq", "drq_norm", "lanes_tables", "mplight", "observation_fn", "reward_fn", "wait", "wait_norm", "wave"]

@@ -27,9 +27,10 @@ RULES = ("fixed", "greedy", "max_pressure", "actuated", "random")
 # *_wave: the lights read the wave observation, OBSERVATION=wave in learner.sh)
 LEARNERS = {"idqn": "idqn_net", "mplight": "mplight_net", "shared_ppo": "shared_ppo_net",
             "idqn_wait_scaled": "idqn_wait_scaled", "ippo": "ippo_net", "shared_ppo_anneal": "shared_ppo_anneal",
-            "dials_shared": "dials_shared", "shared_ppo_wave": "shared_ppo_wave_net", "idqn_wave": "idqn_wave_net"}
+            "dials_shared": "dials_shared", "shared_ppo_wave": "shared_ppo_wave_net", "idqn_wave": "idqn_wave_net",
+            "shared_ppo_drq_wave": "shared_ppo_drq_wave_net"}
 SEEDS = (0, 1, 2)
-SHOWN = ("idqn", "mplight", "shared_ppo", "idqn_wait_scaled", "shared_ppo_wave")
+SHOWN = ("idqn", "mplight", "shared_ppo", "idqn_wait_scaled", "shared_ppo_wave", "shared_ppo_drq_wave")
 
 
 def copy_runs(runs: Path = Path("runs")) -> None:
