@@ -97,6 +97,16 @@ def test_what_the_ials_copies_cannot_do_is_named_before_any_work(tmp_path, flag,
     assert not (tmp_path / "run").exists()
 
 
+@pytest.mark.parametrize("option", [{"observation": "wave"}, {"observation": "mplight"}, {"reward": "pressure"}])
+def test_an_observation_or_reward_of_the_gs_only_is_refused_before_any_work(tmp_path, option):
+    from ials_zoo.baselines import dials
+
+    options = json.dumps({**json.loads(DIALS["env_options"]), **option})
+    with pytest.raises(BadInput, match=f"--env-options: .*{next(iter(option))}={next(iter(option.values()))!r}"):
+        dials.main(dials.Args(**{**DIALS, "env_options": options}, out_dir=str(tmp_path / "run")))
+    assert not (tmp_path / "run").exists()
+
+
 def test_new_aips_drive_the_ials_copies_from_the_next_decision():
     """``make_ials_vector_env``'s ``set_predictors`` reaches every copy in its worker: a uniform AIP (a third each of 0, 1
     and 2+ vehicles per second and entry point) after the recorded frequencies (a few percent)."""

@@ -168,6 +168,7 @@ def check_args(args: Args):
         if args.local != "sumo":
             raise BadInput(f"--local {args.local}: {args.env_id}'s agents share one batched local simulator already")
     options = env_options_of(args, domain)
+    domain.check_ials_options(options, "train dials")
     agents = domain.check_agents(None if args.agents == "all" else args.agents, **options)
     check_seed(args.seed, "seed")
     check_multi_ppo(args, domain)

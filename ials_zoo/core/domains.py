@@ -130,6 +130,9 @@ class Domain:
         policy_options: GS options that change only what the agents observe, never the
             episode nor its rewards (e.g. ``("observation",)``): a policy keeps the ones it was
             trained with, and its result stays on the official protocol.
+        gs_only: ``{option: values}`` that the GS takes and a local simulator cannot (an
+            observation that reads other agents, say): :meth:`check_ials_options` refuses them
+            before an IALS run starts.
         reward_option, rewards: the GS option that picks the agents' reward and the rewards
             it takes (the first is the one that scores them): a learner may learn from another
             (``train idqn --train-reward``) and is still scored on the protocol's; None: one reward.
@@ -175,6 +178,7 @@ class Domain:
     rewards: tuple[str, ...] = ()
     published: Callable | None = None
     policy_options: tuple[str, ...] = ()
+    gs_only: dict = field(default_factory=dict)
     description: str = ""
     extras: dict = field(default_factory=dict)
 
@@ -284,6 +288,14 @@ class Domain:
             raise BadInput(f"{what} needs {needs}, which {self.env_id} does not have yet; its GS is "
                            f"ials_zoo.{self.env_id}.parallel_env() ({having}: {others})")
         return self
+
+    def check_ials_options(self, options: dict, what: str, flag: str = "--env-options") -> None:
+        """A BadInput naming ``flag`` where ``options`` hold a value of :attr:`gs_only`: ``what``
+        (a command) would fail on it only once its local simulators start."""
+        for option, values in self.gs_only.items():
+            if options.get(option) in values:
+                raise BadInput(f"{flag}: {what} runs {self.env_id}'s local simulators, which cannot take "
+                               f"{option}={options[option]!r} ({', '.join(map(repr, values))} are the GS's only)")
 
     def require_ials_parallel_env(self, what: str) -> Domain:
         """This domain, or a BadInput saying that ``what`` needs a multi-agent IALS it lacks."""

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from ials_zoo.core.domains import Domain, Rule
 from ials_zoo.core.extras import BenchSettings, DIALSSettings, LearnerOptions, StudySettings, ViewerSettings
+from ials_zoo.sumo_net.mdp import NETWORK_OBSERVATIONS, NETWORK_REWARDS
 from ials_zoo.sumo_net.names import BOARD_OPTIONS, DEFAULT_NET, ENV_ID, SCENARIO_OPTIONS
 from ials_zoo.sumo_net.scenario import RESCO_MAPS
 
@@ -180,6 +181,7 @@ DOMAIN = Domain(
     rewards=("wait_norm", "wait_scaled", "wait", "queue", "pressure"),
     published=_published,
     policy_options=("observation",),  # what a light reads; the reward that scores it stays RESCO's wait_norm
+    gs_only={"observation": tuple(NETWORK_OBSERVATIONS), "reward": NETWORK_REWARDS},  # a region counts neither
     description="any SUMO network, RESCO's eight city and grid maps by name (libsumo; single-junction IALS)",
     parallel_env=parallel_env,
     local_simulator=local_simulator,
