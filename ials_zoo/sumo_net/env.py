@@ -18,8 +18,17 @@ from ials_zoo.sumo.command import load_budget
 from ials_zoo.sumo.lease import SimHandle
 from ials_zoo.sumo_net.core import MEASURES
 from ials_zoo.sumo_net.influence import full_dset, region_layout, region_spec
-from ials_zoo.sumo_net.mdp import (BATCHED_OBSERVATIONS, GREEN_OBSERVATIONS, N_FEATURES, WAVE_OBSERVATIONS, drq_wave,
-                                   lanes_tables, mplight, observation_fn, reward_fn)
+from ials_zoo.sumo_net.mdp import (
+    BATCHED_OBSERVATIONS,
+    GREEN_OBSERVATIONS,
+    N_FEATURES,
+    WAVE_OBSERVATIONS,
+    drq_wave,
+    lanes_tables,
+    mplight,
+    observation_fn,
+    reward_fn,
+)
 from ials_zoo.sumo_net.metrics import episode_metrics, scheduled_departures
 from ials_zoo.sumo_net.names import ENV_ID, OPTIONS, SCENARIO_OPTIONS
 from ials_zoo.sumo_net.network import read_network
