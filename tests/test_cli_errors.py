@@ -30,6 +30,8 @@ CASES = [
     (["fidelity", "--env", "warehouse_v0", "--predictor", "on-policy", "--aip-lr-schedule", "cosine"],
      "--aip-lr-schedule"),
     (["fidelity", "--env", "warehouse_v0", "--aip-seeds", "2"], "--aip-seeds"),
+    (["fidelity", "--env", "warehouse_v0", "--local", "arrays"], "--local arrays"),
+    (["fidelity", "--env", "sumo_net_v0", "--net", "cologne1", "--local", "cells"], "--local"),
     (["fidelity", "--env", "warehouse_v0", "--predictor", "on-policy-autoregressive", "--aip-influence-lags", "0"],
      "--aip-influence-lags"),
     (["fidelity", "--env", "warehouse_v0", "--predictor", "on-policy", "--aip-influence-lags", "3"],

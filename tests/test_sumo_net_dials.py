@@ -134,23 +134,30 @@ def test_new_aips_drive_the_ials_copies_from_the_next_decision():
 
 
 def test_fidelity_passes_on_policy_aips_and_fails_a_flooding_one_on_a_real_network(tmp_path):
-    """``ials-zoo fidelity`` on lights of their own shapes: with AIPs trained on the GS's data
-    of the same (random) joint policy the share of seconds a vehicle enters holds; a uniform AIP
-    (a vehicle at two seconds of three, 30 times the GS's share) fails it. Six GS episodes of
-    data need 600 epochs: at 150 (150 updates) the quieter light's AIP ran 50% high."""
+    """``ials-zoo fidelity`` on lights of their own shapes, on either local simulator (SUMO
+    regions, arrays): with AIPs trained on the GS's data of the same (random) joint policy the
+    share of seconds a vehicle enters holds; a uniform AIP (a vehicle at two seconds of three,
+    30 times the GS's share) fails it. Six GS episodes of data need 600 epochs: at 150 (150
+    updates) the quieter light's AIP ran 50% high."""
     from ials_zoo.influence.fidelity import fidelity_report
     from ials_zoo.influence.files import save_predictor_set
     from ials_zoo.influence.multi import resolve_predictor_set
 
     options = {"net": "cologne3", "max_cycles": 20}
     common = dict(episodes=3, seed=0, watched=["360082", "360086"], progress=False, **options)
-    good = fidelity_report("sumo_net_v0", ["random"], predictor="on-policy", collect_steps=120, aip_epochs=600, **common)
     agents = ["360082", "360086", "GS_cluster_2415878664_254486231_359566_359576"]
     uniform = tmp_path / "uniform.pt"
     save_predictor_set(resolve_predictor_set("uniform", "sumo_net_v0", agents, options=options), uniform)
-    bad = fidelity_report("sumo_net_v0", ["random"], predictor=str(uniform), **common)
-    for light in common["watched"]:
-        rows, flooded = good["policies"]["random"][light], bad["policies"]["random"][light]
-        assert rows["active"]["holds"], rows["active"]
-        assert rows["active"]["gs"] == flooded["active"]["gs"]  # the same GS episodes
-        assert not flooded["active"]["holds"] and flooded["active"]["ials"] > 0.5, flooded["active"]
+    returns = {}
+    for local in ("sumo", "arrays"):
+        good = fidelity_report("sumo_net_v0", ["random"], predictor="on-policy", collect_steps=120, aip_epochs=600,
+                               ials_options={"local": local}, **common)
+        bad = fidelity_report("sumo_net_v0", ["random"], predictor=str(uniform), ials_options={"local": local},
+                              **common)
+        for light in common["watched"]:
+            rows, flooded = good["policies"]["random"][light], bad["policies"]["random"][light]
+            assert rows["active"]["holds"], (local, rows["active"])
+            assert rows["active"]["gs"] == flooded["active"]["gs"]  # the same GS episodes
+            assert not flooded["active"]["holds"] and flooded["active"]["ials"] > 0.5, (local, flooded["active"])
+        returns[local] = [good["policies"]["random"][x]["return"]["ials"] for x in common["watched"]]
+    assert returns["sumo"] != returns["arrays"]  # two simulators ran, not one twice

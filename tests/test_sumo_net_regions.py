@@ -129,6 +129,35 @@ def test_a_cut_region_keeps_its_lights_program(cologne8, tmp_path):
             regions[light].edges) | {e for e in cut.lane_edges.values() if e.startswith(":")}
 
 
+def test_every_regions_ials_runs_on_a_grid_whose_roads_are_named_after_their_lights():
+    """A generated grid names its roads ``tls_0__tls_1``: with ``"<light>__"`` as the regions'
+    prefix netconvert left such a road unprefixed and the IALS asked for a road that did not
+    exist. Every light's region, one SUMO simulation, vehicles on every light's lanes."""
+    from ials_zoo.sumo_net.ials_env import IALSNetEnv
+
+    scenario = make_scenario(net="grid2x2")
+    assert any("__" in e for e in regions_of(scenario.net_file)["tls_0"].edges)
+    env = IALSNetEnv(predictors="uniform", net="grid2x2", backend="auto", fresh_process=False, max_cycles=6)
+    try:
+        env.reset(seed=0)
+        seen = {a: 0.0 for a in env.agents}
+        while env.agents:
+            obs, *_ = env.step({a: 0 for a in env.agents})
+            for a, x in obs.items():
+                seen[a] += float(x.sum())
+        assert all(v > 0 for v in seen.values()), seen
+    finally:
+        env.close()
+
+
+def test_a_road_that_already_starts_with_the_prefix_is_refused(tmp_path, cologne8):
+    region = regions_of(cologne8)[read_network(cologne8).ids[0]]
+    road = region.edges[0]
+    with pytest.raises(ValueError, match="already starts with the region prefix"):
+        cut_network(cologne8, region, tmp_path / "x.net.xml", prefix=road[:3])
+    assert not (tmp_path / "x.net.xml").exists()
+
+
 def test_bad_input_is_named(tmp_path, cologne8):
     with pytest.raises(BadInput, match="does not exist"):
         regions_of(str(tmp_path / "missing.net.xml"))

@@ -83,7 +83,7 @@ from ials_zoo.baselines.multiagent import (
     whole_updates,
 )
 from ials_zoo.baselines.retrain import training_command
-from ials_zoo.core.domains import dials_domain_ids, get_domain
+from ials_zoo.core.domains import LOCAL_SIMULATORS, dials_domain_ids, get_domain
 from ials_zoo.core.extras import dials_of, study_of
 from ials_zoo.core.spaces import joint_sizes
 from ials_zoo.dials.backends import BACKENDS, InProcessBackend, check_ray_address, make_backend
@@ -232,12 +232,9 @@ def on_copies(domain) -> bool:
     return domain.has_ials_parallel_env and not domain.has_ials
 
 
-LOCALS = ("sumo", "arrays")
-
-
 def _check_copies_args(args) -> None:
-    if args.local not in LOCALS:
-        raise BadInput(f"--local: expected one of {', '.join(LOCALS)}, got {args.local!r}")
+    if args.local not in LOCAL_SIMULATORS:
+        raise BadInput(f"--local: expected one of {', '.join(LOCAL_SIMULATORS)}, got {args.local!r}")
     if args.learner not in PPO_CLASSES:
         raise BadInput(f"--learner {args.learner}: agents with spaces of their own train with --learner batched or "
                        "shared (one torch program, observations padded)")

@@ -6,6 +6,7 @@ trajectories, under several joint policies? (:mod:`ials_zoo.influence.fidelity`)
     ials-zoo fidelity --env warehouse_v0 --policies random,leaderboard/policies/<sha>.safetensors --out f.md
     ials-zoo fidelity --env warehouse_v0 --predictor on-policy-autoregressive [--aip-seeds 3]
     ials-zoo fidelity --env sumo_net_v0 --net cologne8 --policies random,constant --predictor on-policy
+    ials-zoo fidelity --env sumo_net_v0 --net cologne8 --local arrays --predictor on-policy
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ import math
 import os
 
 from ials_zoo.commands import NET_HELP, with_network
-from ials_zoo.core.domains import domain_ids, get_domain
+from ials_zoo.core.domains import LOCAL_SIMULATORS, domain_ids, get_domain
 from ials_zoo.errors import BadInput
 from ials_zoo.evaluation import estimate_evaluation_seconds
 from ials_zoo.influence.base import MAX_INFLUENCE_LAGS
@@ -61,9 +62,19 @@ def configure(parser):
     parser.add_argument("--aip-seeds", type=int, default=1,
                         help="with --predictor on-policy*: train the AIPs this many times (other GS data and "
                              "training seeds) and count per row under how many trainings it holds")
+    parser.add_argument("--local", default="sumo",
+                        help="the IALS's local simulators, where the domain has a choice: sumo (every region cut "
+                             "from the network) | arrays (numpy arrays: ials_zoo.sumo_net.arrays)")
     parser.add_argument("--tolerance", type=float, default=0.1, help="relative difference that holds anyway")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", default=None, help="also write the Markdown report here (atomic)")
+
+
+def _check_local(domain, local: str) -> None:
+    if local not in LOCAL_SIMULATORS:
+        raise BadInput(f"--local: expected one of {', '.join(LOCAL_SIMULATORS)}, got {local!r}")
+    if local != "sumo" and domain.ials_batched_env is None:
+        raise BadInput(f"--local {local}: {domain.env_id}'s IALS has one local simulator, no choice")
 
 
 def run(args) -> int:
@@ -87,6 +98,7 @@ def run(args) -> int:
             raise BadInput(f"--policies: {exc}") from None
         if p not in ("random", "constant", "scripted") and cycle is None and not os.path.isfile(p):
             raise BadInput(f"--policies: {p!r} is neither random, constant, cycle:H, scripted nor a policy file")
+    _check_local(domain, args.local)
     watched = None if args.agents is None else domain.check_agents(args.agents, **options)
     for name in ("collect_steps", "aip_epochs", "aip_seeds", "aip_influence_lags"):
         if getattr(args, name) is not None and getattr(args, name) < 1:
@@ -117,7 +129,8 @@ def run(args) -> int:
                              predictor=args.predictor, tolerance=args.tolerance, collect_steps=args.collect_steps,
                              aip_lr=args.aip_lr, aip_epochs=args.aip_epochs, aip_seeds=args.aip_seeds,
                              aip_lr_schedule=args.aip_lr_schedule, aip_influence_lags=args.aip_influence_lags,
-                             aip_clock_horizon=args.aip_clock_horizon, **options)
+                             aip_clock_horizon=args.aip_clock_horizon,
+                             ials_options={"local": args.local} if args.local != "sumo" else None, **options)
     text = markdown(report)
     print(text)
     if args.out:

@@ -59,6 +59,10 @@ class Rule:
     make: Callable | None = None
     env_options: dict = field(default_factory=dict)
 
+# the local simulators a domain with a batched IALS (``Domain.ials_batched_env``) lets a user
+# pick with the IALS option ``local``: SUMO regions (the default) or numpy arrays
+LOCAL_SIMULATORS = ("sumo", "arrays")
+
 
 @dataclass(frozen=True)
 class Domain:

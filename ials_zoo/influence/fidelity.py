@@ -352,7 +352,7 @@ def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: i
                     collect_steps: int | None = None, aip_lr: float | None = None, aip_epochs: int | None = None,
                     aip_seeds: int = 1, aip_lr_schedule: str | None = None,
                     aip_influence_lags: int | None = None, aip_clock_horizon: int | None = None,
-                    **options) -> dict:
+                    ials_options: dict | None = None, **options) -> dict:
     """Run every joint policy on the GS and on the multi-agent IALS; returns
     ``{policy name: {agent: {metric: compare(...)}}}``. ``predictor``: an AIP set for every
     policy, or ``on-policy[-autoregressive]`` (module docstring) with ``collect_steps`` GS
@@ -362,7 +362,8 @@ def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: i
     only): train them that many times, from other GS data and training seeds, run the IALS with
     each set, and count per row in how many the row holds (``holds_in`` of ``aip_seeds``; the
     means and interval shown are the first set's): which rows fail moves from one training run
-    to the next."""
+    to the next. ``ials_options`` go to the IALS only (``{"local": "arrays"}``: which local
+    simulator, where the domain has a choice)."""
     from ials_zoo.influence.multi import make_ials_parallel_env  # lazy: SB3/torch
 
     aip_seeds = _check_aip_settings(predictor, aip_seeds, aip_lr_schedule, aip_influence_lags, aip_clock_horizon)
@@ -373,7 +374,7 @@ def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: i
     report: dict = {"env_id": env_id, "episodes": episodes, "tolerance": tolerance, "watched": watched,
                     "predictor": str(predictor), "aip_lr": aip_lr, "aip_epochs": aip_epochs,
                     "aip_lr_schedule": aip_lr_schedule, "aip_influence_lags": aip_influence_lags,
-                    "aip_seeds": aip_seeds, "policies": {}}
+                    "aip_seeds": aip_seeds, "ials_options": dict(ials_options or {}), "policies": {}}
     if predictor in ON_POLICY:
         (report["aip_lr"], report["aip_epochs"], report["aip_lr_schedule"],
          report["aip_influence_lags"]) = on_policy_training(env_id, predictor == "on-policy-autoregressive", aip_lr,
@@ -407,7 +408,7 @@ def fidelity_report(env_id: str, policies: Sequence, episodes: int = 20, seed: i
                                       predictor == "on-policy-autoregressive", options, aip_lr, aip_epochs,
                                       aip_lr_schedule, aip_influence_lags, report["aip_clock_horizon"],
                                       sizes.obs_size)
-            ials_env = make_ials_parallel_env(env_id, agents, predictor=aips, seed=seed, **options)
+            ials_env = make_ials_parallel_env(env_id, agents, predictor=aips, seed=seed, **options, **(ials_options or {}))
             try:
                 ials = run(ials_env, agents, watched, policy, episodes, seed, sizes)
             finally:
@@ -478,7 +479,8 @@ def markdown(report: dict) -> str:
     if n_trainings > 1:
         training += (f"; {n_trainings} trainings of them, from other GS data: GS, IALS and the interval are the "
                      f"first's, `holds` counts the trainings under which the row holds")
-    lines = [f"Fidelity of the multi-agent IALS on `{report['env_id']}`: {report['episodes']} episodes per joint "
+    local = "".join(f", {k} {v}" for k, v in (report.get("ials_options") or {}).items())
+    lines = [f"Fidelity of the multi-agent IALS{local} on `{report['env_id']}`: {report['episodes']} episodes per joint "
              f"policy, GS vs IALS (AIPs: {report.get('predictor', 'trained')}{training}), mean over episodes; a row holds "
              f"when the 95% Welch interval of GS - IALS contains 0 or |GS - IALS| <= {report['tolerance']:.0%} of the GS "
              "value.", ""]

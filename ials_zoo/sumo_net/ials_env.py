@@ -2,7 +2,7 @@
 one PettingZoo ParallelEnv.
 
 Every light's region (:mod:`ials_zoo.sumo_net.regions`) is cut from the network and all of
-them run side by side in one SUMO simulation (ids prefixed ``"<light>__"``; a road in two
+them run side by side in one SUMO simulation (ids prefixed ``"<light>~"``; a road in two
 regions is simulated in each). Each decision, every light's AIP samples its region's influence
 sources (:mod:`ials_zoo.sumo_net.influence`: vehicles entering per entry point and second)
 from its d-set history, and :class:`~ials_zoo.sumo_net.island.IslandCore` inserts them, each
@@ -27,6 +27,7 @@ from ials_zoo.sumo_net.influence import region_layout
 from ials_zoo.sumo_net.island import entry_tables
 from ials_zoo.sumo_net.local import RegionsNetEnv
 from ials_zoo.sumo_net.names import ENV_ID, SCENARIO_OPTIONS
+from ials_zoo.sumo_net.regions import region_prefix
 
 
 def resolve_predictors(predictors, lights: list[str], options: dict) -> dict:
@@ -92,9 +93,9 @@ class IALSNetEnv(RegionsNetEnv):
             return {**config, "tables": [self._tables[x] for x in self.network.ids]}
         config = super()._core_config()
         ids = self.network.ids
-        layouts = [region_layout(self.scenario.net_file, x).prefixed(f"{x}__") for x in ids]
+        layouts = [region_layout(self.scenario.net_file, x).prefixed(region_prefix(x)) for x in ids]
         config.update(layouts=[asdict(x) for x in layouts], tables=[self._tables[x] for x in ids],
-                      row_keys=[(x, 0) for x in ids], prefixes=[f"{x}__" for x in ids])
+                      row_keys=[(x, 0) for x in ids], prefixes=[region_prefix(x) for x in ids])
         return config
 
     def set_predictors(self, predictors) -> None:

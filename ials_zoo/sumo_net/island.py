@@ -2,7 +2,7 @@
 
 :class:`SumoNetLocalSimulator` cuts the light's region from the network
 (:mod:`ials_zoo.sumo_net.regions`) ``n_envs`` times into one SUMO simulation (ids prefixed
-``"c<copy>__"``) and runs RESCO's signal loop on it (:class:`~ials_zoo.sumo_net.core.NetCore`):
+``"c<copy>~"``, :func:`~ials_zoo.sumo_net.regions.region_prefix`) and runs RESCO's signal loop on it (:class:`~ials_zoo.sumo_net.core.NetCore`):
 the same spaces, observation and reward as the GS's light.
 
 Each decision it is given the influence sources of :mod:`ials_zoo.sumo_net.influence`: per
@@ -55,7 +55,7 @@ from ials_zoo.sumo_net.local import record_influence
 from ials_zoo.sumo_net.mdp import N_FEATURES, observation_fn, reward_fn
 from ials_zoo.sumo_net.names import SCENARIO_OPTIONS
 from ials_zoo.sumo_net.network import read_network
-from ials_zoo.sumo_net.regions import CHAIN_CAP_METRES, EXIT_METRES, REACH_METRES, regions_of
+from ials_zoo.sumo_net.regions import CHAIN_CAP_METRES, EXIT_METRES, REACH_METRES, region_prefix, regions_of
 from ials_zoo.sumo_net.replay import cut_regions, vehicle_types
 from ials_zoo.sumo_net.scenario import scenario_of
 from ials_zoo.utils import check_seed, parse_untrusted_json_object
@@ -341,7 +341,7 @@ class SumoNetLocalSimulator(LocalSimulator):
         merged = cut_regions(s.net_file, {f"c{r}": regions[a] for r, a in enumerate(rows)}, self._folder)
         vtypes = vehicle_types(s.route_files, self._folder / "vtypes.add.xml")
         tables = entry_tables(s, self.agents, record_seconds, record_seed)
-        layouts = [region_layout(s.net_file, a).prefixed(f"c{r}__") for r, a in enumerate(rows)]
+        layouts = [region_layout(s.net_file, a).prefixed(region_prefix(f"c{r}")) for r, a in enumerate(rows)]
         return {"net_file": str(merged), "route_files": [], "begin": s.begin, "end": s.end,
                 "decision": s.decision_seconds, "yellow": s.yellow_seconds, "max_distance": max_distance,
                 "extra": ["--additional-files", str(vtypes)], "lights": [x.light for x in layouts],
@@ -349,7 +349,7 @@ class SumoNetLocalSimulator(LocalSimulator):
                 "greens": [[lights[a].phases[i] for i in lights[a].greens] for a in rows],
                 "layouts": [asdict(x) for x in layouts], "tables": [tables[a] for a in rows],
                 "row_keys": [(a, r % self.n_envs) for r, a in enumerate(rows)],
-                "prefixes": [f"c{r}__" for r in range(len(rows))], "watch": self._measure}
+                "prefixes": [region_prefix(f"c{r}") for r in range(len(rows))], "watch": self._measure}
 
     def _outputs(self, result):
         measures, phases, _time, (influences, dsets) = result

@@ -2,7 +2,7 @@
 first multi-agent IALS of a real network, to measure what it costs against the GS.
 
 Every region (:mod:`ials_zoo.sumo_net.regions`) is cut from the network and all of them run side
-by side in one SUMO simulation (ids prefixed ``"<light>__"``); :class:`LocalNetEnv` is
+by side in one SUMO simulation (ids prefixed ``"<light>~"``); :class:`LocalNetEnv` is
 ``sumo_net_v0``'s ParallelEnv on it: the same agents, spaces, signal loop, observations and
 rewards (:class:`ials_zoo.sumo_net.core.NetCore`), each light acting on its own region.
 
@@ -32,7 +32,7 @@ from ials_zoo.sumo_net.core import NetCore
 from ials_zoo.sumo_net.env import SumoNetEnv
 from ials_zoo.sumo_net.names import SCENARIO_OPTIONS
 from ials_zoo.sumo_net.network import read_network
-from ials_zoo.sumo_net.regions import regions_of
+from ials_zoo.sumo_net.regions import region_prefix, regions_of
 from ials_zoo.sumo_net.replay import ReplayCore, cut_regions, vehicle_types
 from ials_zoo.sumo_net.scenario import scenario_of
 
@@ -88,8 +88,8 @@ class LocalNetCore(NetCore):
         for light, steps in self.influence.items():
             for vehicle, edges, lane, pos, _speed, vtype, factor in steps[int(self.rng.integers(len(steps)))]:
                 self.inserted += 1
-                name = f"{light}__{vehicle}__{self.inserted}"
-                raw.route_add(name, [f"{light}__{e}" for e in edges])
+                name = f"{region_prefix(light)}{vehicle}__{self.inserted}"
+                raw.route_add(name, [region_prefix(light) + e for e in edges])
                 raw.vehicle_add(name, name, vtype, "now", str(lane), str(max(pos, 0.0)), "max")
                 raw.vehicle_setSpeedFactor(name, factor)
 
@@ -108,7 +108,7 @@ class LocalNetCore(NetCore):
 
 class RegionsNetEnv(SumoNetEnv):
     """``sumo_net_v0`` on every light's region, all side by side in one SUMO simulation (ids
-    prefixed ``"<light>__"``): the GS's agents, spaces, signal loop, observations and rewards. A
+    prefixed ``"<light>~"``): the GS's agents, spaces, signal loop, observations and rewards. A
     subclass says how vehicles come in: what it records before SUMO starts (:meth:`_prepare`)
     and its core. ``episode_metrics()`` has only ``queue``: trip delays need the whole network."""
 
@@ -140,8 +140,8 @@ class RegionsNetEnv(SumoNetEnv):
         config.pop("regions", None)  # the GS's watched regions: these regions are the simulation
         ids = config["lights"]
         config.update(net_file=str(self._merged), route_files=[], extra=["--additional-files", str(self._vtypes)],
-                      lights=[f"{x}__{x}" for x in ids], controlled=[f"{x}__{x}" for x in config["controlled"]],
-                      lanes=[[f"{x}__{lane}" for lane in lanes] for x, lanes in zip(ids, config["lanes"])])
+                      lights=[region_prefix(x) + x for x in ids], controlled=[region_prefix(x) + x for x in config["controlled"]],
+                      lanes=[[region_prefix(x) + lane for lane in lanes] for x, lanes in zip(ids, config["lanes"])])
         return config
 
     def _finish(self) -> dict[str, float]:

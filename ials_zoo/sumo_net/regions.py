@@ -211,12 +211,26 @@ def netconvert(args: list[str], what: str, timeout: float = 120.0) -> None:
         raise RuntimeError(f"netconvert failed {what}: {proc.stderr.strip()[-500:]}")
 
 
+REGION_SEPARATOR = "~"
+
+
+def region_prefix(name: str) -> str:
+    """The prefix of one region's ids where several regions share one simulation. netconvert
+    leaves an id that already starts with its ``--prefix`` as it is, so the separator must be
+    one that networks' ids do not use: ``"__"`` failed on generated grids, whose roads are named
+    ``tls_0__tls_1``. SUMO's ids may hold ``~``."""
+    return f"{name}{REGION_SEPARATOR}"
+
+
 def cut_network(net_file: str, region: NetRegion, out_file: str | os.PathLike, timeout: float = 120.0,
                 prefix: str = "") -> Path:
     """Write ``region``'s edges as a network of their own (``netconvert --keep-edges.explicit``);
     the light and its program come along. ``prefix`` goes before every id (several regions in
     one simulation). Returns ``out_file``."""
     out_file = Path(out_file)
+    clash = [x for x in region.edges if prefix and x.startswith(prefix)]
+    if clash:  # netconvert would leave it unprefixed, and the simulation would ask for another id
+        raise ValueError(f"the road {clash[0]!r} of {net_file} already starts with the region prefix {prefix!r}")
     args = ["--sumo-net-file", str(net_file), "--keep-edges.explicit", ",".join(region.edges),
             "--output-file", str(out_file)] + (["--prefix", prefix] if prefix else [])
     netconvert(args, f"cutting the region of {region.light}", timeout)
@@ -225,4 +239,4 @@ def cut_network(net_file: str, region: NetRegion, out_file: str | os.PathLike, t
     return out_file
 
 
-__all__ = ["CHAIN_CAP_METRES", "EXIT_METRES", "SHORT_EXIT_METRES", "NetRegion", "cut_network", "edge_lanes", "netconvert", "network_size", "read_sumolib", "regions_of"]
+__all__ = ["CHAIN_CAP_METRES", "EXIT_METRES", "SHORT_EXIT_METRES", "NetRegion", "REGION_SEPARATOR", "cut_network", "edge_lanes", "netconvert", "network_size", "read_sumolib", "region_prefix", "regions_of"]

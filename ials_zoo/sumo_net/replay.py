@@ -39,7 +39,7 @@ from ials_zoo.sumo_net.core import _Signal
 from ials_zoo.sumo_net.mdp import wait_norm
 from ials_zoo.sumo_net.metrics import MAX_ROUTE_BYTES, iter_elements
 from ials_zoo.sumo_net.network import read_network
-from ials_zoo.sumo_net.regions import cut_network, netconvert
+from ials_zoo.sumo_net.regions import cut_network, netconvert, region_prefix
 
 MAX_DISTANCE = 200.0  # RESCO's detection (m), as the env's default
 
@@ -55,10 +55,10 @@ def vehicle_types(route_files, out: Path) -> Path:
 
 
 def cut_regions(net_file: str, regions: dict, folder: Path, timeout: float = 600.0) -> Path:
-    """Every region cut from ``net_file`` (ids prefixed ``"<light>__"``) and merged into one
+    """Every region cut from ``net_file`` (ids prefixed :func:`~ials_zoo.sumo_net.regions.region_prefix`) and merged into one
     network in ``folder``; returns its path."""
     folder = Path(folder)
-    cuts = [str(cut_network(net_file, r, folder / f"region_{i}.net.xml", prefix=f"{light}__"))
+    cuts = [str(cut_network(net_file, r, folder / f"region_{i}.net.xml", prefix=region_prefix(light)))
             for i, (light, r) in enumerate(regions.items())]
     merged = folder / "regions.net.xml"
     netconvert(["--sumo-net-file", ",".join(cuts), "--output-file", str(merged)], "merging the regions", timeout)
@@ -201,8 +201,8 @@ class ReplayCore:
                 t0 = time.perf_counter()
                 for light, x, edges, lane, pos, _speed, vtype, factor in step:
                     n += 1
-                    ls.route.add(f"r{n}", [f"{light}__{e}" for e in edges])
-                    vid = f"{light}__{x}__{n}"
+                    ls.route.add(f"r{n}", [region_prefix(light) + e for e in edges])
+                    vid = f"{region_prefix(light)}{x}__{n}"
                     ls.vehicle.add(vid, f"r{n}", typeID=vtype, depart="now", departLane=str(lane),
                                    departPos=str(max(pos, 0.0)), departSpeed="max")
                     ls.vehicle.setSpeedFactor(vid, factor)
@@ -312,8 +312,8 @@ def _sumo_replay(sim, scenario, regions: dict, lights: list, entries, folder: Pa
     """The SUMO regions' replay of ``entries`` as a function of the seed (:func:`replay_arrays`'s result)."""
     merged = cut_regions(scenario.net_file, regions, folder)
     vtypes = vehicle_types(scenario.route_files, folder / "vtypes.add.xml")
-    local_lanes = [f"{x.id}__{lane}" for x in lights for lane in x.lanes]
-    local_signals = [([f"{x.id}__{lane}" for lane in x.lanes], x.lane_lengths) for x in lights]
+    local_lanes = [region_prefix(x.id) + lane for x in lights for lane in x.lanes]
+    local_signals = [([region_prefix(x.id) + lane for lane in x.lanes], x.lane_lengths) for x in lights]
 
     def replay(seed: int):
         states, measures = sim.call("replay", merged, [vtypes], scenario.begin, entries, local_lanes, local_signals,
