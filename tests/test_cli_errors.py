@@ -92,6 +92,13 @@ CASES = [
     (["train", "ippo", "--env", "sumo_net_v0", "--train-reward", "speed", "--out-dir", "{d}/r"], "wait_scaled"),
     (["train", "shared_ppo", "--env", "warehouse_v0", "--recurrent-hidden", "8", "--out-dir", "{d}/r"],
      "--recurrent-hidden"),
+    (["train", "shared_ppo", "--env", "sumo_net_v0", "--imitate", "maxwave", "--out-dir", "{d}/r"], "--imitate"),
+    (["train", "shared_ppo", "--env", "sumo_net_v0", "--imitate", "fixed", "--out-dir", "{d}/r"], "cannot be read"),
+    (["train", "ippo", "--env", "sumo_net_v0", "--imitate-episodes", "2", "--out-dir", "{d}/r"], "needs --imitate"),
+    (["train", "ippo", "--env", "sumo_net_v0", "--imitate", "greedy", "--imitate-episodes", "0", "--out-dir",
+      "{d}/r"], "--imitate-episodes"),
+    (["train", "ippo", "--env", "sumo_net_v0", "--imitate", "greedy", "--frame-stack", "2", "--out-dir", "{d}/r"],
+     "--frame-stack 1"),
     (["evaluate", "--env", "sumo_net_v0", "--joint", "--policy", "rule:maxwave"], "rule:greedy"),
     (["evaluate", "--env", "sumo_net_v0", "--policy", "rule:greedy"], "--joint"),
 ]

@@ -349,3 +349,23 @@ def test_the_trainer_replays_a_saved_episode_to_the_same_state():
     np.testing.assert_array_equal(second.x, first.x)
     with pytest.raises(ValueError, match="unseeded"):
         RolloutTrainer(BatchedPPO(AGENTS, 37, 4, cfg), GSVecEnv(ENV, AGENTS, 2, **OPTIONS)).restore(saved)
+
+
+def test_a_run_warm_started_from_a_rule_records_its_fit_and_resumes_bitwise(tmp_path, monkeypatch):
+    """``--imitate greedy`` (ials_zoo.baselines.imitation) on cologne3's three lights reading
+    greedy's own count: the fitted actors make greedy's choices, the run records the fit, and a
+    resume (past the warm start) neither fits again nor ends elsewhere."""
+    from ials_zoo.baselines import shared_ppo
+
+    kwargs = dict(IPPO, env_id="sumo_net_v0", agents="all", total_timesteps=384, eval_every=128,
+                  env_options=json.dumps({"net": "cologne3", "max_cycles": 30, "observation": "wave"}),
+                  imitate="greedy", imitate_episodes=1, final_eval_episodes=1)
+    whole = shared_ppo.main(shared_ppo.Args(**kwargs, out_dir=str(tmp_path / "whole"))), tmp_path / "whole"
+    resumed = _stopped_and_resumed(monkeypatch, shared_ppo, tmp_path / "resumed", kwargs)
+    assert_same_run(whole, resumed)
+    fit, again = (dict(r[0]["training"]["imitation"]) for r in (whole, resumed))
+    assert fit.pop("seconds") > 0 and again.pop("seconds") > 0 and fit == again  # the clock is not bitwise
+    # 90 choices of small counts (over 28) for 16 hidden units: 0.78 (a uniform choice: about 0.4;
+    # the study's fits, 720 decisions of 64 units, make 0.999)
+    assert fit["rule"] == "greedy" and fit["decisions"] == 30 and fit["agreement"] > 0.7, fit
+    assert "--imitate greedy --imitate-episodes 1" in whole[0]["training"]["reproduce"]["command"]

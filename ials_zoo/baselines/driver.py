@@ -230,7 +230,7 @@ class CopiesLearner(JointActors):
             self.env.close()
 
 
-LATER_OPTIONS = ("train_reward",)
+LATER_OPTIONS = ("train_reward", "imitate", "imitate_episodes")
 """Arguments added after runs were on the board: left out of a run's record at their default
 (None), so that re-training an older entry still makes its policy file bit for bit."""
 

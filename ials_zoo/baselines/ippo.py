@@ -26,6 +26,7 @@ import torch
 
 from ials_zoo.baselines.arguments import arg, run_cli
 from ials_zoo.baselines.driver import CopiesLearner, check_run_args, gs_run_plan, run
+from ials_zoo.baselines.imitation import imitation_of, warm_start
 from ials_zoo.baselines.multiagent import (
     MultiAgentRunArgs,
     check_multi_ppo,
@@ -52,6 +53,11 @@ class Args(MultiAgentRunArgs):
     simulator: str = arg("gs", "gs (IPPO trains on the GS; for IALS use `train dials`)")
     train_reward: str | None = arg(None, "learn from this reward of the domain, in training only (e.g. sumo_net_v0's "
                                    "wait_scaled: wait_norm without its clip); the policy is scored on the protocol's")
+    imitate: str | None = arg(None, "warm start: before PPO, fit the actors to this rule of the domain's (e.g. "
+                              "sumo_net_v0's greedy) over --imitate-episodes GS episodes of its choices "
+                              "(ials_zoo.baselines.imitation)")
+    imitate_episodes: int | None = arg(None, "GS episodes of the rule's choices that --imitate fits "
+                                       "(default: 2; counted as training time)")
     n_envs: int = arg(2, "GS copies")
     gs_processes: int | None = arg(None, "worker processes of the GS copies (default: one per copy for SUMO, else 0)")
     out_dir: str | None = arg(None, "output folder (default: runs/<env>__ippo__s<seed>)")
@@ -76,6 +82,7 @@ def check_args(args: Args):
     if processes < 0:
         raise BadInput(f"gs_processes must be >= 0, got {processes}")
     train_options_of(args, domain, options)
+    imitation_of(domain, args.imitate, args.imitate_episodes, frame_stack_of(args, domain), args.recurrent_hidden)
     return domain, agents, options, processes
 
 
@@ -85,9 +92,11 @@ class GSCopiesLearner(CopiesLearner):
     of each agent at a time."""
 
     def __init__(self, env_id, agents, options, copies, processes, ppo, frame_stack, seed, updates, sizes,
-                 learner_cls=BatchedPPO, train_options=None):
+                 learner_cls=BatchedPPO, train_options=None, imitation=None, training=None):
         # the GS copies learn under the options plus a training reward of their own, if any
         self._setup(env_id, agents, {**options, **(train_options or {})}, copies, processes, frame_stack, seed, sizes)
+        # a warm start from a rule (--imitate), recorded into the run's training record
+        self.imitation, self.training, self.imitated = imitation, training, None
         self.per_update = ppo["n_steps"] * ppo["n_envs"]
         self.learner = learner_cls(agents, self.obs_size * frame_stack, self.n_actions, PPOConfig(**ppo), seed,
                                    updates, action_counts=self.action_counts)
@@ -97,6 +106,22 @@ class GSCopiesLearner(CopiesLearner):
 
     def actor_layers(self):
         return self.learner.actor_layers()
+
+    def before_training(self, steps, total, policy, note):
+        """At the very start, the warm start from a rule (``--imitate``), if asked for."""
+        if self.imitation is None or steps > 0 or self.imitated is not None:
+            return
+        self.imitated = warm_start(self.learner, self.imitation, self.agents, self.options, self.seed, self.obs_size)
+        self.training["imitation"] = self.imitated
+
+    def load(self, state, info):
+        super().load(state, info)
+        if state is not None and state.get("imitation") is not None:
+            self.imitated = self.training["imitation"] = state["imitation"]
+
+    def checkpoint(self, out):
+        state, info = super().checkpoint(out)
+        return dict(state, imitation=self.imitated), info
 
     def train(self, steps, target, advance):
         stats = []
@@ -124,8 +149,10 @@ def main(args: Args | None = None, algorithm: str = "ippo", learner_cls=BatchedP
     train_options = train_options_of(args, domain, options)
     extra = {"ppo": ppo, **({"train_options": train_options} if train_options else {})}
     plan = gs_run_plan(algorithm, args, agents, options, total, per_update, frame_stack, processes, extra)
+    imitation = imitation_of(domain, args.imitate, args.imitate_episodes, frame_stack, args.recurrent_hidden)
     learner = GSCopiesLearner(args.env_id, agents, options, args.n_envs, processes, ppo, frame_stack, args.seed,
-                              total // per_update, joint_sizes(domain, agents, options), learner_cls, train_options)
+                              total // per_update, joint_sizes(domain, agents, options), learner_cls, train_options,
+                              imitation, plan.training)
     copies = f"{args.n_envs} GS cop{'ies' if args.n_envs > 1 else 'y'}"
     return run(plan, learner, f"{algorithm}: {len(agents)} agents of {args.env_id} learn at once on the GS ({copies}, "
                f"{processes} worker process{'es' if processes != 1 else ''})", domain)

@@ -229,10 +229,7 @@ class BatchedPPO:
 
     def forward(self, x):
         """``x [A, B, padded input]`` -> ``(logits [A, B, n_actions], values [A, B])``."""
-        logits = self._mlp("pi", x)[..., :self.n_actions]
-        if self._mask is not None:
-            logits = logits + self._mask
-        return logits, self._mlp("vf", x)[..., 0]
+        return self._logits(x), self._mlp("vf", x)[..., 0]
 
     def act(self, obs: np.ndarray):
         """``obs [A, n_envs, input]`` -> ``(actions, values, log-probabilities)``, each ``[A, n_envs]``."""
@@ -254,6 +251,42 @@ class BatchedPPO:
 
         with torch.no_grad():
             return self._mlp("vf", self._input(obs))[..., 0].numpy()
+
+    # -- a warm start
+    def imitate(self, obs, actions, updates: int, seed: int) -> dict:
+        """Fit the actors to ``actions [A, N]`` chosen at ``obs [A, N, input]``: cross-entropy in
+        ``updates`` minibatches of ``batch_size`` (whole epochs, shuffled), with an Adam of its own
+        at the PPO's learning rate (a warm start from a rule:
+        :mod:`ials_zoo.baselines.imitation`). The critics and PPO's optimiser are left as they
+        are. Returns the last epoch's mean loss and ``agreement``, the share of the given choices
+        that the actors' likeliest action now makes."""
+        import torch
+
+        if self.recurrent:
+            raise BadInput("imitation fits actors that read one observation: recurrent_hidden must be 0")
+        x, chosen = self._input(obs), torch.from_numpy(np.asarray(actions, np.int64))
+        A, N = chosen.shape
+        opt = torch.optim.Adam([v for k, v in self.params.items() if k.startswith("pi.")], lr=self.cfg.learning_rate,
+                               eps=1e-5)
+        rng, rows, bs = np.random.default_rng(seed), torch.arange(A)[:, None], min(self.cfg.batch_size, N)
+        for _ in range(max(1, -(-int(updates) // -(-N // bs)))):
+            perm, losses = torch.from_numpy(np.stack([rng.permutation(N) for _ in range(A)])), []
+            for start in range(0, N, bs):
+                idx = perm[:, start:start + bs]
+                logp = torch.log_softmax(self._logits(x[rows, idx]), dim=-1)
+                per_agent = -logp.gather(-1, chosen[rows, idx][..., None])[..., 0].mean(dim=1)
+                loss = self._total(per_agent)
+                opt.zero_grad(set_to_none=True)
+                loss.backward()
+                opt.step()
+                losses.append(per_agent.mean().item())
+        with torch.no_grad():
+            agreement = (self._logits(x).argmax(dim=-1) == chosen).float().mean().item()
+        return {"loss": float(np.mean(losses)), "agreement": agreement}
+
+    def _logits(self, x):
+        logits = self._mlp("pi", x)[..., :self.n_actions]
+        return logits if self._mask is None else logits + self._mask
 
     # -- update
     def update(self, obs, actions, logp_old, returns, advantages, values_old) -> dict:
