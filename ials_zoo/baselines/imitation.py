@@ -5,6 +5,9 @@ while every agent's own observation is recorded, as the learner reads it (zero-p
 widest agent). The actors are then fitted to the rule's choices by cross-entropy
 (:meth:`ials_zoo.learners.batched_ppo.BatchedPPO.imitate`). The learner starts where the rule
 is, and PPO has to improve on it: the curve's first point scores the fitted actors. The
+critics are fitted to the rule's discounted returns too, in the units PPO's critic learns (the
+learner's reward scale, which keeps the demonstrations' statistics): an untrained critic's
+first advantages are noise that PPO's first updates would write into the fitted actors. The
 demonstrations and the fit count as training time.
 
 Why: on RESCO's maps a learner that reads greedy's own count (``sumo_net_v0``'s ``wave``
@@ -63,10 +66,11 @@ def imitation_of(domain, name: str | None, episodes: int | None, frame_stack: in
 
 
 def rule_demonstrations(domain, rule, agents: list, options: dict, episodes: int, seed: int, width: int):
-    """``(obs [A, N, width], actions [A, N])``: every decision of ``episodes`` GS episodes
-    (seeds derived from ``seed``) with ``rule`` choosing for every agent."""
+    """``(obs [A, N, width], actions [A, N], rewards [A, N], ends [N])``: every decision of
+    ``episodes`` GS episodes (seeds derived from ``seed``) with ``rule`` choosing for every
+    agent; ``ends[t]``: an episode ended after decision ``t``."""
     env = domain.parallel_env(learners=agents, **options, **rule.env_options)
-    observed, chosen = [], []
+    observed, chosen, rewards, ends = [], [], [], []
     try:
         controller = rule.make(env)
         for k in range(episodes):
@@ -75,10 +79,32 @@ def rule_demonstrations(domain, rule, agents: list, options: dict, episodes: int
                 actions = controller(env)
                 observed.append(stack_observations(obs, agents, width))
                 chosen.append([actions[a] for a in agents])
-                obs, *_ = env.step(actions)
+                obs, reward, *_ = env.step(actions)
+                rewards.append([reward[a] for a in agents])
+                ends.append(not env.agents)
     finally:
         env.close()
-    return np.stack(observed, axis=1), np.asarray(chosen, np.int64).T
+    return np.stack(observed, axis=1), np.asarray(chosen, np.int64).T, np.asarray(rewards, float).T, np.asarray(ends)
+
+
+def scaled_returns(learner, rewards: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """``[A, N]``: the discounted return from each decision of the demonstrations, in the units
+    PPO's critic learns: each reward over the running deviation of the discounted return, with
+    the learner's own reward scale (:class:`~ials_zoo.learners.batched_ppo.RewardScale`), which
+    keeps these statistics so that its first rollouts are scaled as the demonstrations were."""
+    cfg, scale = learner.cfg, learner.reward_scale
+    scaled = rewards.copy()
+    if cfg.normalize_reward:
+        running = scale.returns
+        scale.returns = np.zeros((rewards.shape[0], 1))
+        for t in range(rewards.shape[1]):
+            scaled[:, t] = scale(rewards[:, t:t + 1], bool(ends[t]))[:, 0]
+        scale.returns = np.zeros_like(running)
+    out, future = np.zeros_like(scaled), np.zeros(rewards.shape[0])
+    for t in reversed(range(rewards.shape[1])):
+        future = scaled[:, t] + (0.0 if ends[t] else cfg.gamma * future)
+        out[:, t] = future
+    return out
 
 
 def warm_start(learner, imitation: Imitation, agents: list, options: dict, seed: int, width: int) -> dict:
@@ -88,10 +114,13 @@ def warm_start(learner, imitation: Imitation, agents: list, options: dict, seed:
     started = time.perf_counter()
     print(f"imitating {rule_name}: {episodes} GS episode{'s' if episodes > 1 else ''} of its choices, then "
          f"{UPDATES} updates of cross-entropy ...", flush=True)
-    obs, actions = rule_demonstrations(imitation.domain, imitation.rule, agents, options, episodes, seed, width)
-    fit = learner.imitate(obs, actions, UPDATES, derived_seed(seed, "imitation-fit"))
+    obs, actions, rewards, ends = rule_demonstrations(imitation.domain, imitation.rule, agents, options, episodes,
+                                                      seed, width)
+    fit = learner.imitate(obs, actions, UPDATES, derived_seed(seed, "imitation-fit"),
+                          returns=scaled_returns(learner, rewards, ends))
     record = {"rule": rule_name, "episodes": episodes, "decisions": int(actions.shape[1]), "updates": UPDATES,
-              "loss": round(fit["loss"], 6), "agreement": round(fit["agreement"], 6),
+              "loss": round(fit["loss"], 6), "value_loss": round(fit["value_loss"], 6),
+              "agreement": round(fit["agreement"], 6),
               "seconds": round(time.perf_counter() - started, 3)}
     print(f"imitated {rule_name}: the actors now choose as it does at {fit['agreement']:.1%} of its "
          f"{actions.size:,} choices ({record['seconds']:.0f} s)", flush=True)
@@ -99,4 +128,4 @@ def warm_start(learner, imitation: Imitation, agents: list, options: dict, seed:
 
 
 __all__ = ["DEFAULT_EPISODES", "UPDATES", "Imitation", "MAX_EPISODES", "imitation_of", "rule_demonstrations",
-           "warm_start"]
+           "scaled_returns", "warm_start"]

@@ -253,36 +253,45 @@ class BatchedPPO:
             return self._mlp("vf", self._input(obs))[..., 0].numpy()
 
     # -- a warm start
-    def imitate(self, obs, actions, updates: int, seed: int) -> dict:
+    def imitate(self, obs, actions, updates: int, seed: int, returns=None) -> dict:
         """Fit the actors to ``actions [A, N]`` chosen at ``obs [A, N, input]``: cross-entropy in
         ``updates`` minibatches of ``batch_size`` (whole epochs, shuffled), with an Adam of its own
         at the PPO's learning rate (a warm start from a rule:
-        :mod:`ials_zoo.baselines.imitation`). The critics and PPO's optimiser are left as they
-        are. Returns the last epoch's mean loss and ``agreement``, the share of the given choices
-        that the actors' likeliest action now makes."""
+        :mod:`ials_zoo.baselines.imitation`). With ``returns [A, N]`` (the rule's returns from
+        each observation, in the reward scale's units) the critics are fitted to them too, by the
+        squared error; else they are left as they are. PPO's optimiser is left as it is. Returns
+        the last epoch's mean cross-entropy (``loss``), squared error (``value_loss``, with
+        ``returns``) and ``agreement``, the share of the given choices that the actors' likeliest
+        action now makes."""
         import torch
 
         if self.recurrent:
             raise BadInput("imitation fits actors that read one observation: recurrent_hidden must be 0")
         x, chosen = self._input(obs), torch.from_numpy(np.asarray(actions, np.int64))
+        target = None if returns is None else torch.from_numpy(np.asarray(returns, np.float32))
         A, N = chosen.shape
-        opt = torch.optim.Adam([v for k, v in self.params.items() if k.startswith("pi.")], lr=self.cfg.learning_rate,
+        heads = ("pi.",) if target is None else ("pi.", "vf.")
+        opt = torch.optim.Adam([v for k, v in self.params.items() if k.startswith(heads)], lr=self.cfg.learning_rate,
                                eps=1e-5)
         rng, rows, bs = np.random.default_rng(seed), torch.arange(A)[:, None], min(self.cfg.batch_size, N)
         for _ in range(max(1, -(-int(updates) // -(-N // bs)))):
-            perm, losses = torch.from_numpy(np.stack([rng.permutation(N) for _ in range(A)])), []
+            perm, losses, errors = torch.from_numpy(np.stack([rng.permutation(N) for _ in range(A)])), [], []
             for start in range(0, N, bs):
                 idx = perm[:, start:start + bs]
                 logp = torch.log_softmax(self._logits(x[rows, idx]), dim=-1)
                 per_agent = -logp.gather(-1, chosen[rows, idx][..., None])[..., 0].mean(dim=1)
-                loss = self._total(per_agent)
-                opt.zero_grad(set_to_none=True)
-                loss.backward()
-                opt.step()
                 losses.append(per_agent.mean().item())
+                if target is not None:
+                    error = ((self._mlp("vf", x[rows, idx])[..., 0] - target[rows, idx]) ** 2).mean(dim=1)
+                    errors.append(error.mean().item())
+                    per_agent = per_agent + self.cfg.vf_coef * error
+                opt.zero_grad(set_to_none=True)
+                self._total(per_agent).backward()
+                opt.step()
         with torch.no_grad():
             agreement = (self._logits(x).argmax(dim=-1) == chosen).float().mean().item()
-        return {"loss": float(np.mean(losses)), "agreement": agreement}
+        return {"loss": float(np.mean(losses)), "agreement": agreement,
+                **({"value_loss": float(np.mean(errors))} if errors else {})}
 
     def _logits(self, x):
         logits = self._mlp("pi", x)[..., :self.n_actions]

@@ -9,12 +9,16 @@ fidelity (the replay contract) and cost as the number of lights grows (issue 50)
            light's IALS on SUMO regions, on arrays with 1 and with 64 copies in one batch, the
            first DECISIONS decisions of the hour, interleaved turns -> results/cost_<net>.json
   plot     results/cost_*.json as µs per agent-decision against lights, log-log -> cost.png
+  fidelity open loop: `ials-zoo fidelity --predictor on-policy` on each local simulator (SUMO
+           regions, arrays), the same GS episodes and the same on-policy AIPs' data, under
+           random lights, a fixed-time cycle (cycle:3) and any --policy-files -> results/
+           fidelity_<net>.json (both reports) and fidelity_<net>.md
 
 Each result file is written whole when its part ends; a part whose file exists is skipped
 (resumable). Each names the commit it ran at.
 
-Usage: python studies/arrays_local/run.py replay|cost|plot [--nets cologne8,ingolstadt21]
-       [--seconds 3600] [--decisions 120] [--repeats 3]
+Usage: python studies/arrays_local/run.py replay|cost|plot|fidelity [--nets cologne8,ingolstadt21]
+       [--seconds 3600] [--decisions 120] [--repeats 3] [--episodes 10] [--policy-files A,B]
 """
 
 from __future__ import annotations
@@ -72,6 +76,21 @@ def cost(net: str, decisions: int, repeats: int) -> dict:
     return dict(row, commit=commit(), bytes_per_copy={str(k): v for k, v in row["bytes_per_copy"].items()})
 
 
+def fidelity(net: str, episodes: int, policy_files: list[str]) -> tuple[dict, str]:
+    from ials_zoo.influence.fidelity import fidelity_report, markdown
+
+    policies = ["random", "cycle:3", *policy_files]
+    out, text = {"net": net, "episodes": episodes, "policies": policies, "commit": commit()}, []
+    for local in ("sumo", "arrays"):
+        start = time.perf_counter()
+        report = fidelity_report("sumo_net_v0", policies, episodes=episodes, predictor="on-policy",
+                                 ials_options={"local": local}, net=net)
+        plain = json.loads(json.dumps(report, default=lambda x: x.tolist() if hasattr(x, "tolist") else str(x)))
+        out[local] = dict(plain, wall_s=time.perf_counter() - start)
+        text += [f"## {local}", "", markdown(report), ""]
+    return out, "\n".join(text)
+
+
 def plot(out: Path) -> None:
     import matplotlib
 
@@ -106,11 +125,13 @@ def plot(out: Path) -> None:
 
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("part", choices=("replay", "cost", "plot"))
+    parser.add_argument("part", choices=("replay", "cost", "plot", "fidelity"))
     parser.add_argument("--nets", default="cologne8,ingolstadt21")
     parser.add_argument("--seconds", type=int, default=3600)
     parser.add_argument("--decisions", type=int, default=120)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--episodes", type=int, default=10, help="fidelity: episodes per policy and simulator")
+    parser.add_argument("--policy-files", default="", help="fidelity: learned joint policies, comma-separated")
     args = parser.parse_args(argv)
     if args.part == "plot":
         plot(HERE / "cost.png")
@@ -120,7 +141,12 @@ def main(argv=None) -> None:
         if path.is_file():
             print(f"done: {path}")
             continue
-        data = replay(net, args.seconds) if args.part == "replay" else cost(net, args.decisions, args.repeats)
+        if args.part == "fidelity":
+            files = [x.strip() for x in args.policy_files.split(",") if x.strip()]
+            data, text = fidelity(net, args.episodes, [f.replace("{net}", net) for f in files])
+            (RESULTS / f"fidelity_{net}.md").write_text(f"commit {data['commit']}\n\n{text}\n")
+        else:
+            data = replay(net, args.seconds) if args.part == "replay" else cost(net, args.decisions, args.repeats)
         _write(path, data)
 
 
