@@ -31,6 +31,8 @@ MAX_EPISODES = 100  # RESCO's whole budget per light: more is a typo, not a warm
 # minibatch updates of the fit: on cologne8 (wave, 2 episodes, minibatches of 128) 180 fit 81% of
 # greedy's choices and 600 fit 99.9%
 UPDATES = 600
+# the fit's own rate, whatever PPO's (a run that fine-tunes slowly still fits the rule whole)
+LEARNING_RATE = 1e-3
 
 
 @dataclass(frozen=True)
@@ -117,7 +119,7 @@ def warm_start(learner, imitation: Imitation, agents: list, options: dict, seed:
     obs, actions, rewards, ends = rule_demonstrations(imitation.domain, imitation.rule, agents, options, episodes,
                                                       seed, width)
     fit = learner.imitate(obs, actions, UPDATES, derived_seed(seed, "imitation-fit"),
-                          returns=scaled_returns(learner, rewards, ends))
+                          returns=scaled_returns(learner, rewards, ends), learning_rate=LEARNING_RATE)
     record = {"rule": rule_name, "episodes": episodes, "decisions": int(actions.shape[1]), "updates": UPDATES,
               "loss": round(fit["loss"], 6), "value_loss": round(fit["value_loss"], 6),
               "agreement": round(fit["agreement"], 6),
@@ -127,5 +129,5 @@ def warm_start(learner, imitation: Imitation, agents: list, options: dict, seed:
     return record
 
 
-__all__ = ["DEFAULT_EPISODES", "UPDATES", "Imitation", "MAX_EPISODES", "imitation_of", "rule_demonstrations",
+__all__ = ["DEFAULT_EPISODES", "LEARNING_RATE", "UPDATES", "Imitation", "MAX_EPISODES", "imitation_of", "rule_demonstrations",
            "scaled_returns", "warm_start"]

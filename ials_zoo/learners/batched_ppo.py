@@ -253,10 +253,10 @@ class BatchedPPO:
             return self._mlp("vf", self._input(obs))[..., 0].numpy()
 
     # -- a warm start
-    def imitate(self, obs, actions, updates: int, seed: int, returns=None) -> dict:
+    def imitate(self, obs, actions, updates: int, seed: int, returns=None, learning_rate: float | None = None) -> dict:
         """Fit the actors to ``actions [A, N]`` chosen at ``obs [A, N, input]``: cross-entropy in
         ``updates`` minibatches of ``batch_size`` (whole epochs, shuffled), with an Adam of its own
-        at the PPO's learning rate (a warm start from a rule:
+        at ``learning_rate`` (default: the PPO's) (a warm start from a rule:
         :mod:`ials_zoo.baselines.imitation`). With ``returns [A, N]`` (the rule's returns from
         each observation, in the reward scale's units) the critics are fitted to them too, by the
         squared error; else they are left as they are. PPO's optimiser is left as it is. Returns
@@ -271,8 +271,8 @@ class BatchedPPO:
         target = None if returns is None else torch.from_numpy(np.asarray(returns, np.float32))
         A, N = chosen.shape
         heads = ("pi.",) if target is None else ("pi.", "vf.")
-        opt = torch.optim.Adam([v for k, v in self.params.items() if k.startswith(heads)], lr=self.cfg.learning_rate,
-                               eps=1e-5)
+        opt = torch.optim.Adam([v for k, v in self.params.items() if k.startswith(heads)],
+                               lr=learning_rate or self.cfg.learning_rate, eps=1e-5)
         rng, rows, bs = np.random.default_rng(seed), torch.arange(A)[:, None], min(self.cfg.batch_size, N)
         for _ in range(max(1, -(-int(updates) // -(-N // bs)))):
             perm, losses, errors = torch.from_numpy(np.stack([rng.permutation(N) for _ in range(A)])), [], []
