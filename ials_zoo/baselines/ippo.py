@@ -54,7 +54,7 @@ class Args(MultiAgentRunArgs):
     train_reward: str | None = arg(None, "learn from this reward of the domain, in training only (e.g. sumo_net_v0's "
                                    "wait_scaled: wait_norm without its clip); the policy is scored on the protocol's")
     imitate: str | None = arg(None, "warm start: before PPO, fit the actors to this rule of the domain's (e.g. "
-                              "sumo_net_v0's greedy) over --imitate-episodes GS episodes of its choices "
+                              "greedy, on a SUMO network) over --imitate-episodes GS episodes of its choices "
                               "(ials_zoo.baselines.imitation)")
     imitate_episodes: int | None = arg(None, "GS episodes of the rule's choices that --imitate fits "
                                        "(default: 2; counted as training time)")
