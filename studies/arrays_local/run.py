@@ -102,7 +102,7 @@ def plot(out: Path) -> None:
         raise SystemExit(f"no cost_*.json under {RESULTS}: run `cost` first")
     fig, ax = plt.subplots(figsize=(7, 4.5))
     series = [("GS (SUMO, whole network)", "gs_us"),
-              ("every light's IALS, SUMO regions (they fail on the generated grids)", "sumo_regions_us"),
+              ("every light's IALS, SUMO regions (on grids since f55f700: grid10x10 measured)", "sumo_regions_us"),
               ("IALS on arrays, 1 copy", "arrays_1_us"), ("IALS on arrays, 64 copies (per copy)", "arrays_64_us")]
     for label, key in series:
         have = [r for r in rows if r.get(key)]
