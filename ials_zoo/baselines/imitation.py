@@ -25,6 +25,7 @@ import numpy as np
 from ials_zoo.core.spaces import stack_observations
 from ials_zoo.core.streams import derived_seed
 from ials_zoo.errors import BadInput
+from ials_zoo.learners.batched_ppo import gae
 
 DEFAULT_EPISODES = 2
 MAX_EPISODES = 100  # RESCO's whole budget per light: more is a typo, not a warm start
@@ -46,9 +47,9 @@ class Imitation:
 
 
 def imitation_of(domain, name: str | None, episodes: int | None, frame_stack: int, recurrent_hidden: int):
-    """The :class:`Imitation` that ``--imitate`` asks for, or None; clear errors naming the flag for a rule the domain lacks, one whose choices cannot be read (the
-    GS's own controller drives it), a count out of range, and a learner that reads more than
-    one observation."""
+    """The :class:`Imitation` that ``--imitate`` asks for, or None; clear errors naming the flag
+    for a rule the domain lacks, one whose choices cannot be read (the GS's own controller drives
+    it), a count out of range, and a learner that reads more than one observation."""
     if name is None:
         if episodes is not None:
             raise BadInput("--imitate-episodes needs --imitate RULE")
@@ -102,11 +103,10 @@ def scaled_returns(learner, rewards: np.ndarray, ends: np.ndarray) -> np.ndarray
         for t in range(rewards.shape[1]):
             scaled[:, t] = scale(rewards[:, t:t + 1], bool(ends[t]))[:, 0]
         scale.returns = np.zeros_like(running)
-    out, future = np.zeros_like(scaled), np.zeros(rewards.shape[0])
-    for t in reversed(range(rewards.shape[1])):
-        future = scaled[:, t] + (0.0 if ends[t] else cfg.gamma * future)
-        out[:, t] = future
-    return out
+    # returns to go: GAE with lambda 1 over a critic of zeros ([T, A, 1], as the rollouts' arrays)
+    zeros = np.zeros((scaled.shape[1], scaled.shape[0], 1))
+    _, returns = gae(scaled.T[:, :, None], zeros, np.asarray(ends, float), zeros[0], cfg.gamma, 1.0)
+    return returns[:, :, 0].T
 
 
 def warm_start(learner, imitation: Imitation, agents: list, options: dict, seed: int, width: int) -> dict:
