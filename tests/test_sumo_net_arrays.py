@@ -147,6 +147,33 @@ def test_the_dsets_are_the_vehicle_by_vehicle_reference(cologne8):
     assert core.sim.inserted > 200 and blocked_some
 
 
+def test_the_pools_order_and_lane_counts_are_recomputed_references_every_second(cologne8):
+    """The simulator keeps its vehicles sorted (lane, then front first) by merging only those
+    that changed lane or came in, and counts the vehicles per lane as they move: every second,
+    over two copies of every region flooded with entries and exits blocked, the order is a
+    fresh sort's and the counts a fresh bincount's."""
+    lights = read_network(cologne8.net_file).lights
+    ids = [x.id for x in lights]
+    tables = entry_tables(cologne8, ids)
+    core = ArrayNetCore(cologne8.net_file, cologne8.route_files, cologne8.begin, cologne8.decision_seconds,
+                        cologne8.yellow_seconds, ids, [x.lanes for x in lights], [tables[x] for x in ids], copies=2)
+    layouts = [region_layout(cologne8.net_file, x) for x in ids]
+    rng = np.random.default_rng(2)
+    core.reset(4)
+    sim, crossed = core.sim, 0
+    for _ in range(20):
+        influences = [np.concatenate([rng.integers(0, 2, size=cologne8.decision_seconds * len(x.points)),
+                                      rng.random(len(x.exits)) < 0.2]).astype(np.int64) for x in layouts * 2]
+        core.step([int(rng.integers(x.n_actions)) for _ in range(2) for x in lights], influences)
+        v = sim.v
+        assert np.array_equal(sim._on_lane, np.bincount(v.lane[v.alive], minlength=len(sim.length)))
+        n = sim._sort_pool()
+        assert v.alive[:n].all() and not v.alive[n:].any()
+        assert np.array_equal(np.lexsort((-v.pos[:n], v.lane[:n])), np.arange(n))
+        crossed = max(crossed, int((v.came[:n] >= 0).sum()))
+    assert sim.inserted > 300 and crossed > 50  # many came in, many changed lanes
+
+
 def test_the_ials_on_arrays_runs_without_sumo_and_leaves_the_lease_free():
     """IALSNetEnv(local="arrays") steps an episode slice in this process without taking the
     process's SUMO lease (a GS can still start here), with the SUMO regions' spaces and region data."""

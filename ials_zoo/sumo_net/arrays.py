@@ -7,8 +7,10 @@ SUMO stays the GS and the judge; this is a local simulator of the regions
 SUMO's where that costs nothing and simpler where it would cost a loop per vehicle:
 
 * **vehicles** in a pool of arrays (lane, position of the front, speed, route step, kind, speed
-  factor, waiting time); each second they are sorted by lane and position, so that every
-  vehicle's leader is its neighbour in the order;
+  factor, waiting time), kept sorted by lane and position, so that every vehicle's leader is its
+  neighbour in the order: as no vehicle passes its leader, each second only those that came in
+  or changed lane are sorted and merged in, and the pool is reordered so that its first slots
+  hold the vehicles in that order (reading a field is a slice, not a gather);
 * **car following** is SUMO's default, Krauss, without a loop: each vehicle's speed is the
   least of its last speed plus its acceleration, its lane's limit times its speed factor (or its
   kind's top speed), and the safe speed behind its leader (``-b + sqrt(b^2 + v_l^2 + 2 b gap)``,
@@ -52,7 +54,8 @@ FREE_SECONDS = 4.0  # no foe within this much more: a minor link's vehicle need 
 FIELDS = {"alive": bool, "lane": np.int64, "pos": np.float64, "speed": np.float64, "step": np.int64,
           "cand": np.int64, "next_cand": np.int64, "length": np.float64, "gap": np.float64, "accel": np.float64,
           "decel": np.float64, "top": np.float64, "sigma": np.float64, "factor": np.float64,
-          "waiting": np.float64, "resco_wait": np.float64, "came": np.int64}
+          "waiting": np.float64, "resco_wait": np.float64, "came": np.int64, "way": np.int64, "code": np.int64,
+          "leave_at": np.float64, "foe": bool, "fresh": bool}
 
 
 class VehiclePool:
@@ -96,6 +99,9 @@ class ArraySim:
         # global lane -> observation row (copy-major), -1 where the lane is not observed
         self.row_of = np.concatenate([np.where(per_copy >= 0, per_copy + c * self.n_rows, -1) for c in range(self.copies)])
         self.length = np.tile(arrays.lane_length, self.copies)
+        # links some minor link yields to: only vehicles on these need their arrival times
+        self.is_foe = np.zeros(arrays.n_links + 1, bool)
+        self.is_foe[arrays.foes[arrays.foes >= 0]] = True
         self.reset(seed)
 
     def reset(self, seed: int) -> None:
@@ -110,6 +116,8 @@ class ArraySim:
         self._new: list[tuple] = []  # entered since the last second, one by one
         self._batches: list[np.ndarray] = []  # and as rows
         self.inserted = self.dropped = 0
+        self._n = 0  # the vehicles sorted last second fill the pool's first slots
+        self._on_lane = np.zeros(len(self.length), np.int64)  # vehicles per lane, kept as they move
 
     # -- signals -------------------------------------------------------------------------------
     def set_phase(self, copy: int, row: int, phase: int) -> None:
@@ -124,103 +132,129 @@ class ArraySim:
         self.phase = np.where(over, (self.phase + 1) % self.n_phases, self.phase)
         self.elapsed[over] = 0.0
 
-    def _shows(self, copy: np.ndarray, code: np.ndarray) -> np.ndarray:
-        """What link ``code`` shows in ``copy`` (GREEN where no light controls it)."""
-        out = np.full(len(code), GREEN, np.int8)
-        ruled = code >= 0
-        row, link = np.divmod(code[ruled], self.width)
-        phase = self.a.signals.phase_start[row] + self.phase[copy[ruled], row]
-        out[ruled] = self.a.signals.shows[phase, link]
-        return out
+    def _showing(self) -> np.ndarray:
+        """What every link shows now, flat: ``copy * signals * width + code`` (a vehicle's
+        :attr:`code`), and GREEN at the end for the links no light controls."""
+        s = self.a.signals
+        now = s.shows[s.phase_start[:-1][None, :] + self.phase].reshape(-1)
+        return np.append(now, np.int8(GREEN))
 
     # -- one second ------------------------------------------------------------------------------
     def advance(self) -> None:
         """One simulated second: signals, every vehicle moves, then the entries are inserted
         (as SUMO's step does)."""
         self._tick_signals()
-        v = self.v
-        idx = np.flatnonzero(v.alive)
-        if len(idx):
-            self._move(idx[np.argsort(v.lane[idx] * POSITION_KEY + (POSITION_SHIFT - v.pos[idx]))])
+        n = self._sort_pool()
+        if n:
+            self._move(n)
         self._insert_pending()
 
-    def _move(self, idx: np.ndarray) -> None:
-        """Move the vehicles ``idx`` (sorted by lane, front first) by one second."""
+    def _sort_pool(self) -> int:
+        """Reorder the pool so that its first ``n`` slots hold every vehicle, sorted by lane and
+        front first (the order makes each vehicle's leader its neighbour, and reading the
+        fields in slot order is a slice, not a gather); returns ``n``. A vehicle never passes
+        its leader, so last second's order still holds for those that stayed on their lane;
+        only the ``fresh`` ones (inserted, or onto a new lane) are sorted and merged in."""
+        v = self.v
+        kept = np.flatnonzero(v.alive[:self._n] & ~v.fresh[:self._n])
+        fresh = np.flatnonzero(v.fresh & v.alive)
+        keys = v.lane.take(kept) * POSITION_KEY + (POSITION_SHIFT - v.pos.take(kept))
+        new_keys = v.lane.take(fresh) * POSITION_KEY + (POSITION_SHIFT - v.pos.take(fresh))
+        first = np.argsort(new_keys)
+        order = np.insert(kept, np.searchsorted(keys, new_keys[first]), fresh[first])
+        n = self._n = len(order)
+        for name in FIELDS:
+            if name not in ("alive", "fresh"):
+                field = getattr(v, name)
+                field[:n] = field.take(order)
+        v.alive[:n], v.alive[n:], v.fresh[:] = True, False, False
+        self._on_lane = np.bincount(v.lane[:n], minlength=len(self.length))
+        return n
+
+    def _move(self, n: int) -> None:
+        """Move the vehicles (slots ``[0, n)``, sorted by lane, front first) by one second."""
         v, r = self.v, self.a.routes
-        lane, pos, speed = v.lane[idx], v.pos[idx], v.speed[idx]
-        front = np.ones(len(idx), bool)
+        lane, pos, speed = v.lane[:n].copy(), v.pos[:n].copy(), v.speed[:n].copy()
+        gap = v.gap[:n]
+        front = np.ones(n, bool)
         front[1:] = lane[1:] != lane[:-1]
-        back = pos - v.length[idx]
+        back = pos - v.length[:n]
         # the leader: the vehicle ahead on the lane, or for a front vehicle the stop line or the
         # last vehicle of its next lane
-        lead_back = np.empty(len(idx))
-        lead_speed = np.empty(len(idx))
+        lead_back, lead_speed = np.empty(n), np.empty(n)
         lead_back[1:], lead_speed[1:] = back[:-1], speed[:-1]
         tail_back, tail_speed = self._tails(lane, back, speed, front)
         f = np.flatnonzero(front)
-        fv = idx[f]
-        nxt = r.next[v.step[fv]]
+        lane_f, pos_f, step_f = lane.take(f), pos.take(f), v.step.take(f)
+        nxt = r.next.take(step_f)
         going_on = nxt >= 0
-        copy = lane[f] // self.a.n_lanes
-        next_lane = np.where(going_on, r.lanes[np.maximum(nxt, 0), v.next_cand[fv]] + copy * self.a.n_lanes, -1)
-        junction = r.junction[v.step[fv], v.cand[fv]]
-        to_line = self.length[lane[f]] - pos[f]
-        way, shows, coming = self._right_of_way(idx, lane, pos, speed)
-        stopping = speed[f] ** 2 / (2 * v.decel[fv])
-        major = going_on & ((shows[f] == GREEN) | ((shows[f] == YELLOW) & (to_line < stopping)))
-        passes = major | (going_on & (shows[f] == MINOR) & self._may_go(fv, way[f], coming, to_line, junction))
+        copy = lane_f // self.a.n_lanes
+        next_lane = np.where(going_on, r.lanes[np.maximum(nxt, 0), v.next_cand.take(f)] + copy * self.a.n_lanes, -1)
+        junction = r.junction[step_f, v.cand.take(f)]
+        to_line = self.length.take(lane_f) - pos_f
+        way, shows, coming = self._right_of_way(n, lane, pos, speed, f)
+        stopping = speed.take(f) ** 2 / (2 * v.decel.take(f))
+        passes = going_on & ((shows == GREEN) | ((shows == YELLOW) & (to_line < stopping)))
+        minor = np.flatnonzero(going_on & (shows == MINOR))
+        if len(minor):
+            passes[minor] = self._may_go(f[minor], way[f[minor]], coming, to_line[minor], junction[minor])
         # the next lane's position p is lane end + junction + p here
-        beyond = np.where(passes, tail_back[np.maximum(next_lane, 0)] + junction, np.inf)
-        lead_back[f] = np.where(going_on, np.where(passes, pos[f] + to_line + beyond, pos[f] + to_line + v.gap[fv]),
+        after = np.maximum(next_lane, 0)
+        beyond = np.where(passes, tail_back.take(after) + junction, np.inf)
+        lead_back[f] = np.where(going_on, np.where(passes, pos_f + to_line + beyond, pos_f + to_line + gap.take(f)),
                                 np.inf)
-        lead_speed[f] = np.where(passes, tail_speed[np.maximum(next_lane, 0)], 0.0)
-        new_speed = self._speeds(idx, lead_back - pos - v.gap[idx], lead_speed)
-        limit = lead_back - v.gap[idx]  # never past the leader's back as it was
+        lead_speed[f] = np.where(passes, tail_speed.take(after), 0.0)
+        new_speed = self._speeds(n, lane, speed, lead_back - pos - gap, lead_speed)
+        limit = lead_back - gap  # never past the leader's back as it was
         new_pos = np.minimum(pos + new_speed, np.maximum(limit, pos))
-        won = self._crossing(f, fv, passes, next_lane, new_pos)
-        v.speed[idx] = new_pos - pos
-        v.pos[idx] = new_pos
-        v.waiting[idx] = np.where(v.speed[idx] < HALTING_SPEED, v.waiting[idx] + 1.0, 0.0)
-        v.came[fv[won]] = way[f[won]]
-        self._switch(fv[won], next_lane[won], new_pos[f[won]] - self.length[lane[f[won]]] - junction[won])
-        self._leave(idx)
+        won = self._crossing(f, passes, next_lane, new_pos)
+        moved = new_pos - pos
+        v.speed[:n], v.pos[:n] = moved, new_pos
+        v.waiting[:n] = (v.waiting[:n] + 1.0) * (moved < HALTING_SPEED)
+        w = f[won]
+        v.came[w] = way[w]
+        self._switch(w, next_lane[won], new_pos[w] - self.length[lane[w]] - junction[won])
+        self._leave(n)
 
     def _tails(self, lane, back, speed, front):
         """Per lane (all copies): its last vehicle's back (+inf if empty) and speed."""
         n = self.copies * self.a.n_lanes
         tail_back, tail_speed = np.full(n, np.inf), np.zeros(n)
-        last = np.ones(len(lane), bool)
-        last[:-1] = front[1:]
-        tail_back[lane[last]], tail_speed[lane[last]] = back[last], speed[last]
+        last = np.flatnonzero(front[1:])  # the vehicle before each front, and the very last
+        last = np.append(last, len(lane) - 1)
+        on = lane.take(last)
+        tail_back[on], tail_speed[on] = back.take(last), speed.take(last)
         return tail_back, tail_speed
 
-    def _speeds(self, idx, gap, lead_speed) -> np.ndarray:
-        """Krauss's next speed of vehicles ``idx`` behind a leader ``gap`` m ahead (module docstring)."""
+    def _speeds(self, n, lane, speed, gap, lead_speed) -> np.ndarray:
+        """Krauss's next speed of the vehicles (slots ``[0, n)``, on ``lane`` at ``speed``)
+        behind a leader ``gap`` m ahead (module docstring)."""
         v = self.v
-        b = v.decel[idx]
+        b, accel = v.decel[:n], v.accel[:n]
         with np.errstate(invalid="ignore"):
             safe = -b + np.sqrt(b * b + lead_speed ** 2 + 2 * b * np.maximum(gap, 0.0))  # tau = 1 s
-        safe = np.where(np.isnan(safe), np.inf, safe)
-        top = np.minimum(self.limit[v.lane[idx]] * v.factor[idx], v.top[idx])
-        want = np.minimum(np.minimum(v.speed[idx] + v.accel[idx], top), safe)
+        safe[np.isnan(safe)] = np.inf
+        top = np.minimum(self.limit.take(lane) * v.factor[:n], v.top[:n])
+        want = np.minimum(np.minimum(speed + accel, top), safe)
         # SUMO's dawdle (MSCFModel_Krauss::dawdle2): in proportion to the speed below one
         # second's acceleration, so that a vehicle closing a small gap does not creep for long
-        dawdle = v.sigma[idx] * np.minimum(want, v.accel[idx]) * self.rng.random(len(idx))
+        dawdle = v.sigma[:n] * np.minimum(want, accel) * self.rng.random(n)
         return np.maximum(0.0, want - dawdle)
 
-    def _right_of_way(self, idx, lane, pos, speed):
-        """Per vehicle ``idx``: its link (index over all copies, -1 on its last edge) and what
-        the link shows; per link, when the first vehicle with the right of way reaches the
-        junction (s; 0 for one that crossed by it and is still in the junction)."""
-        v, r = self.v, self.a.routes
-        step, cand = v.step[idx], v.cand[idx]
-        copy = lane // self.a.n_lanes
-        way = np.where(r.next[step] >= 0, r.way[step, cand] + copy * self.a.n_links, -1)
-        shows = self._shows(copy, r.link[step, cand])
+    def _right_of_way(self, n, lane, pos, speed, f):
+        """Per vehicle (slots ``[0, n)``): its link (index over all copies, -1 on its last
+        edge); what the links of the front vehicles ``f`` show; per link, when the first vehicle
+        with the right of way reaches the junction (s; 0 for one that crossed by it and is still
+        in the junction), read only for links a minor link yields to."""
+        v = self.v
+        way, showing = v.way[:n].copy(), self._showing()
+        shows = showing.take(v.code.take(f))
         arrives = np.full(self.copies * self.a.n_links + 1, np.inf)  # the last: no link
-        on = (way >= 0) & (shows == GREEN)
-        np.minimum.at(arrives, way[on], (self.length[lane[on]] - pos[on]) / np.maximum(speed[on], 0.5))
-        crossing = v.came[idx]
+        on = np.flatnonzero(v.foe[:n])
+        on = on[showing.take(v.code.take(on)) == GREEN]
+        np.minimum.at(arrives, way.take(on),
+                      (self.length.take(lane.take(on)) - pos.take(on)) / np.maximum(speed.take(on), 0.5))
+        crossing = v.came[:n]
         arrives[crossing[(crossing >= 0) & (pos < 0)]] = 0.0
         return way, shows, arrives
 
@@ -239,10 +273,10 @@ class ArraySim:
         clear = (-u + np.sqrt(u * u + 2 * a * way_across)) / a + GAP_SECONDS
         return (first >= clear) & ((to_line <= MINOR_VISIBILITY) | (first >= clear + FREE_SECONDS))
 
-    def _crossing(self, f, fv, passes, next_lane, new_pos) -> np.ndarray:
+    def _crossing(self, f, passes, next_lane, new_pos) -> np.ndarray:
         """Which front vehicles ``f`` cross onto their next lane this second (one per lane; the
         others wait at their line: ``new_pos`` is cut there)."""
-        length = self.length[self.v.lane[fv]]
+        length = self.length[self.v.lane[f]]
         over = passes & (new_pos[f] > length)
         won = np.zeros(len(f), bool)
         cand = np.flatnonzero(over)
@@ -258,9 +292,26 @@ class ArraySim:
         v = self.v
         v.step[w] = self.a.routes.next[v.step[w]]
         v.cand[w] = v.next_cand[w]
+        np.subtract.at(self._on_lane, v.lane[w], 1)
+        np.add.at(self._on_lane, lanes, 1)
         v.lane[w] = lanes
         v.pos[w] = positions
+        v.fresh[w] = True
+        self._route_fields(w)
         self._choose_next(w)
+
+    def _route_fields(self, w: np.ndarray) -> None:
+        """Vehicles ``w``'s link (over all copies; -1 on their last edge) and its signal code,
+        which change only as they take the next step of their route."""
+        v, r = self.v, self.a.routes
+        step, cand = v.step[w], v.cand[w]
+        copy = v.lane[w] // self.a.n_lanes
+        last = r.next[step] < 0
+        v.way[w] = np.where(last, -1, r.way[step, cand] + copy * self.a.n_links)
+        code = r.link[step, cand]
+        v.code[w] = np.where(code >= 0, copy * self.n_signals * self.width + code, self.copies * self.n_signals * self.width)
+        v.leave_at[w] = np.where(last, r.leave[step], np.inf)
+        v.foe[w] = ~last & self.is_foe[r.way[step, cand]]
 
     def _choose_next(self, w: np.ndarray) -> None:
         """For vehicles ``w`` just on an edge: among the lanes of their next edge that lead on,
@@ -273,7 +324,7 @@ class ArraySim:
         if not on.any():
             return
         w, nxt = w[on], nxt[on]
-        counts = np.bincount(v.lane[v.alive], minlength=self.copies * self.a.n_lanes)
+        counts = self._on_lane
         lanes = r.lanes[nxt]  # [vehicles, candidates]
         copy = v.lane[w] // self.a.n_lanes
         load = counts[np.maximum(lanes, 0) + copy[:, None] * self.a.n_lanes] + 1.0
@@ -283,10 +334,11 @@ class ArraySim:
         score = load / share + np.where(led, 0.0, OFF_LINK_PENALTY)
         v.next_cand[w] = np.argmin(np.where(lanes >= 0, score, np.inf), axis=1)
 
-    def _leave(self, idx) -> None:
-        v, r = self.v, self.a.routes
-        gone = (r.next[v.step[idx]] < 0) & (v.pos[idx] >= r.leave[v.step[idx]])
-        v.alive[idx[gone]] = False
+    def _leave(self, n: int) -> None:
+        v = self.v
+        gone = np.flatnonzero(v.pos[:n] >= v.leave_at[:n])
+        v.alive[gone] = False
+        np.subtract.at(self._on_lane, v.lane[gone], 1)
 
     # -- entries ---------------------------------------------------------------------------------
     def entry_row(self, region: int, edges, lane_index: int, position: float, kind: str, factor: float) -> tuple:
@@ -349,7 +401,10 @@ class ArraySim:
         """Per entry: whether its place is free of the vehicles on its lane, and the back and
         speed of the vehicle ahead of it (+inf and 0 if none)."""
         v = self.v
+        wanted = np.zeros(len(self.length), bool)
+        wanted[lane] = True
         alive = np.flatnonzero(v.alive)
+        alive = alive[wanted[v.lane[alive]]]  # only the entries' lanes matter
         order = alive[np.argsort(v.lane[alive] * POSITION_KEY + (v.pos[alive] + POSITION_SHIFT))]
         keys = v.lane[order] * POSITION_KEY + (v.pos[order] + POSITION_SHIFT)
         i = np.searchsorted(keys, lane * POSITION_KEY + (position + POSITION_SHIFT))
@@ -377,9 +432,11 @@ class ArraySim:
         values = {"alive": True, "lane": lane, "pos": position, "speed": np.minimum(top, safe),
                   "step": p[:, 2].astype(np.int64), "cand": p[:, 1].astype(np.int64), "length": k[:, 0],
                   "gap": k[:, 1], "accel": k[:, 2], "decel": k[:, 3], "top": k[:, 4], "sigma": k[:, 5],
-                  "factor": factor, "waiting": 0.0, "resco_wait": 0.0, "came": -1}
+                  "factor": factor, "waiting": 0.0, "resco_wait": 0.0, "came": -1, "fresh": True}
         for name, x in values.items():
             getattr(v, name)[slots] = x
+        np.add.at(self._on_lane, lane, 1)
+        self._route_fields(slots)
         self._choose_next(slots)
 
     # -- what the lights see -----------------------------------------------------------------------
