@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ials_zoo.errors import BadInput, BadInputType
-from ials_zoo.influence.base import InfluencePredictor
+from ials_zoo.influence.base import InfluencePredictor, count_below
 
 
 class _ConstantPredictor(InfluencePredictor):
@@ -42,8 +42,7 @@ class _ConstantPredictor(InfluencePredictor):
 
     def sample(self, dsets, rng):
         self._check_dsets(dsets)
-        r = rng.random((self.n, self.n_sources, 1))
-        return (self._cum < r).sum(axis=-1)
+        return count_below(self._cum[:, :-1], rng.random((self.n, self.n_sources)))  # the last: never below
 
     def _arrays(self):
         return {"table": self.table}
