@@ -231,8 +231,16 @@ class ArraySim:
         behind a leader ``gap`` m ahead (module docstring)."""
         v = self.v
         b, accel = v.decel[:n], v.accel[:n]
+        # -b + sqrt(b^2 + v_l^2 + 2 b gap) (tau = 1 s), computed in place, rounding as written so
+        room = np.maximum(gap, 0.0)
+        room *= b
+        room *= 2.0
+        safe = b * b
+        safe += lead_speed * lead_speed
+        safe += room
         with np.errstate(invalid="ignore"):
-            safe = -b + np.sqrt(b * b + lead_speed ** 2 + 2 * b * np.maximum(gap, 0.0))  # tau = 1 s
+            np.sqrt(safe, out=safe)
+        safe -= b
         safe[np.isnan(safe)] = np.inf
         top = np.minimum(self.limit.take(lane) * v.factor[:n], v.top[:n])
         want = np.minimum(np.minimum(speed + accel, top), safe)
@@ -247,7 +255,7 @@ class ArraySim:
         with the right of way reaches the junction (s; 0 for one that crossed by it and is still
         in the junction), read only for links a minor link yields to."""
         v = self.v
-        way, showing = v.way[:n].copy(), self._showing()
+        way, showing = v.way[:n], self._showing()  # a view: read before any vehicle takes its next step
         shows = showing.take(v.code.take(f))
         arrives = np.full(self.copies * self.a.n_links + 1, np.inf)  # the last: no link
         on = np.flatnonzero(v.foe[:n])
@@ -330,7 +338,9 @@ class ArraySim:
         load = counts[np.maximum(lanes, 0) + copy[:, None] * self.a.n_lanes] + 1.0
         share = self.a.lane_share[np.maximum(lanes, 0)]
         targets = r.targets[v.step[w], v.cand[w]]  # [vehicles, targets]
-        led = (lanes[:, :, None] == targets[:, None, :]).any(axis=2)
+        led = lanes == targets[:, None, 0]  # a loop over the few targets: faster than .any(axis=2)
+        for t in range(1, targets.shape[1]):
+            led |= lanes == targets[:, None, t]
         score = load / share + np.where(led, 0.0, OFF_LINK_PENALTY)
         v.next_cand[w] = np.argmin(np.where(lanes >= 0, score, np.inf), axis=1)
 
