@@ -9,6 +9,7 @@ fidelity (the replay contract) and cost as the number of lights grows (issue 50)
            light's IALS on SUMO regions, on arrays with 1 and with 64 copies in one batch, the
            first DECISIONS decisions of the hour, interleaved turns -> results/cost_<net>.json
   plot     results/cost_*.json as µs per agent-decision against lights, log-log -> cost.png
+  table    results/cost_*.json as the Markdown table of the docs (printed)
   fidelity open loop: `ials-zoo fidelity --predictor on-policy` on each local simulator (SUMO
            regions, arrays), the same GS episodes and the same on-policy AIPs' data, under
            random lights, a fixed-time cycle (cycle:3) and any --policy-files -> results/
@@ -17,7 +18,7 @@ fidelity (the replay contract) and cost as the number of lights grows (issue 50)
 Each result file is written whole when its part ends; a part whose file exists is skipped
 (resumable). Each names the commit it ran at.
 
-Usage: python studies/arrays_local/run.py replay|cost|plot|fidelity [--nets cologne8,ingolstadt21]
+Usage: python studies/arrays_local/run.py replay|cost|plot|table|fidelity [--nets cologne8,ingolstadt21]
        [--seconds 3600] [--decisions 120] [--repeats 3] [--episodes 10] [--policy-files A,B]
 """
 
@@ -102,7 +103,7 @@ def plot(out: Path) -> None:
         raise SystemExit(f"no cost_*.json under {RESULTS}: run `cost` first")
     fig, ax = plt.subplots(figsize=(7, 4.5))
     series = [("GS (SUMO, whole network)", "gs_us"),
-              ("every light's IALS, SUMO regions (on grids since f55f700: grid10x10 measured)", "sumo_regions_us"),
+              ("every light's IALS, SUMO regions", "sumo_regions_us"),
               ("IALS on arrays, 1 copy", "arrays_1_us"), ("IALS on arrays, 64 copies (per copy)", "arrays_64_us")]
     for label, key in series:
         have = [r for r in rows if r.get(key)]
@@ -123,9 +124,32 @@ def plot(out: Path) -> None:
     print(f"wrote {out}")
 
 
+def _ratio(stat) -> str:
+    if not stat:
+        return "fails"
+    digits = 3 if stat[0] < 0.3 else 2
+    return f"{stat[0]:.{digits}f} [{stat[1]:.{digits}f}, {stat[2]:.{digits}f}]"
+
+
+def table() -> str:
+    """The cost rows as the docs show them: per network, the ratios to the GS (median [min, max]
+    over the turns), the arrays' 64-copy µs, memory per copy and the commit."""
+    rows = sorted((json.loads(p.read_text()) for p in RESULTS.glob("cost_*.json")), key=lambda r: r["agents"])
+    lines = ["| network (lights) | GS µs per agent-decision | SUMO regions / GS | arrays, 1 copy / GS | "
+             "arrays, 64 copies / GS (per copy) | arrays x64, µs | KiB per copy | commit |",
+             "|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['net']} ({r['agents']}) | {r['gs_us'][0]:,.0f} | {_ratio(r.get('sumo_regions_over_gs'))} | "
+                     f"{_ratio(r['arrays_1_over_gs'])} | {_ratio(r['arrays_64_over_gs'])} | {r['arrays_64_us'][0]:.0f} | "
+                     f"{r['bytes_per_copy']['64'] / 1024:.0f} | {r['commit']} |")
+    x64 = [r["arrays_64_us"][0] for r in rows if r["agents"] >= 16]
+    lines.append(f"\narrays x64 from 16 lights up: {min(x64):.1f} to {max(x64):.1f} µs, {max(x64) / min(x64):.2f}x")
+    return "\n".join(lines)
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("part", choices=("replay", "cost", "plot", "fidelity"))
+    parser.add_argument("part", choices=("replay", "cost", "plot", "table", "fidelity"))
     parser.add_argument("--nets", default="cologne8,ingolstadt21")
     parser.add_argument("--seconds", type=int, default=3600)
     parser.add_argument("--decisions", type=int, default=120)
@@ -135,6 +159,9 @@ def main(argv=None) -> None:
     args = parser.parse_args(argv)
     if args.part == "plot":
         plot(HERE / "cost.png")
+        return
+    if args.part == "table":
+        print(table())
         return
     for net in [x.strip() for x in args.nets.split(",") if x.strip()]:
         path = RESULTS / f"{args.part}_{net}.json"
