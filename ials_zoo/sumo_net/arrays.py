@@ -20,7 +20,8 @@ SUMO's where that costs nothing and simpler where it would cost a loop per vehic
   the line, on yellow it stops unless it cannot any more (SUMO's rule), on a minor green
   (``g``) it waits until it could cross the junction before a vehicle with the right of way
   on a link it must yield to (SUMO's ``response``) gets there, :data:`GAP_SECONDS` to spare, and
-  while one comes it approaches ready to stop (:meth:`ArraySim._may_go`); on green it drives across the junction (the straight line from
+  while one comes it approaches ready to stop, as it does whenever it is farther than
+  :data:`MINOR_APPROACH` from its line (:meth:`ArraySim._may_go`); on green it drives across the junction (the straight line from
   lane end to lane start) onto the next lane, behind that lane's last vehicle, one vehicle per
   lane and second. On entering an edge a vehicle takes, among the lanes that lead on to its next
   edge, the one with the fewest vehicles for its share of the edge's vehicles in the GS
@@ -50,7 +51,11 @@ POSITION_KEY, POSITION_SHIFT = 1e5, 1e3  # lane * KEY + position + SHIFT sorts v
 OFF_LINK_PENALTY = 4.0  # vehicles per share: how much emptier a lane their link does not lead to must be
 MINOR_VISIBILITY = 4.5  # m: SUMO's default foe visibility of a minor link: closer than that a vehicle may go
 GAP_SECONDS = 1.0
-FREE_SECONDS = 4.0  # no foe within this much more: a minor link's vehicle need not slow to its line  # a minor link's vehicle goes if the foes come this long after it has crossed
+FREE_SECONDS = 4.0  # no foe within this much more: a minor link's vehicle need not slow to its line
+# m: farther from its line than this, a minor link's vehicle never crosses within the second: it
+# approaches ready to stop, as SUMO's drivers, who see their foes from MINOR_VISIBILITY only, do.
+# Calibrated on cologne8's replay (4.5 left its worst lane at 1.5x the GS's vehicles, no limit at 0.66x)
+MINOR_APPROACH = 7.0
 FIELDS = {"alive": bool, "lane": np.int64, "pos": np.float64, "speed": np.float64, "step": np.int64,
           "cand": np.int64, "next_cand": np.int64, "length": np.float64, "gap": np.float64, "accel": np.float64,
           "decel": np.float64, "top": np.float64, "sigma": np.float64, "factor": np.float64,
@@ -271,7 +276,8 @@ class ArraySim:
         acceptance, simplified): the first vehicle on a link it yields to must reach the junction
         at least :data:`GAP_SECONDS` after it could have crossed, and while one comes within
         :data:`FREE_SECONDS` more it crosses only from :data:`MINOR_VISIBILITY` of its line (it
-        approaches ready to stop, as SUMO's drivers on a minor link do)."""
+        approaches ready to stop, as SUMO's drivers on a minor link do); from farther than
+        :data:`MINOR_APPROACH` it never crosses within the second."""
         v, n = self.v, self.a.n_links
         base = np.maximum(way, 0)
         foes = self.a.foes[base % n]
@@ -279,7 +285,8 @@ class ArraySim:
         u, a = v.speed[fv], v.accel[fv]
         way_across = np.maximum(to_line + junction + v.length[fv], 0.0)
         clear = (-u + np.sqrt(u * u + 2 * a * way_across)) / a + GAP_SECONDS
-        return (first >= clear) & ((to_line <= MINOR_VISIBILITY) | (first >= clear + FREE_SECONDS))
+        near = (to_line <= MINOR_VISIBILITY) | ((to_line <= MINOR_APPROACH) & (first >= clear + FREE_SECONDS))
+        return (first >= clear) & near
 
     def _crossing(self, f, passes, next_lane, new_pos) -> np.ndarray:
         """Which front vehicles ``f`` cross onto their next lane this second (one per lane; the
