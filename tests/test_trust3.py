@@ -254,13 +254,15 @@ def test_a_forged_training_claim_is_accepted_by_submit_but_fails_retraining(tmp_
     result's env_steps to match), and seed 1's weights under a seed-0 header. Submit takes
     both ('header-agrees' is all it can say); re-training names the first difference."""
     from ials_zoo import leaderboard as lb
-    from ials_zoo.baselines.retrain import retrain
+    from ials_zoo.baselines.retrain import package_commit, retrain
 
     board = _board(tmp_path)
     entry = lb.submit(_forged_entry(tmp_path, trained, weights_of, **header), board)
     assert lb.load_result(entry)["provenance"] == "header-agrees"
     (report,) = retrain(entry, directory=board)
     assert not report["ok"] and report["difference"].startswith(where), report
+    assert report["entry_commit"] == lb.load_result(entry)["training"]["reproduce"]["commit"]
+    assert report["commit"] == package_commit()
 
 
 @pytest.mark.parametrize("command,match", [

@@ -409,8 +409,9 @@ def retrain(path, seeds: int = 1, directory=None, progress: bool = False,
             max_seconds: float = 4 * 3600.0) -> list[dict]:
     """Re-run the training of the first ``seeds`` training seeds of the entry at ``path``; one
     report per seed: ``seed``, ``ok`` (the policy file re-made bit for bit, as above),
-    ``difference`` (where it first differs, or None), ``platform`` (this one) and
-    ``entry_platform``."""
+    ``difference`` (where it first differs, or None), ``platform`` (this one),
+    ``entry_platform``, ``commit`` (this package's) and ``entry_commit`` (the training's): code
+    that changed between the two commits may change what a seed trains."""
 
     path = Path(path)
     data = load_result(path)
@@ -441,7 +442,8 @@ def retrain(path, seeds: int = 1, directory=None, progress: bool = False,
             difference = policy_difference(remade, submitted)
             clocks = {"claimed": wall_clock_of(_header(submitted)), "retrained": wall_clock_of(_header(remade))}
         reports.append({"seed": seed, "ok": difference is None, "difference": difference,
-                        "platform": platform_text(), "entry_platform": record["platform"], "wall_clock": clocks})
+                        "platform": platform_text(), "entry_platform": record["platform"], "wall_clock": clocks,
+                        "commit": package_commit(), "entry_commit": record.get("commit")})
     return reports
 
 

@@ -122,8 +122,12 @@ def _retrain(args) -> int:
     for r in reports:
         status = "OK (the policy file re-made bit for bit)" if r["ok"] else f"FAILED: first difference: {r['difference']}"
         print(f"seed {r['seed']}: re-trained: {status}\n  {wall_clock_text(r['wall_clock'])}")
-    if not all(r["ok"] for r in reports) and reports[0]["platform"] != reports[0]["entry_platform"]:
-        print(f"  (trained on: {reports[0]['entry_platform']}\n   re-trained on: {reports[0]['platform']})")
+    first = reports[0]
+    if not all(r["ok"] for r in reports) and first["platform"] != first["entry_platform"]:
+        print(f"  (trained on: {first['entry_platform']}\n   re-trained on: {first['platform']})")
+    if not all(r["ok"] for r in reports) and first["commit"] != first["entry_commit"]:
+        print(f"  (trained at commit {first['entry_commit']}, re-trained at commit {first['commit']}: the code "
+              "between them may train otherwise)")
     ok = all(r["ok"] for r in reports)
     if ok and args.record:
         record_retrained(args.file, reports)
