@@ -120,15 +120,21 @@ def _reference_dsets(core: ArrayNetCore, layouts: list) -> list[np.ndarray]:
     return out
 
 
+def _every_region(scenario, copies: int):
+    """The scenario's lights, the array core of every light's region in ``copies`` copies, and
+    the regions' layouts."""
+    lights = read_network(scenario.net_file).lights
+    ids = [x.id for x in lights]
+    tables = entry_tables(scenario, ids)
+    core = ArrayNetCore(scenario.net_file, scenario.route_files, scenario.begin, scenario.decision_seconds,
+                        scenario.yellow_seconds, ids, [x.lanes for x in lights], [tables[x] for x in ids], copies=copies)
+    return lights, core, [region_layout(scenario.net_file, x) for x in ids]
+
+
 def test_the_dsets_are_the_vehicle_by_vehicle_reference(cologne8):
     """Two copies of cologne8's every region, flooded with entries and with exits blocked at
     random: at every decision the batched d-sets equal the loop reference's."""
-    lights = read_network(cologne8.net_file).lights
-    ids = [x.id for x in lights]
-    tables = entry_tables(cologne8, ids)
-    core = ArrayNetCore(cologne8.net_file, cologne8.route_files, cologne8.begin, cologne8.decision_seconds,
-                        cologne8.yellow_seconds, ids, [x.lanes for x in lights], [tables[x] for x in ids], copies=2)
-    layouts = [region_layout(cologne8.net_file, x) for x in ids]
+    lights, core, layouts = _every_region(cologne8, copies=2)
     rng = np.random.default_rng(1)
     out = core.reset(3)
     blocked_some = False
@@ -138,8 +144,8 @@ def test_the_dsets_are_the_vehicle_by_vehicle_reference(cologne8):
         assert all(np.array_equal(a, b) for a, b in zip(dsets, expected)), decision
         blocked_some |= any(d[len(x.source_lanes) * CELLS:].any() for d, x in zip(dsets, layouts * 2))
         influences = []
-        for k in range(2 * len(ids)):
-            layout = layouts[k % len(ids)]
+        for k in range(2 * len(lights)):
+            layout = layouts[k % len(lights)]
             entries = np.minimum(rng.integers(0, 3, size=cologne8.decision_seconds * len(layout.points)),
                                  rng.integers(0, 2, size=cologne8.decision_seconds * len(layout.points)) * 2)
             influences.append(np.concatenate([entries, rng.random(len(layout.exits)) < 0.3]).astype(np.int64))
@@ -152,12 +158,7 @@ def test_the_pools_order_and_lane_counts_are_recomputed_references_every_second(
     that changed lane or came in, and counts the vehicles per lane as they move: every second,
     over two copies of every region flooded with entries and exits blocked, the order is a
     fresh sort's and the counts a fresh bincount's."""
-    lights = read_network(cologne8.net_file).lights
-    ids = [x.id for x in lights]
-    tables = entry_tables(cologne8, ids)
-    core = ArrayNetCore(cologne8.net_file, cologne8.route_files, cologne8.begin, cologne8.decision_seconds,
-                        cologne8.yellow_seconds, ids, [x.lanes for x in lights], [tables[x] for x in ids], copies=2)
-    layouts = [region_layout(cologne8.net_file, x) for x in ids]
+    lights, core, layouts = _every_region(cologne8, copies=2)
     rng = np.random.default_rng(2)
     core.reset(4)
     sim, crossed = core.sim, 0
