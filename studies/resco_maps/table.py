@@ -25,15 +25,17 @@ MAPS = ("cologne8", "grid4x4", "ingolstadt21", "cologne1", "ingolstadt1", "ingol
 RULES = ("fixed", "greedy", "max_pressure", "actuated", "random")
 # learner -> its runs' folder under runs/ (idqn_wait_scaled: IDQN with --train-reward wait_scaled;
 # *_wave: the lights read the wave observation, OBSERVATION=wave in learner.sh; shared_ppo_greedy_start:
-# wave, --imitate greedy --train-reward queue, RUN_TAG=imitate_vf_queue)
+# wave, --imitate greedy --train-reward queue, RUN_TAG=imitate_vf_queue; shared_ppo_queue: wave,
+# --train-reward queue, RUN_TAG=queue)
 LEARNERS = {"idqn": "idqn_net", "mplight": "mplight_net", "shared_ppo": "shared_ppo_net",
             "idqn_wait_scaled": "idqn_wait_scaled", "ippo": "ippo_net", "shared_ppo_anneal": "shared_ppo_anneal",
             "dials_shared": "dials_shared", "shared_ppo_wave": "shared_ppo_wave_net", "idqn_wave": "idqn_wave_net",
             "shared_ppo_drq_wave": "shared_ppo_drq_wave_net",
-            "shared_ppo_greedy_start": "shared_ppo_wave_imitate_vf_queue_net"}
+            "shared_ppo_greedy_start": "shared_ppo_wave_imitate_vf_queue_net",
+            "shared_ppo_queue": "shared_ppo_wave_queue_net"}
 SEEDS = (0, 1, 2)
 SHOWN = ("idqn", "mplight", "shared_ppo", "idqn_wait_scaled", "shared_ppo_wave", "shared_ppo_drq_wave",
-         "shared_ppo_greedy_start")
+         "shared_ppo_greedy_start", "shared_ppo_queue")
 
 
 def copy_runs(runs: Path = Path("runs")) -> None:
