@@ -82,3 +82,23 @@ def test_export_refuses_an_unknown_format():
     proc = subprocess.run([sys.executable, "-m", "ials_zoo.cli", "leaderboard", "export", "--format", "csv"],
                           capture_output=True, text=True)
     assert proc.returncode == 2 and "csv" in proc.stderr
+
+
+def test_marl_eval_keeps_apart_two_entries_of_one_algorithm_on_one_task():
+    """Two trained entries of one algorithm on one task (other settings, the same seeds) are two
+    algorithms of the export, each named by its entry id: neither seed overwrites the other's."""
+    from ials_zoo.leaderboard.export import marl_eval
+
+    def entry(value):
+        return {"env_id": "warehouse_v0", "track": "multi-agent", "agents": ["a", "b"], "algorithm": "ippo",
+                "training": {"simulator": "gs"}, "policy": {"kind": "model"}, "learning_curves": [],
+                "evaluation": {"protocol": "official", "options": {}, "deterministic": False},
+                "scores": [{"seed": 0, "returns": [value], "metrics": {}}]}
+
+    out = marl_eval([("r/warehouse_v0__2-agents__ippo__gs__aaa.json", entry(1.0)),
+                     ("r/warehouse_v0__2-agents__ippo__gs__bbb.json", entry(2.0)),
+                     ("r/warehouse_v0__2-agents__dials__dials__ccc.json", dict(entry(3.0), algorithm="dials"))])
+    algorithms = out["warehouse_v0"]["2-agents"]
+    assert sorted(algorithms) == ["dials/gs", "ippo/gs/aaa", "ippo/gs/bbb"]
+    assert algorithms["ippo/gs/aaa"]["run_0"]["absolute_metrics"]["episode_return"] == [1.0]
+    assert algorithms["ippo/gs/bbb"]["run_0"]["absolute_metrics"]["episode_return"] == [2.0]

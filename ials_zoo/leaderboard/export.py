@@ -11,7 +11,9 @@ Here ``env`` is the domain's id (``traffic_grid_v0``), ``task`` the agents evalu
 name on the single-agent track, ``"<n>-agents"`` on the multi-agent one, after the domain's
 track options: ``net=cologne8/8-agents``), ``algorithm`` the
 entry's algorithm and training simulator (``dials/dials-once``, ``ippo/gs``; a sampled entry
-and a ``deterministic`` one are two algorithms), ``run_<seed>`` one training seed. A step
+and a ``deterministic`` one are two algorithms; where one task holds several entries of one
+algorithm, each is its own, its entry id after it: ``shared_ppo/gs/346c743eda24``),
+``run_<seed>`` one training seed. A step
 is one point of that seed's learning curve: its ``episode_return`` holds the curve point's mean
 (the board keeps a curve's means, not its episodes). ``absolute_metrics`` holds the final
 evaluation's returns, one per episode of the protocol, and the entry's physical ``metrics``
@@ -20,6 +22,9 @@ are exported; references (scripted, random) have no training run and are left ou
 """
 
 from __future__ import annotations
+
+from collections import Counter
+from pathlib import Path
 
 from ials_zoo import reference_speed
 from ials_zoo.core.domains import get_domain
@@ -49,11 +54,15 @@ def task_label(data: dict) -> str:
 def marl_eval(entries) -> dict:
     """The marl-eval JSON object of ``entries`` (``(path, data)`` pairs; module docstring)."""
     out: dict = {}
-    for _path, data in entries:
-        if data.get("evaluation", {}).get("protocol") != "official" or data.get("policy", {}).get("kind") != "model":
-            continue
+    chosen = [(path, data) for path, data in entries if data.get("evaluation", {}).get("protocol") == "official"
+              and data.get("policy", {}).get("kind") == "model"]
+    keys = Counter((d["env_id"], task_label(d), algorithm_label(d)) for _, d in chosen)
+    for path, data in chosen:
+        algorithm = algorithm_label(data)
+        if keys[(data["env_id"], task_label(data), algorithm)] > 1:  # its seeds would overwrite another's
+            algorithm += "/" + Path(path).stem.rsplit("__", 1)[-1]
         curves = {c["seed"]: c["points"] for c in data.get("learning_curves") or []}
-        runs = out.setdefault(data["env_id"], {}).setdefault(task_label(data), {}).setdefault(algorithm_label(data), {})
+        runs = out.setdefault(data["env_id"], {}).setdefault(task_label(data), {}).setdefault(algorithm, {})
         for score in data["scores"]:
             seed = score["seed"]
             run: dict = {}
