@@ -309,6 +309,32 @@ def test_ppo_single_on_the_shipped_aip_charges_only_what_it_did(tmp_path):
     assert aip["file"].startswith("ials_zoo/influence/pretrained/") and not aip["file"].startswith("/")
 
 
+def test_the_aip_record_charges_only_an_aip_this_run_made_and_names_only_a_shipped_file(tmp_path):
+    """The record reads where the predictor came from (``source``): a shipped file is named and not
+    charged, a cached one (outside the package) is neither, one made in this process is charged;
+    a file given by path is charged (the study trains one per run); the GS has no record."""
+    import copy
+    from types import SimpleNamespace
+
+    from ials_zoo.baselines.aip_record import predictor_record
+    from ials_zoo.influence.files import load_predictor
+    from ials_zoo.influence.ials import pretrained_path
+    from ials_zoo.influence.specs import parse_simulator
+
+    shipped = load_predictor(pretrained_path(ENV, AGENT))
+    cached, made = copy.deepcopy(shipped), copy.deepcopy(shipped)
+    cached.source, made.source = tmp_path / "cached.pt", None
+    trained = parse_simulator("ials")
+    records = {name: predictor_record(SimpleNamespace(predictor=p), trained)
+               for name, p in (("shipped", shipped), ("cached", cached), ("made", made))}
+    assert [records[n]["charged"] for n in ("shipped", "cached", "made")] == [False, False, True]
+    assert records["shipped"]["file"] == f"ials_zoo/influence/pretrained/{ENV}__{AGENT}.pt"
+    assert records["shipped"]["sha256"] and records["cached"]["file"] is None is records["made"]["file"]
+    given = predictor_record(SimpleNamespace(predictor=shipped), parse_simulator(str(pretrained_path(ENV, AGENT))))
+    assert given["charged"] is True and given["file"].endswith(f"{ENV}__{AGENT}.pt")
+    assert predictor_record(SimpleNamespace(predictor=None), None) is None
+
+
 def test_the_update_size_is_the_domains_unless_given():
     from ials_zoo.baselines import ippo
     from ials_zoo.baselines.multiagent import fill_update_size

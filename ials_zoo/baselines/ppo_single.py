@@ -84,11 +84,11 @@ from ials_zoo.baselines.sb3_run import (
     ppo_speed,
     sb3_env,
 )
-from ials_zoo.core.domains import get_domain, ials_domain_ids
+from ials_zoo.core.domains import Domain, get_domain, ials_domain_ids
 from ials_zoo.core.extras import dials_of, study_of
 from ials_zoo.errors import BadInput
-from ials_zoo.influence.ials import ials_vec_env, trained_aip
-from ials_zoo.influence.specs import parse_simulator, predictor_for, simulator_label
+from ials_zoo.influence.ials import ials_vec_env
+from ials_zoo.influence.specs import PredictorSpec, parse_simulator, predictor_for, simulator_label
 from ials_zoo.single_agent import gs_vec_env
 from ials_zoo.utils import check_seed, format_seconds
 
@@ -175,31 +175,36 @@ def check_args(args: Args) -> None:
     predictor_for(args.simulator)
 
 
-def make_training_env(args: Args, agent: str):
-    """The training vec env (GS or IALS) and the AIP record (None on the GS). The domain and the
-    ``--simulator`` spec are resolved here, once, and passed down as objects."""
+@dataclass(frozen=True)
+class TrainingSimulator:
+    """Where a ``ppo_single`` run trains, resolved once from its arguments: the domain, the
+    agent, the env options and the parsed ``--simulator`` (None: the GS)."""
 
-    domain = get_domain(args.env_id)
-    options = parse_env_options(args.env_options)
-    spec = parse_simulator(args.simulator)
-    if spec is None:
-        venv = gs_vec_env(domain, agent, n_envs=args.n_envs, vec_env=args.vec_env, **options)
-        venv.seed(args.seed)
+    domain: Domain
+    agent: str
+    options: dict
+    spec: PredictorSpec | None
+    dset_kind: str | None = None
+    vec_env: str = "auto"
+
+    @classmethod
+    def of(cls, args: Args, domain: Domain, agent: str, options: dict) -> TrainingSimulator:
+        spec = parse_simulator(args.simulator)
+        if spec is not None and spec.kind == "trained":
+            spec = dataclasses.replace(spec, train_if_missing=True)  # a training command may train its AIP
+        return cls(domain, agent, options, spec, args.dset_kind, args.vec_env)
+
+
+def make_training_env(sim: TrainingSimulator, n_envs: int, seed: int):
+    """The training vec env (GS or IALS) of ``sim`` and the AIP record (None on the GS)."""
+
+    if sim.spec is None:
+        venv = gs_vec_env(sim.domain, sim.agent, n_envs=n_envs, vec_env=sim.vec_env, **sim.options)
+        venv.seed(seed)
         return venv, None
-
-    kw = dict(options) if args.dset_kind is None else dict(options, dset_kind=args.dset_kind)
-    # an AIP file is charged (the study trains one per run, and the paper's IALS cost includes
-    # it); a shipped or cached AIP only when this run had to make it
-    made_now, predictor = True, spec
-    if spec.kind == "trained" and not spec.train_if_missing:
-        made_now = False  # a training command may train its AIP (and says so)
-        try:
-            trained_aip(domain, agent, args.dset_kind or "dset", arch=spec.arch, options=options, progress=False)
-        except FileNotFoundError:
-            made_now = True  # none shipped or cached: this run collects the data and trains it
-        predictor = dataclasses.replace(spec, train_if_missing=True)
-    venv = ials_vec_env(domain, agent, n_envs=args.n_envs, predictor=predictor, seed=args.seed, **kw)
-    return venv, predictor_record(venv, spec, domain.env_id, agent, made_now=made_now)
+    venv = ials_vec_env(sim.domain, sim.agent, n_envs=n_envs, predictor=sim.spec, dset_kind=sim.dset_kind,
+                        seed=seed, **sim.options)
+    return venv, predictor_record(venv, sim.spec)
 
 
 def default_out_dir(args: Args, agent: str) -> Path:
@@ -233,7 +238,7 @@ def main(args: Args | None = None) -> dict:
                    steps_per_second=ppo_speed(dom, args.simulator), unit="step", command=training_command("ppo_single", args))
 
     def make_env(training):
-        venv, aip = make_training_env(args, agent)
+        venv, aip = make_training_env(TrainingSimulator.of(args, dom, agent, options), args.n_envs, args.seed)
         training.update(simulator=simulator_label(args.simulator, (aip or {}).get("variant")), aip=aip)
         # only what this run did is on its clock; a shipped or cached AIP's own cost is recorded
         # in training.aip, not charged

@@ -19,7 +19,7 @@ import torch
 from stable_baselines3.common.vec_env import VecEnv, VecFrameStack, VecMonitor
 
 from ials_zoo.baselines.arguments import hidden_sizes
-from ials_zoo.baselines.ppo_single import Args, make_training_env, update_size
+from ials_zoo.baselines.ppo_single import Args, TrainingSimulator, make_training_env, update_size
 from ials_zoo.baselines.sb3_run import as_float_box, make_ppo
 from ials_zoo.core.domains import get_domain
 from ials_zoo.errors import BadInput
@@ -88,7 +88,7 @@ def ppo_throughput(env_id: str, agent: str, simulator: str, steps: int = 30_000,
     args = Args(env_id=env_id, agent=agent, simulator="ials" if simulator == NO_SIMULATOR else simulator,
                 n_envs=n_envs, seed=seed)
     args.n_steps, args.batch_size = update_size(args, dom)
-    venv, _ = make_training_env(args, agent)
+    venv, _ = make_training_env(TrainingSimulator.of(args, dom, agent, {}), n_envs, seed)
     try:
         if simulator == NO_SIMULATOR:
             boxed = as_float_box(venv)

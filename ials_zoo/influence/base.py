@@ -67,12 +67,16 @@ class InfluencePredictor:
         region: the region this predictor is for (domain, agent, sources, d-set layout).
         dset_kind: which d-set it reads, ``"dset"`` or ``"full"``.
         metadata: free-form provenance (hyper-parameters, cross-entropies, ...), saved with it.
+        source: the file it was loaded from, None when it was made in this process (not saved:
+            it says where this object came from, so a run can tell a shipped AIP from one it
+            trained).
     """
 
     name = "base"
     autoregressive = False
     influence_lags = 0  # past steps of its own influence an autoregressive predictor reads
     clock_horizon = 0  # > 0: the predictor also reads min(t, clock_horizon) / clock_horizon
+    source = None
 
     def __init__(self, region: RegionSpec, dset_kind: str = "dset", metadata: dict | None = None):
         if not isinstance(region, RegionSpec):

@@ -163,6 +163,7 @@ def load_predictor_set(path, env_id: str | None = None) -> dict:
             raise BadInput(f"{path} holds predictors of {pred.region.domain!r}, not {env_id!r}")
         if pred.region.agent in out:
             raise BadInput(f"{path}: two members are predictors of {pred.region.agent!r}")
+        pred.source = Path(path)
         out[pred.region.agent] = pred
     return out
 
@@ -194,6 +195,7 @@ def load_predictor(path, env_id: str | None = None, agent: str | None = None) ->
             f"{path} is an influence predictor for agent {region.agent!r} of {region.domain}, "
             f"not for agent {agent!r}"
         )
+    pred.source = path
     return pred
 
 
