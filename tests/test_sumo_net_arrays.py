@@ -24,29 +24,45 @@ def cologne8():
     return make_scenario(net="cologne8")
 
 
-def test_own_programs_keep_sumos_phase_every_second(cologne8):
-    """Every light of cologne8 on its own program: the arrays' phase index equals SUMO's at
-    every one of 300 seconds from the map's begin (a phase counts from the step after it starts)."""
+@pytest.mark.parametrize("net", ["cologne8", "ingolstadt21"])
+def test_every_program_keeps_sumos_phase_every_second(net):
+    """Every light of every region on its own program (a region's own and those past its exits):
+    the arrays' phase index equals SUMO's at every one of 300 seconds from the map's begin (a
+    phase counts from the step after it starts). ingolstadt21 begins at 57,600 s, mid-cycle for
+    two of its lights (SUMO runs a program as if from time 0)."""
     if not inprocess_available():
         pytest.skip("another simulation holds this process's libsumo")
     import libsumo
 
     from ials_zoo.sumo.command import sumo_command
 
-    regions = regions_of(cologne8.net_file)
-    arrays = RegionArrays(cologne8.net_file, regions, cologne8.yellow_seconds, driven=False)
-    sim = ArraySim(arrays, vehicle_kinds(cologne8.route_files), 1, [[] for _ in regions])
-    own = [k for k, (r, x) in enumerate(arrays.signals.names) if x == arrays.lights[r]]
-    libsumo.start(sumo_command(0, net=cologne8.net_file, routes=list(cologne8.route_files))
-                  + ["--begin", str(cologne8.begin)])
+    scenario = make_scenario(net=net)
+    regions = regions_of(scenario.net_file)
+    arrays = RegionArrays(scenario.net_file, regions, scenario.yellow_seconds, driven=False, begin=scenario.begin)
+    sim = ArraySim(arrays, vehicle_kinds(scenario.route_files), 1, [[] for _ in regions])
+    lights = [x for _, x in arrays.signals.names]
+    libsumo.start(sumo_command(0, net=scenario.net_file, routes=list(scenario.route_files))
+                  + ["--begin", str(scenario.begin)])
     try:
-        for _ in range(300):
+        for second in range(300):
             libsumo.simulationStep()
             sim.advance()
-            got = [int(sim.phase[0, k]) for k in own]
-            assert got == [libsumo.trafficlight.getPhase(arrays.lights[arrays.signals.names[k][0]]) for k in own]
+            assert [int(x) for x in sim.phase[0]] == [libsumo.trafficlight.getPhase(x) for x in lights], second
     finally:
         libsumo.close()
+
+
+def test_a_program_begins_where_sumo_has_it_at_the_first_second():
+    """The position in a fixed program at a begin time: (begin - offset) mod cycle, as a phase and
+    the seconds into it less one (hand-computed: 55 s into a 20/3/30/3/26/3 cycle is 2 s into
+    phase 3, which SUMO counts from the next step)."""
+    from ials_zoo.sumo_net.arrays_layout import program_position
+
+    durations = [20.0, 3.0, 30.0, 3.0, 26.0, 3.0]
+    assert program_position(durations, 0.0, 57600.0) == (3, 1.0)
+    assert program_position(durations, 0.0, 0.0) == (0, -1.0)
+    assert program_position(durations, 10.0, 85.0 * 3 + 10.0) == (0, -1.0)
+    assert program_position(durations, -5.0, 48.0) == (3, -1.0)  # 53 s in: phase 3 starts
 
 
 def _gaps_ok(sim: ArraySim) -> bool:
@@ -93,6 +109,101 @@ def test_vehicles_never_overlap_and_stop_at_a_red_line(cologne8):
         sim.advance()
         assert _gaps_ok(sim)
     assert sim.inserted - int(sim.v.alive.sum()) > before  # vehicles left the region
+
+
+def test_entries_on_one_lane_of_two_that_lead_on_spread_once_it_queues(cologne8):
+    """An entry a second, all on one lane of a two-lane first edge whose lanes both lead on, the
+    light held red: the first stay on the lane they came in on, and once it holds
+    ``ENTRY_PENALTY`` more vehicles per share (equal shares, uncalibrated) they take the other."""
+    from ials_zoo.sumo_net.arrays import ENTRY_PENALTY
+
+    light = "247379907"
+    regions = {light: regions_of(cologne8.net_file)[light]}
+    arrays = RegionArrays(cologne8.net_file, regions, cologne8.yellow_seconds, driven=[light])
+    sim = ArraySim(arrays, vehicle_kinds(cologne8.route_files), 1, [[]], patience=None)
+    row = arrays.signals.names.index((0, light))
+    arrays.signals.shows[arrays.signals.phase_start[row]] = RED
+    sim.set_phase(0, row, 0)
+    sim.elapsed[:] = -1e9
+    entries = [e for table in entry_tables(cologne8, [light])[light] for e in table]
+    edges, came_in, _pos, vtype, factor = next(
+        (edges, lane, pos, vtype, factor) for edges, lane, pos, vtype, factor in entries
+        if (arrays.routes.lanes[arrays.routes.step_of(0, edges)] >= 0).sum() == 2)
+    own, other = sorted(arrays.routes.lanes[arrays.routes.step_of(0, edges)][:2],
+                        key=lambda x: arrays.lane_index[x] != came_in)
+    share = arrays.lane_share[own]
+    assert share == arrays.lane_share[other] == 0.5
+    counts = []
+    for _ in range(40):
+        sim.enter(0, 0, edges, came_in, 0.0, vtype, factor)
+        sim.advance()
+        counts.append((int(sim._on_lane[own]), int(sim._on_lane[other])))
+    assert counts[0] == (1, 0)  # both empty: it keeps its lane
+    first_other = next(k for k, (_a, b) in enumerate(counts) if b)
+    # (own + 1) / share > (0 + 1) / share + ENTRY_PENALTY first when own exceeds ENTRY_PENALTY * share
+    assert counts[first_other - 1][0] == int(ENTRY_PENALTY * share) + 1
+    assert abs(counts[-1][0] - counts[-1][1]) <= ENTRY_PENALTY * share + 1
+
+
+def test_free_speed_is_the_highest_that_brakes_to_the_turns_speed_by_the_line():
+    """Reference: a vehicle that drives ``free_speed`` now and then brakes at ``b`` each second
+    (never below the target) is at most at the target in the second it passes the line, and
+    0.05 m/s more now would pass it faster. Random distances, targets and decelerations."""
+    from ials_zoo.sumo_net.arrays import free_speed
+
+    def passing_speed(speed, dist, target, b):
+        done = 0.0
+        while done + speed <= dist + 1e-9:
+            done, speed = done + speed, max(target, speed - b)
+        return speed
+
+    rng = np.random.default_rng(0)
+    dist, target, b = rng.uniform(0, 150, 500), rng.uniform(1, 14, 500), rng.uniform(2, 7.5, 500)
+    speed = free_speed(dist, target, b)
+    for now, d, t, bb in zip(speed, dist, target, b):
+        assert passing_speed(now, d, t, bb) <= t + 1e-9
+        assert passing_speed(now + 0.05, d, t, bb) > t
+
+
+def test_vehicles_cross_a_turn_no_faster_than_its_speed_limit():
+    """ingolstadt21's light 243641585 on its own program, fed its GS entries: every vehicle that
+    crosses onto its next lane does so no faster than the junction's internal lane allows it (its
+    speed factor times the limit); most of its right turns are slower than their lane."""
+    scenario = make_scenario(net="ingolstadt21")
+    light = "243641585"
+    arrays = RegionArrays(scenario.net_file, {light: regions_of(scenario.net_file)[light]}, scenario.yellow_seconds,
+                          driven=False, begin=scenario.begin)
+    import sumolib
+
+    net = sumolib.net.readNet(scenario.net_file, withInternal=True)  # the reference: SUMO's own reading
+
+    def limit(from_lane, to_lane):
+        lane = net.getLane(arrays.lane_ids[from_lane].split("__", 1)[1])
+        to = arrays.lane_ids[to_lane].split("__", 1)[1].rsplit("_", 1)[0]
+        via = next(c.getViaLaneID() for c in lane.getOutgoing() if c.getTo().getID() == to)
+        return net.getLane(via).getSpeed(), lane.getSpeed()
+
+    sim = ArraySim(arrays, vehicle_kinds(scenario.route_files), 1, [[]], patience=None)
+    crossed = []
+    switch = sim._switch
+
+    def recording(w, lanes, positions):
+        for x, to in zip(w, lanes):
+            turn, lane_speed = limit(sim.v.lane[x], to)
+            crossed.append((sim.v.speed[x], turn * sim.v.factor[x], lane_speed * sim.v.factor[x]))
+        switch(w, lanes, positions)
+
+    sim._switch = recording
+    tables, rng = entry_tables(scenario, [light])[light], np.random.default_rng(0)
+    for _ in range(600):
+        for table in tables:
+            if table and rng.random() < 0.1:
+                sim.enter(0, 0, *table[int(rng.integers(len(table)))])
+        sim.advance()
+    speed, turn, lane_limit = np.array(crossed).T
+    assert np.all(speed <= turn + 1e-9)
+    slower = turn < lane_limit
+    assert slower.sum() > 20 and np.mean(speed[slower] > turn[slower] - 1.0) > 0.2  # they reach the limit
 
 
 def _reference_dsets(core: ArrayNetCore, layouts: list) -> list[np.ndarray]:

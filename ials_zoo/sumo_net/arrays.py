@@ -21,17 +21,21 @@ SUMO's where that costs nothing and simpler where it would cost a loop per vehic
   (``g``) it waits until it could cross the junction before a vehicle with the right of way
   on a link it must yield to (SUMO's ``response``) gets there, :data:`GAP_SECONDS` to spare, and
   while one comes it approaches ready to stop, as it does whenever it is farther than
-  :data:`MINOR_APPROACH` from its line (:meth:`ArraySim._may_go`); on green it drives across the junction (the straight line from
-  lane end to lane start) onto the next lane, behind that lane's last vehicle, one vehicle per
-  lane and second. On entering an edge a vehicle takes, among the lanes that lead on to its next
-  edge, the one with the fewest vehicles for its share of the edge's vehicles in the GS
+  :data:`MINOR_APPROACH` from its line (:meth:`ArraySim._may_go`); on green it drives across the
+  junction (the straight line from lane end to lane start) onto the next lane, behind that
+  lane's last vehicle, one vehicle per lane and second, no faster than the junction's speed
+  limit (the network's internal lane: a turn's is lower), to which it brakes as SUMO's drivers
+  do (:func:`free_speed`). On entering an edge a vehicle takes, among the lanes that lead on to
+  its next edge, the one with the fewest vehicles for its share of the edge's vehicles in the GS
   (:mod:`ials_zoo.sumo_net.arrays_calibration`), preferring those its link leads to: lane changes
   happen at junctions only;
 * **signals**: the region's own light driven by actions as RESCO drives it (its greens and
   yellows, :class:`~ials_zoo.sumo_net.core.NetCore`), or its own program (the replay), every
-  other light on its own program; a phase longer than its duration moves on, as in SUMO;
+  other light on its own program, from where SUMO has it as the simulation begins; a phase longer than its duration moves on, as in SUMO;
 * **entries** (the influence sources) are inserted where the GS had them, at the highest safe
-  speed, when their place is free; one that cannot be inserted waits ``patience`` seconds and is
+  speed, when their place is free, on the lane of their first edge that the rule above picks,
+  the one they came in on unless another is much emptier (:data:`ENTRY_PENALTY`: SUMO's drivers
+  change lanes along the edge, the arrays only as a vehicle comes in); one that cannot be inserted waits ``patience`` seconds and is
   then dropped (None: it waits, as SUMO's insertion queue does);
 * **exits**: a vehicle leaves where its way through the region ends; a blocked exit's lanes get
   a speed limit of :data:`ials_zoo.sumo_net.island.BLOCKED_SPEED`.
@@ -49,6 +53,9 @@ from ials_zoo.sumo_net.influence import HALTING_SPEED
 
 POSITION_KEY, POSITION_SHIFT = 1e5, 1e3  # lane * KEY + position + SHIFT sorts vehicles by lane, then position
 OFF_LINK_PENALTY = 4.0  # vehicles per share: how much emptier a lane their link does not lead to must be
+# vehicles per share: how much emptier another lane of its first edge must be for an entry to take it.
+# Swept 0-8 on the replays of cologne8 and ingolstadt21 (1,800 s, two seeds): 2 was best on cologne8
+ENTRY_PENALTY = 2.0
 MINOR_VISIBILITY = 4.5  # m: SUMO's default foe visibility of a minor link: closer than that a vehicle may go
 GAP_SECONDS = 1.0
 FREE_SECONDS = 4.0  # no foe within this much more: a minor link's vehicle need not slow to its line
@@ -60,7 +67,18 @@ FIELDS = {"alive": bool, "lane": np.int64, "pos": np.float64, "speed": np.float6
           "cand": np.int64, "next_cand": np.int64, "length": np.float64, "gap": np.float64, "accel": np.float64,
           "decel": np.float64, "top": np.float64, "sigma": np.float64, "factor": np.float64,
           "waiting": np.float64, "resco_wait": np.float64, "came": np.int64, "way": np.int64, "code": np.int64,
-          "leave_at": np.float64, "foe": bool, "fresh": bool}
+          "leave_at": np.float64, "foe": bool, "fresh": bool, "turn": np.float64}
+
+
+def free_speed(dist, target, b):
+    """The highest speed now from which a vehicle braking at ``b`` drives at ``target`` after
+    ``dist`` m, with one-second steps (SUMO's ``MSCFModel::freeSpeed``, Euler update: it brakes
+    whole steps, the last at ``target``, and spreads the distance left over the steps)."""
+    steps = np.maximum(0.0, ((np.sqrt((b + 2.0 * target) ** 2 + 8.0 * b * dist) - b) * 0.5 - target) / b)
+    whole = np.floor(steps)
+    covered = (whole * whole + whole) * 0.5 * b + whole * target + np.where(steps > whole, target, 0.0)
+    out = np.maximum(0.0, dist - covered) / (whole + 1.0) + whole * b + target
+    return np.where(dist < target, target, out)
 
 
 class VehiclePool:
@@ -110,11 +128,12 @@ class ArraySim:
         self.reset(seed)
 
     def reset(self, seed: int) -> None:
-        """No vehicles, every signal at its first phase, a new random stream."""
+        """No vehicles, every signal where the simulation begins (a driven one at its first phase),
+        a new random stream."""
         self.rng = np.random.default_rng(seed)
         self.v = VehiclePool()
-        self.phase = np.zeros((self.copies, self.n_signals), np.int64)
-        self.elapsed = np.full((self.copies, self.n_signals), -1.0)  # SUMO counts a phase from the next step
+        self.phase = np.tile(self.a.signals.first_phase, (self.copies, 1))
+        self.elapsed = np.tile(self.a.signals.first_elapsed, (self.copies, 1))  # SUMO counts a phase from the next step
         self.limit = np.tile(self.a.lane_speed, self.copies)
         # entries not inserted yet: [lane, candidate, route step, position, kind row, factor, seconds waited]
         self.pending = np.zeros((0, 7))
@@ -209,7 +228,7 @@ class ArraySim:
         lead_back[f] = np.where(going_on, np.where(passes, pos_f + to_line + beyond, pos_f + to_line + gap.take(f)),
                                 np.inf)
         lead_speed[f] = np.where(passes, tail_speed.take(after), 0.0)
-        new_speed = self._speeds(n, lane, speed, lead_back - pos - gap, lead_speed)
+        new_speed = self._speeds(n, lane, speed, lead_back - pos - gap, lead_speed, self.length.take(lane) - pos)
         limit = lead_back - gap  # never past the leader's back as it was
         new_pos = np.minimum(pos + new_speed, np.maximum(limit, pos))
         won = self._crossing(f, passes, next_lane, new_pos)
@@ -231,9 +250,9 @@ class ArraySim:
         tail_back[on], tail_speed[on] = back.take(last), speed.take(last)
         return tail_back, tail_speed
 
-    def _speeds(self, n, lane, speed, gap, lead_speed) -> np.ndarray:
+    def _speeds(self, n, lane, speed, gap, lead_speed, to_line) -> np.ndarray:
         """Krauss's next speed of the vehicles (slots ``[0, n)``, on ``lane`` at ``speed``)
-        behind a leader ``gap`` m ahead (module docstring)."""
+        behind a leader ``gap`` m ahead, ``to_line`` m before their line (module docstring)."""
         v = self.v
         b, accel = v.decel[:n], v.accel[:n]
         # -b + sqrt(b^2 + v_l^2 + 2 b gap) (tau = 1 s), computed in place, rounding as written so
@@ -248,6 +267,9 @@ class ArraySim:
         safe -= b
         safe[np.isnan(safe)] = np.inf
         top = np.minimum(self.limit.take(lane) * v.factor[:n], v.top[:n])
+        turn = v.turn[:n]
+        slow = np.flatnonzero(turn < top)  # those that must brake to cross at their turn's speed
+        top[slow] = np.minimum(top[slow], free_speed(np.maximum(to_line[slow], 0.0), turn[slow], b[slow]))
         want = np.minimum(np.minimum(speed + accel, top), safe)
         # SUMO's dawdle (MSCFModel_Krauss::dawdle2): in proportion to the speed below one
         # second's acceleration, so that a vehicle closing a small gap does not creep for long
@@ -326,6 +348,7 @@ class ArraySim:
         code = r.link[step, cand]
         v.code[w] = np.where(code >= 0, copy * self.n_signals * self.width + code, self.copies * self.n_signals * self.width)
         v.leave_at[w] = np.where(last, r.leave[step], np.inf)
+        v.turn[w] = np.where(last, np.inf, r.turn[step, cand] * v.factor[w])
         v.foe[w] = ~last & self.is_foe[r.way[step, cand]]
 
     def _choose_next(self, w: np.ndarray) -> None:
@@ -399,6 +422,7 @@ class ArraySim:
         p = self.pending
         if not len(p):
             return
+        self._choose_entry_lanes(p)
         lane, kind = p[:, 0].astype(np.int64), p[:, 4].astype(np.int64)
         k = np.asarray(self._kind_rows)[kind]
         ok, lead_back, lead_speed = self._room(lane, p[:, 3], k[:, 0], k[:, 1])
@@ -413,6 +437,22 @@ class ArraySim:
         late = left[:, 6] > self.patience if self.patience is not None else np.zeros(len(left), bool)
         self.dropped += int(late.sum())
         self.pending = left[~late]
+
+    def _choose_entry_lanes(self, p: np.ndarray) -> None:
+        """Waiting entries ``p`` onto the lane of their first edge that :meth:`_choose_next`'s rule
+        picks: the fewest vehicles for its share among those that lead on, the lane they came
+        in on unless another is much emptier (SUMO's drivers change lanes along the edge)."""
+        lanes = self.a.routes.lanes[p[:, 2].astype(np.int64)]
+        rows = np.flatnonzero(lanes[:, 1] >= 0)  # most first edges have one lane that leads on
+        if not len(rows):
+            return
+        lane, lanes, n_lanes = p[rows, 0].astype(np.int64), lanes[rows], self.a.n_lanes
+        own = lanes + (lane // n_lanes)[:, None] * n_lanes
+        load = self._on_lane[np.maximum(own, 0)] + 1.0
+        score = load / self.a.lane_share[np.maximum(lanes, 0)] + np.where(own == lane[:, None], 0.0, ENTRY_PENALTY)
+        j = np.argmin(np.where(lanes >= 0, score, np.inf), axis=1)
+        p[rows, 0] = own[np.arange(len(rows)), j]
+        p[rows, 1] = j
 
     def _room(self, lane, position, length, gap):
         """Per entry: whether its place is free of the vehicles on its lane, and the back and

@@ -47,7 +47,8 @@ class ArrayNetCore:
         self.max_distance = float(max_distance)
         regions = regions_of(net_file)
         self.controlled = list(self.lights if controlled is None else controlled)
-        self.arrays = RegionArrays(net_file, {x: regions[x] for x in self.lights}, self.yellow, driven=self.controlled)
+        self.arrays = RegionArrays(net_file, {x: regions[x] for x in self.lights}, self.yellow, driven=self.controlled,
+                                   begin=self.begin)
         self.arrays.calibrate(lane_shares or {})
         check_memory(self.arrays, self.copies)
         self.sim = ArraySim(self.arrays, vehicle_kinds(route_files), self.copies, [list(x) for x in lanes],

@@ -24,7 +24,9 @@ entries, a few hundred).
 
 from __future__ import annotations
 
+import functools
 import math
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,6 +46,27 @@ MAX_CANDIDATES = 8  # lanes of one edge a vehicle may choose between
 MAX_TARGETS = 4  # lanes of the next edge one lane's links lead to
 MAX_FOES = 24  # links one link yields to
 MIN_SHARE = 0.02  # a lane the GS hardly used still takes a vehicle when the others are full
+
+
+MAX_NET_BYTES = 512 << 20
+
+
+@functools.lru_cache(maxsize=8)
+def _internal_speeds(net_file: str, mtime: float) -> dict[str, float]:
+    speeds = {}
+    for el in iter_elements(net_file, MAX_NET_BYTES):
+        if el.tag == "lane" and el.get("id", "").startswith(":"):
+            speeds[el.get("id")] = float(el.get("speed"))
+        elif el.tag in ("edge", "connection", "junction", "tlLogic"):
+            el.clear()
+    return speeds
+
+
+def internal_speeds(net_file: str) -> dict[str, float]:
+    """The speed limit of every internal lane (the way across a junction) of ``net_file``, by
+    id: SUMO's drivers slow to it before their line (the network file sets it from the turn's
+    radius). ``sumolib`` leaves internal lanes out as the regions read the network."""
+    return _internal_speeds(str(net_file), os.path.getmtime(net_file))
 
 
 def vehicle_kinds(route_files) -> dict[str, np.ndarray]:
@@ -71,6 +94,8 @@ class SignalRows:
         durations: seconds per phase (all rows' phases one after another).
         shows: ``[phases, max links]`` GREEN/YELLOW/RED per link index.
         yellow_of: per driven row, ``(green, green) -> yellow phase`` (RESCO's ``create_yellows``).
+        first_phase, first_elapsed: per row, its phase and seconds into it (less one: SUMO counts a
+            phase from the step after it starts) as the simulation begins.
     """
 
     names: list
@@ -79,26 +104,31 @@ class SignalRows:
     durations: np.ndarray
     shows: np.ndarray
     yellow_of: list
+    first_phase: np.ndarray
+    first_elapsed: np.ndarray
 
 
 def _show(state: str) -> list[int]:
     return [GREEN if c == "G" else MINOR if c == "g" else YELLOW if c in "yYuo" else RED for c in state]
 
 
-def signal_rows(net, rows: list[tuple[int, str, bool]], yellow_seconds: int) -> SignalRows:
+def signal_rows(net, rows: list[tuple[int, str, bool]], yellow_seconds: int, begin: float = 0.0) -> SignalRows:
     """``rows``: ``(region index, light id, driven)``. A driven light's phases are RESCO's program
-    (its greens, then the yellows); another light's are its own program 0."""
-    phases, yellow_of, start = [], [], [0]
+    (its greens, then the yellows), from its first; another light's are its own program 0, where
+    SUMO has it at ``begin`` (:func:`program_position`)."""
+    phases, yellow_of, start, first = [], [], [0], []
     for _, light, driven in rows:
-        program = list(net.getTLS(light).getPrograms().values())[0].getPhases()
-        own = [(float(p.duration), p.state) for p in program]
+        program = list(net.getTLS(light).getPrograms().values())[0]
+        own = [(float(p.duration), p.state) for p in program.getPhases()]
         if driven:
             greens = [(d, s) for d, s in own if "y" not in s and "g" in s.lower()]
             yellows, index = yellow_program([s for _, s in greens], yellow_seconds)
             own = greens + yellows
             yellow_of.append(index)
+            first.append((0, -1.0))
         else:
             yellow_of.append({})
+            first.append(program_position([d for d, _ in own], float(program.getOffset() or 0), begin))
         phases += own
         start.append(len(phases))
     width = max(len(s) for _, s in phases)
@@ -106,16 +136,27 @@ def signal_rows(net, rows: list[tuple[int, str, bool]], yellow_seconds: int) -> 
     for k, (_, s) in enumerate(phases):
         shows[k, :len(s)] = _show(s)
     return SignalRows([(r, x) for r, x, _ in rows], np.array([d for *_, d in rows], bool), np.array(start, np.int64),
-                      np.array([d for d, _ in phases], np.float64), shows, yellow_of)
+                      np.array([d for d, _ in phases], np.float64), shows, yellow_of,
+                      np.array([k for k, _ in first], np.int64), np.array([e for _, e in first], np.float64))
+
+
+def program_position(durations: list[float], offset: float, begin: float) -> tuple[int, float]:
+    """``(phase, seconds into it less one)`` of a fixed program at ``begin``: SUMO runs a static
+    program as if from time ``offset``, so a simulation that begins mid-cycle finds its lights
+    mid-cycle (measured: ingolstadt21 begins at 57,600 s, 55 s into 243641585's 85 s cycle)."""
+    into = (begin - offset) % sum(durations)
+    ends = np.cumsum(durations)
+    k = int(np.searchsorted(ends, into, side="right"))
+    return k, into - (ends[k] - durations[k]) - 1.0
 
 
 class RegionArrays:
     """The lanes, signals and routes of ``regions`` (light -> :class:`~ials_zoo.sumo_net.regions.NetRegion`)
     of ``net_file``, in that order (module docstring); ``driven``: the lights driven by actions
     (the IALS's learners; True: all, False: none, as in the replay); the others run their own
-    program."""
+    program, from where SUMO has it at ``begin`` (the scenario's first second)."""
 
-    def __init__(self, net_file: str, regions: dict, yellow_seconds: int, driven=True):
+    def __init__(self, net_file: str, regions: dict, yellow_seconds: int, driven=True, begin: float = 0.0):
         driven = set(regions) if driven is True else set(driven or ())
         net = read_sumolib(net_file)
         self.regions = list(regions.values())
@@ -146,7 +187,7 @@ class RegionArrays:
                 self.lane_share[lanes] = 1.0 / len(lanes)
         self.lane_speed = np.array(speeds, np.float64)
         self.n_lanes = len(self.lane_ids)
-        self.signals, self.links = self._signals(net, regions, yellow_seconds, driven)
+        self.signals, self.links = self._signals(net, net_file, regions, yellow_seconds, driven, begin)
         self.routes = RouteTable(self)
 
     def calibrate(self, shares: dict[str, float]) -> None:
@@ -157,7 +198,7 @@ class RegionArrays:
             if share is not None:
                 self.lane_share[k] = min(max(float(share), MIN_SHARE), 1.0)
 
-    def _signals(self, net, regions: dict, yellow_seconds: int, driven: set):
+    def _signals(self, net, net_file: str, regions: dict, yellow_seconds: int, driven: set, begin: float):
         """The signal rows and, per region, ``(lane, next edge) ->`` :class:`Link` (its code
         ``row * width + link index``, -1 where no light controls it); sets :attr:`foes`."""
         rows, row_of, found = [], {}, []
@@ -176,7 +217,8 @@ class RegionArrays:
                             row_of[(r, tls)] = len(rows) - 1
                         mine[(lane.getID(), to)] = (c, row_of[(r, tls)] if tls else -1)
             found.append(mine)
-        signals = signal_rows(net, rows, yellow_seconds)
+        signals = signal_rows(net, rows, yellow_seconds, begin)
+        turn_speed = internal_speeds(net_file)
         links, n = [], 0
         for r, mine in enumerate(found):
             coded = {}
@@ -184,7 +226,8 @@ class RegionArrays:
                 targets = [self.lane_of[r][x.getToLane().getID()] for x in c.getFromLane().getOutgoing()
                            if x.getTo().getID() == to]
                 code = row * signals.shows.shape[1] + c.getTLLinkIndex() if row >= 0 else -1
-                coded[(lane, to)] = Link(code, _junction_metres(c.getFromLane(), c.getToLane()), targets, n, c)
+                coded[(lane, to)] = Link(code, _junction_metres(c.getFromLane(), c.getToLane()), targets, n, c,
+                                         turn_speed.get(c.getViaLaneID(), math.inf))
                 n += 1
             links.append(coded)
         self.n_links = n
@@ -196,13 +239,14 @@ class RegionArrays:
 class Link:
     """A region's way from a lane onto its next edge: its signal code, the junction's metres,
     the next edge's lanes its connections lead to, its index among the regions' links and
-    SUMO's connection."""
+    SUMO's connection and the speed limit across the junction (inf where the network has none)."""
 
     code: int
     metres: float
     targets: list
     index: int
     connection: object
+    speed: float = math.inf
 
 
 def _foes(links: list[dict]) -> np.ndarray:
@@ -238,6 +282,7 @@ class RouteTable:
         self.lanes = np.full((n, MAX_CANDIDATES), -1, np.int64)
         self.link = np.full((n, MAX_CANDIDATES), -1, np.int64)
         self.junction = np.zeros((n, MAX_CANDIDATES), np.float64)
+        self.turn = np.full((n, MAX_CANDIDATES), np.inf, np.float64)  # the link's speed across the junction
         self.targets = np.full((n, MAX_CANDIDATES, MAX_TARGETS), -1, np.int64)  # lanes the links lead to
         self.way = np.full((n, MAX_CANDIDATES), -1, np.int64)  # the link's index (:class:`Link`)
         self.next = np.full(n, -1, np.int64)
@@ -255,7 +300,7 @@ class RouteTable:
         if need <= len(self.next):
             return
         n = max(need, 2 * len(self.next))
-        for name, fill in (("lanes", -1), ("link", -1), ("junction", 0.0), ("targets", -1), ("way", -1), ("next", -1), ("leave", np.inf)):
+        for name, fill in (("lanes", -1), ("link", -1), ("junction", 0.0), ("turn", np.inf), ("targets", -1), ("way", -1), ("next", -1), ("leave", np.inf)):
             old = getattr(self, name)
             new = np.full((n, *old.shape[1:]), fill, old.dtype)
             new[:len(old)] = old
@@ -280,6 +325,7 @@ class RouteTable:
                 nxt = None
             for j, (x, link) in enumerate(ok[:MAX_CANDIDATES]):
                 self.lanes[s, j], self.link[s, j], self.junction[s, j] = x, link.code, link.metres
+                self.turn[s, j] = link.speed
                 self.way[s, j] = link.index
                 self.targets[s, j, :len(link.targets[:MAX_TARGETS])] = link.targets[:MAX_TARGETS]
             self.next[s] = s + 1 if nxt else -1

@@ -242,7 +242,7 @@ def replay_arrays(scenario, regions: dict, entries, observed: list, seed: int = 
     ``entries`` (of :meth:`ReplayCore.record`): ``(lane states per step, the lights' measures
     every decision, seconds per step)``; ``shares``: its lane calibration
     (:func:`~ials_zoo.sumo_net.arrays_calibration.lane_shares`), none if None."""
-    arrays = RegionArrays(scenario.net_file, regions, scenario.yellow_seconds, driven=False)
+    arrays = RegionArrays(scenario.net_file, regions, scenario.yellow_seconds, driven=False, begin=scenario.begin)
     arrays.calibrate(shares or {})
     sim = ArraySim(arrays, vehicle_kinds(scenario.route_files), 1, observed, seed, patience=None)
     index = {light: r for r, light in enumerate(regions)}
