@@ -192,7 +192,6 @@ class ArraySim:
                 field = getattr(v, name)
                 field[:n] = field.take(order)
         v.alive[:n], v.alive[n:], v.fresh[:] = True, False, False
-        self._on_lane = np.bincount(v.lane[:n], minlength=len(self.length))
         return n
 
     def _move(self, n: int) -> None:
