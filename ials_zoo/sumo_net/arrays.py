@@ -31,12 +31,14 @@ SUMO's where that costs nothing and simpler where it would cost a loop per vehic
   happen at junctions only;
 * **signals**: the region's own light driven by actions as RESCO drives it (its greens and
   yellows, :class:`~ials_zoo.sumo_net.core.NetCore`), or its own program (the replay), every
-  other light on its own program, from where SUMO has it as the simulation begins; a phase longer than its duration moves on, as in SUMO;
+  other light on its own program, from where SUMO has it as the simulation begins; a phase
+  longer than its duration moves on, as in SUMO;
 * **entries** (the influence sources) are inserted where the GS had them, at the highest safe
   speed, when their place is free, on the lane of their first edge that the rule above picks,
   the one they came in on unless another is much emptier (:data:`ENTRY_PENALTY`: SUMO's drivers
-  change lanes along the edge, the arrays only as a vehicle comes in); one that cannot be inserted waits ``patience`` seconds and is
-  then dropped (None: it waits, as SUMO's insertion queue does);
+  change lanes along the edge, the arrays only as a vehicle comes in); one that cannot be
+  inserted waits ``patience`` seconds and is then dropped (None: it waits, as SUMO's insertion
+  queue does);
 * **exits**: a vehicle leaves where its way through the region ends; a blocked exit's lanes get
   a speed limit of :data:`ials_zoo.sumo_net.island.BLOCKED_SPEED`.
 
@@ -54,7 +56,7 @@ from ials_zoo.sumo_net.influence import HALTING_SPEED
 POSITION_KEY, POSITION_SHIFT = 1e5, 1e3  # lane * KEY + position + SHIFT sorts vehicles by lane, then position
 OFF_LINK_PENALTY = 4.0  # vehicles per share: how much emptier a lane their link does not lead to must be
 # vehicles per share: how much emptier another lane of its first edge must be for an entry to take it.
-# Swept 0-8 on the replays of cologne8 and ingolstadt21 (1,800 s, two seeds): 2 was best on cologne8
+# Swept 0-8 on the replays of cologne8 and ingolstadt21 (1,800 s, two seeds): 2 and 4 tie, 0-1 and none worse
 ENTRY_PENALTY = 2.0
 MINOR_VISIBILITY = 4.5  # m: SUMO's default foe visibility of a minor link: closer than that a vehicle may go
 GAP_SECONDS = 1.0
